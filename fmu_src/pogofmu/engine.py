@@ -1,0 +1,508 @@
+"""The hybrid engine: embedded Runge-Kutta integration with exact state-event location.
+
+One :class:`Simulator` integrates any :class:`~pogofmu.model.HybridModel`:
+
+* Dormand-Prince 5(4) (``method=5``, the pair behind ode45) or 8(5,3) (``method=8``, DOP853),
+  with the usual error control (``rel_tol``, ``abs_tol``, ``max_step``, ``initial_step``);
+* after every accepted step the active guards are evaluated; a sign change in the guard's
+  direction is located on the step's continuous extension (dense output) by a safeguarded
+  Illinois iteration to a time tolerance of a few ulps of ``t``; the step is then redone exactly
+  up to the event (so the state at the event has the full order of the method, not the order of
+  the interpolant), the jump is applied and integration restarts there;
+* the integrator runs *ahead* of the communication points and serves them from the dense output:
+  the step sequence, and so every event time, does not depend on the communication grid.  Only a
+  change of input forces a restart at the communication point;
+* an event storm (more than ``zeno_max_events`` events within ``zeno_window`` seconds) and a step
+  size that collapses end in a :class:`~pogofmu.model.ZenoError` / error, never in a hang.
+
+Restart rule (no re-detection of the event just handled): a guard only fires when its value at
+the start of a step lies strictly on the "before" side (``> 0`` for a falling guard, ``< 0`` for a
+rising one); a guard that is exactly zero after a jump is disarmed until it leaves zero.
+"""
+from __future__ import annotations
+
+import copy
+import math
+from dataclasses import dataclass
+from typing import List, Optional
+
+from . import _tableaux as tab
+from .model import DomainError, HybridModel, ModelError, ParameterError, Params, ZenoError, FALLING
+
+EPS = 2.220446049250313e-16
+SAFETY = 0.9
+MIN_FACTOR = 0.2
+MAX_FACTOR = 10.0
+
+
+# =============================================================================================
+# Runge-Kutta pairs
+# =============================================================================================
+#
+# States are plain lists of floats: for the handful of states of these models, Python float
+# arithmetic is several times cheaper than numpy's per-call overhead on tiny arrays.  The stage
+# sums are generated once per pair from the tableau (zero coefficients skipped) and compiled.
+
+def _lincomb(coefs, names, scale="h"):
+    """Source of ``[base + h*(c0*k0_ + ...) ...]`` pieces: (expression, zipped names, vectors)."""
+    terms = [(c, k) for c, k in zip(coefs, names) if c != 0.0]
+    expr = " + ".join(f"{c!r}*{k}_" for c, k in terms)
+    return expr, [k for _, k in terms]
+
+
+def _gen_stages(A, C, first, last, y="y", t="t"):
+    """Source lines computing stages ``k{first}..k{last-1}`` from ``k0..``."""
+    lines = []
+    for s in range(first, last):
+        expr, ks = _lincomb(A[s][:s], [f"k{j}" for j in range(s)])
+        it = ", ".join(f"{k}_" for k in ks)
+        zs = ", ".join(ks)
+        lines.append(f"    k{s} = fun({t} + {C[s]!r}*h, [y_ + h*({expr}) for y_, {it} in zip({y}, {zs})])")
+    return lines
+
+
+def _compile(src, name):
+    ns = {"sqrt": math.sqrt}
+    exec(compile(src, f"<pogofmu.engine:{name}>", "exec"), ns)
+    return ns[name]
+
+
+def _gen_step(A, B, C, n_stages):
+    lines = ["def step(fun, t, y, f, h):", "    k0 = f"]
+    lines += _gen_stages(A, C, 1, n_stages)
+    expr, ks = _lincomb(B, [f"k{j}" for j in range(n_stages)])
+    lines.append(f"    y_new = [y_ + h*({expr}) for y_, {', '.join(k + '_' for k in ks)} in zip(y, {', '.join(ks)})]")
+    lines.append("    f_new = fun(t + h, y_new)")
+    lines.append(f"    return y_new, f_new, ({', '.join(f'k{j}' for j in range(n_stages))}, f_new)")
+    return _compile("\n".join(lines) + "\n", "step")
+
+
+class _Pair:
+    """An embedded explicit Runge-Kutta pair with FSAL and dense output (generated code)."""
+
+    name = ""
+    order = 0
+    error_exponent = 0.0
+
+
+class DOPRI5(_Pair):
+    name = "DOPRI5"
+    order = 5
+    error_exponent = -1.0 / 5.0
+
+    def __init__(self):
+        A, B, C, E, P = tab.DOPRI5_A, tab.DOPRI5_B, tab.DOPRI5_C, tab.DOPRI5_E, tab.DOPRI5_P
+        ns = len(B)
+        self.step = _gen_step(A, B, C, ns)
+        K = [f"k{j}" for j in range(ns + 1)]
+        expr, ks = _lincomb(E, K)
+        self.error_norm = _compile(
+            f"def error_norm(K, h, y, y_new, atol, rtol):\n"
+            f"    {', '.join(K)} = K\n"
+            f"    acc = 0.0\n"
+            f"    for y_, yn_, {', '.join(k + '_' for k in ks)} in zip(y, y_new, {', '.join(ks)}):\n"
+            f"        e = h*({expr}) / (atol + rtol*max(abs(y_), abs(yn_)))\n"
+            f"        acc += e*e\n"
+            f"    return sqrt(acc/len(y))\n", "error_norm")
+        qs = []
+        for r in range(4):
+            expr, ks = _lincomb([P[j][r] for j in range(ns + 1)], K)
+            qs.append(f"    q{r} = [{expr} for {', '.join(k + '_' for k in ks)}, in zip({', '.join(ks)})]")
+        self._coeffs = _compile(f"def coeffs(K):\n    {', '.join(K)} = K\n" + "\n".join(qs)
+                                + "\n    return q0, q1, q2, q3\n", "coeffs")
+
+    def dense(self, fun, t0, y0, y1, h, K):
+        return _Dense5(t0, h, y0, self._coeffs(K))
+
+
+class DOP853(_Pair):
+    name = "DOP853"
+    order = 8
+    error_exponent = -1.0 / 8.0
+
+    def __init__(self):
+        A, B, C = tab.DOP853_A, tab.DOP853_B, tab.DOP853_C
+        ns, nx = tab.DOP853_N_STAGES, tab.DOP853_N_STAGES_EXTENDED
+        self.step = _gen_step(A, B, C, ns)
+        K = [f"k{j}" for j in range(ns + 1)]
+        e5, k5 = _lincomb(tab.DOP853_E5, K)
+        e3, k3 = _lincomb(tab.DOP853_E3, K)
+        assert k5 == k3
+        self.error_norm = _compile(
+            f"def error_norm(K, h, y, y_new, atol, rtol):\n"
+            f"    {', '.join(K)} = K\n"
+            f"    n5 = n3 = 0.0\n"
+            f"    for y_, yn_, {', '.join(k + '_' for k in k5)} in zip(y, y_new, {', '.join(k5)}):\n"
+            f"        sc = atol + rtol*max(abs(y_), abs(yn_))\n"
+            f"        a = ({e5}) / sc\n"
+            f"        b = ({e3}) / sc\n"
+            f"        n5 += a*a\n"
+            f"        n3 += b*b\n"
+            f"    if n5 == 0.0 and n3 == 0.0:\n"
+            f"        return 0.0\n"
+            f"    return abs(h) * n5 / sqrt((n5 + 0.01*n3) * len(y))\n", "error_norm")
+        # dense output (Hairer's contd8): three more stages, then seven coefficient vectors
+        lines = ["def coeffs(fun, t0, y0, y1, h, K):", f"    {', '.join(K)} = K"]
+        # stage ns (index 12) of the extended tableau is f_new = K[ns]
+        lines += _gen_stages(A, C, ns + 1, nx, y="y0", t="t0")
+        KX = [f"k{j}" for j in range(nx)]
+        for r in range(4):
+            expr, ks = _lincomb(tab.DOP853_D[r], KX)
+            lines.append(f"    d{r} = [h*({expr}) for {', '.join(k + '_' for k in ks)}, in zip({', '.join(ks)})]")
+        lines += [
+            "    f0 = [b - a for a, b in zip(y0, y1)]",
+            "    f1 = [h*a - b for a, b in zip(k0, f0)]",
+            f"    f2 = [2.0*b - h*(a + c) for a, b, c in zip(k0, f0, k{ns})]",
+            "    return f0, f1, f2, d0, d1, d2, d3",
+        ]
+        self._coeffs = _compile("\n".join(lines) + "\n", "coeffs")
+
+    def dense(self, fun, t0, y0, y1, h, K):
+        return _Dense8(t0, h, y0, self._coeffs(fun, t0, y0, y1, h, K))
+
+
+class _Dense5:
+    __slots__ = ("t0", "h", "y0", "Q")
+
+    def __init__(self, t0, h, y0, Q):
+        self.t0, self.h, self.y0, self.Q = t0, h, y0, Q
+
+    def __call__(self, t):
+        x = (t - self.t0) / self.h
+        hx = self.h * x
+        return [y + hx * (a + x * (b + x * (c + x * d))) for y, a, b, c, d in zip(self.y0, *self.Q)]
+
+
+class _Dense8:
+    __slots__ = ("t0", "h", "y0", "F")
+
+    def __init__(self, t0, h, y0, F):
+        self.t0, self.h, self.y0, self.F = t0, h, y0, F
+
+    def __call__(self, t):
+        x = (t - self.t0) / self.h
+        w = 1.0 - x
+        return [y + x * (a + w * (b + x * (c + w * (d + x * (e + w * (f + x * g))))))
+                for y, a, b, c, d, e, f, g in zip(self.y0, *self.F)]
+
+
+METHODS = {5: DOPRI5(), 8: DOP853()}
+
+
+def _rms(v):
+    return math.sqrt(sum(a * a for a in v) / len(v))
+
+
+# =============================================================================================
+# Simulator
+# =============================================================================================
+
+@dataclass
+class EventRecord:
+    """One handled event: when, which, and the state just before and after its jump."""
+
+    time: float
+    name: str
+    index: int
+    x_before: list
+    x_after: list
+
+
+class _Segment:
+    """One accepted step ``[t0, t1]`` in one discrete state, with lazily built dense output."""
+
+    __slots__ = ("t0", "t1", "y0", "y1", "f0", "K", "fun", "pair", "_dense")
+
+    def __init__(self, t0, t1, y0, y1, f0, K, fun, pair):
+        self.t0, self.t1, self.y0, self.y1, self.f0 = t0, t1, y0, y1, f0
+        self.K, self.fun, self.pair = K, fun, pair
+        self._dense = None
+
+    def __call__(self, t):
+        if t == self.t1:
+            return self.y1
+        if t == self.t0:
+            return self.y0
+        if self._dense is None:
+            self._dense = self.pair.dense(self.fun, self.t0, self.y0, self.y1, self.t1 - self.t0, self.K)
+        return self._dense(t)
+
+
+def solver_parameters():
+    """The solver knobs every FMU exposes (name, default, unit, description, integer)."""
+    from .model import Parameter
+
+    return (
+        Parameter("method", 5, "", "Runge-Kutta pair: 5 = Dormand-Prince 5(4) (ode45), 8 = DOP853", integer=True),
+        Parameter("rel_tol", 1e-6, "", "relative error tolerance of the internal solver"),
+        Parameter("abs_tol", 1e-12, "", "absolute error tolerance of the internal solver (state units)"),
+        Parameter("max_step", 0.01, "s", "largest internal step (0 or inf: unbounded)"),
+        Parameter("initial_step", 0.0, "s", "first internal step (0: chosen automatically)"),
+    )
+
+
+def check_solver_parameters(p: Params):
+    from .model import require
+
+    for name in ("method", "rel_tol", "abs_tol", "max_step", "initial_step"):
+        v = p[name]
+        if not isinstance(v, (int, float)) or math.isnan(v):
+            raise ParameterError(f"parameter {name} = {v!r} violates the rule: {name} must be a number")
+    require(p.method in METHODS, "method", p.method, "method must be 5 (DOPRI5) or 8 (DOP853)")
+    require(1e-14 <= p.rel_tol < 1.0, "rel_tol", p.rel_tol, "1e-14 <= rel_tol < 1")
+    require(p.abs_tol > 0 and math.isfinite(p.abs_tol), "abs_tol", p.abs_tol, "0 < abs_tol < inf")
+    require(p.max_step >= 0, "max_step", p.max_step, "max_step >= 0 (0 or inf: unbounded)")
+    require(p.initial_step >= 0 and math.isfinite(p.initial_step), "initial_step", p.initial_step,
+            "0 <= initial_step < inf (0: automatic)")
+
+
+class Simulator:
+    """Integrates one :class:`HybridModel` from ``t0`` on; see the module docstring.
+
+    ``p`` must hold the model's parameters and the solver knobs (:func:`solver_parameters`).
+    """
+
+    def __init__(self, model: HybridModel, p: Params, u=None, t0: float = 0.0, t_stop: float = math.inf,
+                 zeno_max_events: int = 200, zeno_window: float = 1e-6):
+        check_solver_parameters(p)
+        model.check(p)
+        self.model = model
+        self.p = p
+        self.pair = METHODS[int(p.method)]
+        self.rtol = float(p.rel_tol)
+        self.atol = float(p.abs_tol)
+        ms = float(p.max_step)
+        self.max_step = math.inf if ms == 0.0 else ms
+        self.t_stop = float(t_stop)
+        self.zeno_max_events = zeno_max_events
+        self.zeno_window = zeno_window
+        self.u = tuple(float(v.start) for v in model.inputs) if u is None else tuple(u)
+        self._check_input(self.u)
+        x, q = model.initial(p)
+        self.t = float(t0)  # integrator time (may be ahead of the communication time)
+        self.t_out = float(t0)  # latest time served to the caller
+        self.x = [float(v) for v in x]
+        self.q = dict(q)
+        self.events: List[EventRecord] = []
+        self.seg: Optional[_Segment] = None
+        self.pending = None  # (event index, x at event) to apply at self.t
+        self.n_steps = 0
+        self.n_rejected = 0
+        self._check_domain(self.t, self.x)
+        self._bind()
+        self.h = float(p.initial_step) if p.initial_step > 0 else self._initial_step()
+
+    # ---- setup helpers ----------------------------------------------------------------------
+    def _check_input(self, u):
+        for var, v in zip(self.model.inputs, u):
+            if not math.isfinite(v):
+                raise ParameterError(f"input {var.name} = {v!r} violates the rule: {var.name} must be finite")
+
+    def _bind(self):
+        """(Re)bind the right-hand side and the active guards to the current (q, u)."""
+        model, q, u, p = self.model, self.q, self.u, self.p
+        flow = model.flow
+        self.fun = lambda t, x: flow(t, x, q, u, p)
+        self.active = [(i, ev) for i, ev in enumerate(model.events) if ev.active(q)]
+        self.f = self.fun(self.t, self.x)
+        self.g = [ev.guard(self.x, q, u, p) for _, ev in self.active]
+
+    def _initial_step(self):
+        """Hairer's starting step (Solving ODEs I, Sect. II.4)."""
+        t, y, f = self.t, self.x, self.f
+        scale = [self.atol + abs(v) * self.rtol for v in y]
+        d0 = _rms([a / b for a, b in zip(y, scale)])
+        d1 = _rms([a / b for a, b in zip(f, scale)])
+        h0 = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
+        h0 = min(h0, self.max_step)
+        y1 = [a + h0 * b for a, b in zip(y, f)]
+        f1 = self.fun(t + h0, y1)
+        d2 = _rms([(a - b) / c for a, b, c in zip(f1, f, scale)]) / h0
+        order = 5 if self.pair.order == 5 else 8
+        if d1 <= 1e-15 and d2 <= 1e-15:
+            h1 = max(1e-6, h0 * 1e-3)
+        else:
+            h1 = (0.01 / max(d1, d2)) ** (1.0 / order)
+        return min(100 * h0, h1, self.max_step)
+
+    # ---- public API -------------------------------------------------------------------------
+    def set_input(self, u):
+        """Change the inputs from the latest communication time on."""
+        u = tuple(float(v) for v in u)
+        if u == self.u:
+            return
+        self._check_input(u)
+        if self.t > self.t_out:
+            # the integrator ran ahead: redo the step exactly up to the communication time
+            seg = self.seg
+            if self.t_out == seg.t0:
+                x = seg.y0
+            else:
+                x, _, _ = self.pair.step(seg.fun, seg.t0, seg.y0, seg.f0, self.t_out - seg.t0)
+            self.t, self.x = self.t_out, x
+            self.pending = None
+            self.seg = None
+        self.u = u
+        self._bind()
+
+    def advance(self, t_target: float):
+        """Integrate to ``t_target`` (handling every event on the way); return ``(x, q)`` there."""
+        if t_target < self.t_out:
+            raise ValueError(f"cannot go back in time: t = {t_target} < {self.t_out}")
+        while True:
+            if self.pending is not None and t_target >= self.t:
+                self._apply_pending()
+                continue
+            if t_target <= self.t:
+                break
+            self._step()
+        self.t_out = t_target
+        if t_target == self.t:
+            return self.x, self.q
+        return self.seg(t_target), self.q
+
+    def snapshot(self):
+        """A deep copy of the whole integrator state (for fmi2GetFMUstate)."""
+        memo = {id(self.model): self.model, id(self.p): self.p}
+        return copy.deepcopy(self.__dict__, memo)
+
+    def restore(self, snap):
+        memo = {id(self.model): self.model, id(self.p): self.p}
+        self.__dict__.update(copy.deepcopy(snap, memo))
+        self._bind_keep_state()
+
+    def _bind_keep_state(self):
+        # closures captured (q, u) of the copy: rebind them to this object's own q and u
+        f, g = self.f, self.g
+        self._bind()
+        self.f, self.g = f, g
+
+    # ---- stepping ---------------------------------------------------------------------------
+    def _step(self):
+        pair, fun = self.pair, self.fun
+        t, y, f = self.t, self.x, self.f
+        h = min(self.h, self.max_step)
+        rejected = False
+        while True:
+            t_new = t + h
+            if t_new >= self.t_stop > t:
+                t_new = self.t_stop
+                h = t_new - t
+            if h <= 10 * EPS * max(abs(t), 1.0):
+                raise ModelError(f"step size collapsed to {h:.3g} s at t = {t:.15g} s "
+                                 f"(the model is stiff or singular here)")
+            y_new, f_new, K = pair.step(fun, t, y, f, h)
+            err = pair.error_norm(K, h, y, y_new, self.atol, self.rtol)
+            if err < 1.0:  # False for NaN: a non-finite step is rejected
+                factor = MAX_FACTOR if err == 0.0 else min(MAX_FACTOR, SAFETY * err ** pair.error_exponent)
+                if rejected:
+                    factor = min(1.0, factor)
+                self.h = min(h * factor, self.max_step)
+                break
+            self.n_rejected += 1
+            rejected = True
+            if not math.isfinite(err):
+                h *= MIN_FACTOR
+            else:
+                h *= max(MIN_FACTOR, SAFETY * err ** pair.error_exponent)
+        self.n_steps += 1
+        seg = _Segment(t, t_new, y, y_new, f, K, fun, pair)
+        # ---- event detection on the accepted step ----
+        q, u, p = self.q, self.u, self.p
+        g_new = [ev.guard(y_new, q, u, p) for _, ev in self.active]
+        hit = None
+        for k, ((i, ev), g0, g1) in enumerate(zip(self.active, self.g, g_new)):
+            if (ev.direction == FALLING and g0 > 0.0 >= g1) or (ev.direction != FALLING and g0 < 0.0 <= g1):
+                te = self._locate(seg, ev, g0, g1)
+                if hit is None or te < hit[0]:
+                    hit = (te, k)
+        if hit is None:
+            self._check_domain(t_new, y_new, seg)
+            self.seg, self.t, self.x, self.f, self.g = seg, t_new, y_new, f_new, g_new
+            return
+        te, k = hit
+        i, ev = self.active[k]
+        if te < t_new:
+            # redo the step exactly up to the event: full-order state at the event
+            y_e, f_e, K_e = pair.step(fun, t, y, f, te - t)
+            seg = _Segment(t, te, y, y_e, f, K_e, fun, pair)
+        else:
+            y_e, f_e = y_new, f_new
+        self._check_domain(te, y_e, seg)
+        self.seg, self.t, self.x, self.f = seg, te, y_e, f_e
+        self.pending = (i, y_e)
+
+    def _locate(self, seg, ev, g0, g1):
+        """Earliest time in the segment where ``ev``'s guard crosses zero in its direction.
+
+        Illinois iteration keeping a bracket ``[a, b]`` with the guard strictly on the before side
+        at ``a`` and on the after side at ``b``; returns ``b`` (the event has happened there).
+        """
+        q, u, p = self.q, self.u, self.p
+        guard = ev.guard
+        sgn = -1.0 if ev.direction == FALLING else 1.0  # after side: sgn*g >= 0
+        a, b = seg.t0, seg.t1
+        fa, fb = sgn * g0, sgn * g1  # fa < 0 <= fb
+        side = 0
+        tol = 4 * EPS * max(abs(a), abs(b), 1e-300)
+        for _ in range(200):
+            if b - a <= tol:
+                break
+            c = b - fb * (b - a) / (fb - fa)
+            if not (a < c < b):
+                c = 0.5 * (a + b)
+            fc = sgn * guard(seg(c), q, u, p)
+            if fc >= 0.0:
+                b, fb = c, fc
+                if side == 1:
+                    fa *= 0.5
+                side = 1
+            else:
+                a, fa = c, fc
+                if side == -1:
+                    fb *= 0.5
+                side = -1
+            if fc == 0.0:
+                break
+        return b
+
+    def _apply_pending(self):
+        i, x_before = self.pending
+        ev = self.model.events[i]
+        x_new, q_new = ev.jump(self.x, self.q, self.u, self.p)
+        x_new = [float(v) for v in x_new]
+        self.events.append(EventRecord(self.t, ev.name, i, list(x_before), list(x_new)))
+        self.pending = None
+        self.x, self.q = x_new, dict(q_new)
+        self._check_zeno()
+        self._check_domain(self.t, self.x)
+        self._bind()
+
+    def _check_zeno(self):
+        n = self.zeno_max_events
+        if len(self.events) >= n:
+            first = self.events[-n]
+            if self.t - first.time <= self.zeno_window:
+                names = ", ".join(sorted({e.name for e in self.events[-n:]}))
+                raise ZenoError(
+                    f"event storm: {n} events ({names}) within {self.t - first.time:.3g} s up to "
+                    f"t = {self.t:.15g} s (Zeno behaviour; limit {n} events per {self.zeno_window:g} s)")
+
+    def _check_domain(self, t, x, seg=None):
+        domain = self.model.domain
+        msg = domain(t, x, self.q, self.u, self.p)
+        if msg is None:
+            if not all(map(math.isfinite, x)):
+                raise DomainError(f"the state became non-finite at t = {t:.15g} s")
+            return
+        if seg is not None:
+            # bisect for the first time the condition is violated
+            a, b = seg.t0, t
+            for _ in range(60):
+                c = 0.5 * (a + b)
+                if domain(c, seg(c), self.q, self.u, self.p) is None:
+                    a = c
+                else:
+                    b = c
+            t = b
+        raise DomainError(f"the trajectory left the model's domain at t = {t:.10g} s: {msg}")

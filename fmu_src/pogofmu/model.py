@@ -1,0 +1,164 @@
+"""A hybrid dynamical system as plain data and pure functions.
+
+Nothing here knows about FMI: :mod:`pogofmu.engine` integrates any :class:`HybridModel`,
+:mod:`pogofmu.fmi` maps any of them onto an FMI 2.0 co-simulation slave.
+
+Conventions (MODELS.md):
+
+* continuous states ``x`` (a list of floats; ``flow`` returns a list too), a discrete state ``q`` (a ``dict`` of
+  numbers: the mode ``s`` and any memory such as an SMA branch), parameters ``p`` (a read-only
+  :class:`Params` with attribute access), inputs ``u`` (a tuple of floats, held over a
+  communication step);
+* ``flow(t, x, q, u, p) -> dx/dt``;
+* every :class:`Event` has a guard ``h(x, q, u, p)`` with a direction: ``FALLING`` fires where
+  ``h`` goes from ``> 0`` to ``<= 0``, ``RISING`` where it goes from ``< 0`` to ``>= 0``; and a
+  jump ``(x, q) <- jump(x, q, u, p)``.  Events listed first win when several fire at the same
+  instant (the documented priority).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable, Mapping, Optional, Sequence, Tuple
+
+FALLING = -1
+RISING = 1
+
+
+class ModelError(Exception):
+    """Base class of the errors a model raises; the message is meant for the user."""
+
+
+class ParameterError(ModelError, ValueError):
+    """A parameter, start value or input breaks a rule of the model."""
+
+
+class DomainError(ModelError):
+    """The trajectory left the physical domain of the model."""
+
+
+class ZenoError(ModelError):
+    """Too many events in too short a time (an event storm)."""
+
+
+@dataclass(frozen=True)
+class Variable:
+    """A named scalar with a unit and a description (state, input or output)."""
+
+    name: str
+    unit: str = ""
+    description: str = ""
+    start: float = 0.0
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """A fixed parameter with its default, unit, description and (optionally) type."""
+
+    name: str
+    default: float
+    unit: str = ""
+    description: str = ""
+    integer: bool = False
+
+
+@dataclass(frozen=True)
+class Event:
+    """One guard with its direction, the modes it is active in and its jump map."""
+
+    name: str
+    direction: int
+    guard: Callable  # (x, q, u, p) -> float
+    jump: Callable  # (x, q, u, p) -> (x_new, q_new)
+    active: Callable = lambda q: True  # (q) -> bool
+
+
+class Params:
+    """Read-only parameter record: attribute access (``p.m``, as fast as a plain attribute) and
+    mapping access (``p["m"]``)."""
+
+    def __init__(self, values: Mapping[str, float]):
+        self.__dict__.update(values)
+
+    def __setattr__(self, name, value):
+        raise AttributeError("Params is read-only")
+
+    def __getitem__(self, name):
+        return self.__dict__[name]
+
+    def as_dict(self):
+        return dict(self.__dict__)
+
+    def __repr__(self):
+        return f"Params({self.__dict__!r})"
+
+
+@dataclass(frozen=True)
+class HybridModel:
+    """Everything the engine and the FMI adapter need to know about one model variant.
+
+    ``initial(p) -> (x0, q0)`` derives the initial state from the parameters (it may raise
+    :class:`ParameterError`); ``check(p)`` validates the parameters; ``domain(t, x, q, u, p)``
+    returns ``None`` or the text of the violated domain condition;
+    ``output_fn(t, x, q, u, p, n_events, t_last_event)`` returns a dict of output values;
+    ``integer_outputs`` names the outputs that are integers (modes, counters).
+    """
+
+    name: str
+    description: str
+    states: Tuple[Variable, ...]
+    parameters: Tuple[Parameter, ...]
+    inputs: Tuple[Variable, ...]
+    outputs: Tuple[Variable, ...]
+    flow: Callable
+    events: Tuple[Event, ...]
+    initial: Callable
+    output_fn: Callable
+    check: Callable = lambda p: None
+    domain: Callable = lambda t, x, q, u, p: None
+    integer_outputs: frozenset = frozenset()
+    default_stop_time: float = 10.0
+    default_step: float = 1e-3
+
+    def defaults(self) -> dict:
+        return {par.name: par.default for par in self.parameters}
+
+    def params(self, **overrides) -> Params:
+        values = self.defaults()
+        unknown = set(overrides) - set(values)
+        if unknown:
+            raise ParameterError(f"unknown parameter(s) {sorted(unknown)} for model {self.name}")
+        values.update(overrides)
+        return Params(values)
+
+    def state_index(self, name: str) -> int:
+        for i, v in enumerate(self.states):
+            if v.name == name:
+                return i
+        raise KeyError(name)
+
+
+# ---------------------------------------------------------------------------------------------
+# parameter rules: each raises ParameterError naming the parameter, its value and the rule
+# ---------------------------------------------------------------------------------------------
+
+def require(condition: bool, name: str, value, rule: str):
+    if not condition:
+        raise ParameterError(f"parameter {name} = {value!r} violates the rule: {rule}")
+
+
+def require_finite(p: Params, names: Optional[Sequence[str]] = None):
+    for name in names if names is not None else p.as_dict():
+        v = p[name]
+        if not (isinstance(v, (int, float)) and math.isfinite(v)):
+            raise ParameterError(f"parameter {name} = {v!r} violates the rule: {name} must be a finite number")
+
+
+def require_positive(p: Params, *names: str):
+    for name in names:
+        require(p[name] > 0, name, p[name], f"{name} > 0")
+
+
+def require_nonnegative(p: Params, *names: str):
+    for name in names:
+        require(p[name] >= 0, name, p[name], f"{name} >= 0")

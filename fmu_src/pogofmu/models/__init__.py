@@ -1,0 +1,1 @@
+"""Model variants: each module defines ``MODEL``, a :class:`pogofmu.model.HybridModel`."""
