@@ -283,6 +283,7 @@ class Simulator:
         self.t_out = float(t0)  # latest time served to the caller
         self.x = [float(v) for v in x]
         self.q = dict(q)
+        self.x_out, self.q_out = self.x, self.q  # state served at t_out
         self.events: List[EventRecord] = []
         self.seg: Optional[_Segment] = None
         self.pending = None  # (event index, x at event) to apply at self.t
@@ -300,12 +301,15 @@ class Simulator:
 
     def _bind(self):
         """(Re)bind the right-hand side and the active guards to the current (q, u)."""
+        self._rebind()
+        self.f = self.fun(self.t, self.x)
+        self.g = [ev.guard(self.x, self.q, self.u, self.p) for _, ev in self.active]
+
+    def _rebind(self):
         model, q, u, p = self.model, self.q, self.u, self.p
         flow = model.flow
         self.fun = lambda t, x: flow(t, x, q, u, p)
         self.active = [(i, ev) for i, ev in enumerate(model.events) if ev.active(q)]
-        self.f = self.fun(self.t, self.x)
-        self.g = [ev.guard(self.x, q, u, p) for _, ev in self.active]
 
     def _initial_step(self):
         """Hairer's starting step (Solving ODEs I, Sect. II.4)."""
@@ -357,25 +361,25 @@ class Simulator:
                 break
             self._step()
         self.t_out = t_target
-        if t_target == self.t:
-            return self.x, self.q
-        return self.seg(t_target), self.q
+        self.x_out = self.x if t_target == self.t else self.seg(t_target)
+        self.q_out = self.q
+        return self.x_out, self.q_out
 
     def snapshot(self):
-        """A deep copy of the whole integrator state (for fmi2GetFMUstate)."""
-        memo = {id(self.model): self.model, id(self.p): self.p}
-        return copy.deepcopy(self.__dict__, memo)
+        """A deep copy of the whole integrator state (for fmi2GetFMUstate).
+
+        The model, the parameters and the method are immutable and shared, not copied; closures
+        are rebuilt on restore (the discrete state ``q`` is never mutated in place, so the
+        right-hand sides kept in past segments stay valid).
+        """
+        shared = {id(self.model): self.model, id(self.p): self.p, id(self.pair): self.pair}
+        state = {k: v for k, v in self.__dict__.items() if k not in ("fun", "active")}
+        return copy.deepcopy(state, shared)
 
     def restore(self, snap):
-        memo = {id(self.model): self.model, id(self.p): self.p}
-        self.__dict__.update(copy.deepcopy(snap, memo))
-        self._bind_keep_state()
-
-    def _bind_keep_state(self):
-        # closures captured (q, u) of the copy: rebind them to this object's own q and u
-        f, g = self.f, self.g
-        self._bind()
-        self.f, self.g = f, g
+        shared = {id(snap["model"]): snap["model"], id(snap["p"]): snap["p"], id(snap["pair"]): snap["pair"]}
+        self.__dict__.update(copy.deepcopy(snap, shared))
+        self._rebind()
 
     # ---- stepping ---------------------------------------------------------------------------
     def _step(self):

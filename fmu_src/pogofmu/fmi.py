@@ -1,0 +1,195 @@
+"""One adapter from any :class:`~pogofmu.model.HybridModel` to an FMI 2.0 co-simulation slave.
+
+A slave file is two lines::
+
+    from pogofmu.fmi import HybridSlave
+    from pogofmu.models.pogo_stick import MODEL
+
+    class PogoStick(HybridSlave):
+        model = MODEL
+
+Behaviour (FMI 2.0 co-simulation, on pythonfmu 0.7):
+
+* parameters are ``fixed``: set them before ``fmi2ExitInitializationMode``; they are all checked
+  there and the initial state is derived from them;
+* every ``fmi2DoStep`` holds the inputs over the step, lets the engine run to the end of the step
+  (handling every event inside it) and caches all outputs;
+* errors name the variable, its value and the rule, and never take the host process down:
+
+  - a broken parameter rule (checked in ``fmi2ExitInitializationMode``), the trajectory leaving
+    the model's domain or an event storm raise :class:`FMUError`: pythonfmu returns
+    ``fmi2Fatal`` and logs the message (the instance is finished; free it and make a new one);
+  - a non-finite input, a negative step size or a wrong communication point make
+    ``fmi2DoStep`` return ``fmi2Discard`` with the reason logged at status ``fmi2Error``: the
+    instance stays usable, the master can correct the input and step again;
+* ``fmi2GetFMUstate`` / ``fmi2SetFMUstate`` save and restore the whole engine: continuous and
+  discrete state (mode, element memories), the integrator's step size and current step, the
+  event history and the inputs.
+"""
+from __future__ import annotations
+
+import math
+
+from pythonfmu import DefaultExperiment, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real
+from pythonfmu.enums import Fmi2Status
+
+from .engine import Simulator
+from .model import HybridModel, ModelError, Params
+
+__all__ = ["HybridSlave", "FMUError"]
+
+
+class FMUError(Exception):
+    """An FMI call cannot be carried out; the message says why."""
+
+
+class HybridSlave(Fmi2Slave):
+    """Generic FMI 2.0 co-simulation slave for a :class:`HybridModel` (set ``model`` in a subclass)."""
+
+    model: HybridModel = None
+    author = "pogofmu"
+    license = "MIT"
+    version = "0.1.0"
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        model = type(self).model
+        if model is None:
+            raise FMUError(f"{type(self).__name__} defines no model")
+        self.description = model.description
+        self.default_experiment = DefaultExperiment(start_time=0.0, stop_time=model.default_stop_time,
+                                                    step_size=model.default_step)
+        self._par = model.defaults()
+        self._u = [float(v.start) for v in model.inputs]
+        self._sim = None
+        self._out = None
+        self._t_start = 0.0
+        self._t_stop = math.inf
+        for par in model.parameters:
+            cls = Integer if par.integer else Real
+            self.register_variable(cls(
+                par.name, causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed,
+                description=par.description,
+                getter=(lambda n=par.name: self._par[n]),
+                setter=(lambda v, n=par.name: self._set_parameter(n, v))))
+        for i, var in enumerate(model.inputs):
+            self.register_variable(Real(
+                var.name, causality=Fmi2Causality.input, variability=Fmi2Variability.continuous,
+                description=var.description,
+                getter=(lambda i=i: self._u[i]),
+                setter=(lambda v, i=i, n=var.name: self._set_input(i, n, v))))
+        for var in model.outputs:
+            if var.name in model.integer_outputs:
+                cls, variability = Integer, Fmi2Variability.discrete
+            else:
+                cls, variability = Real, Fmi2Variability.continuous
+            self.register_variable(cls(
+                var.name, causality=Fmi2Causality.output, variability=variability,
+                description=var.description,
+                getter=(lambda n=var.name: self._output(n))))
+
+    # ---- variable access ----------------------------------------------------------------------
+    def _set_parameter(self, name, value):
+        if self._sim is not None:
+            raise FMUError(f"parameter {name} is fixed: it cannot be changed after initialization "
+                           f"(tried {value!r})")
+        # all rules (finite, signs, consistency) are checked in fmi2ExitInitializationMode
+        self._par[name] = value
+
+    def _set_input(self, i, name, value):
+        # checked in fmi2DoStep, which can refuse the step without destroying the instance
+        self._u[i] = float(value)
+
+    def _output(self, name):
+        if self._out is None:
+            self._out = self._initial_outputs()
+        return self._out[name]
+
+    def _initial_outputs(self):
+        model = type(self).model
+        try:
+            p = Params(self._par)
+            x, q = model.initial(p)
+        except ModelError:
+            return {v.name: 0 for v in model.outputs}
+        return model.output_fn(self._t_start, x, q, tuple(self._u), p, 0, self._t_start)
+
+    def _update_outputs(self):
+        sim = self._sim
+        ev = sim.events
+        x, q = sim.x_out, sim.q_out
+        self._out = type(self).model.output_fn(
+            sim.t_out, x, q, sim.u, sim.p, len(ev), ev[-1].time if ev else self._t_start)
+
+    # ---- FMI calls ----------------------------------------------------------------------------
+    def setup_experiment(self, start_time, stop_time=None, tolerance=None):
+        self._t_start = float(start_time)
+        self._t_stop = math.inf if stop_time is None else float(stop_time)
+
+    def exit_initialization_mode(self):
+        model = type(self).model
+        try:
+            self._sim = Simulator(model, Params(self._par), u=tuple(self._u), t0=self._t_start,
+                                  t_stop=self._t_stop)
+        except (ModelError, ValueError) as exc:
+            raise FMUError(f"{model.name}: initialization failed: {exc}") from None
+        self._sim.advance(self._t_start)
+        self._update_outputs()
+
+    def do_step(self, current_time, step_size):
+        sim = self._sim
+        problem = self._step_problem(current_time, step_size)
+        if problem is not None:
+            # recoverable: refuse the step (fmi2Discard) with the reason logged as an error; the
+            # instance stays usable (the master may correct the input or the step and retry)
+            self.log(problem, Fmi2Status.error)
+            return False
+        t_end = max(current_time + step_size, sim.t_out)
+        try:
+            sim.set_input(self._u)
+            sim.advance(t_end)
+        except ModelError as exc:
+            # not recoverable (the trajectory left the domain, an event storm): fmi2Fatal with the
+            # message logged by pythonfmu (no self.log in this call, or the message would be lost)
+            raise FMUError(f"{type(self).model.name}: step from t = {current_time!r} s failed: {exc}") from None
+        self._update_outputs()
+        return True
+
+    def _step_problem(self, current_time, step_size):
+        sim = self._sim
+        if sim is None:
+            return "fmi2DoStep called before fmi2ExitInitializationMode"
+        if not (math.isfinite(step_size) and step_size >= 0):
+            return (f"communication step size step_size = {step_size!r} violates the rule: "
+                    f"0 <= step_size < inf")
+        if abs(current_time - sim.t_out) > 1e-9 * max(1.0, abs(current_time)):
+            return (f"currentCommunicationPoint = {current_time!r} violates the rule: it must equal "
+                    f"the end of the previous step ({sim.t_out!r})")
+        for var, v in zip(type(self).model.inputs, self._u):
+            if not math.isfinite(v):
+                return f"input {var.name} = {v!r} violates the rule: {var.name} must be a finite number"
+        return None
+
+    def terminate(self):
+        pass
+
+    # ---- FMU state ----------------------------------------------------------------------------
+    def _get_fmu_state(self):
+        return {
+            "sim": None if self._sim is None else self._sim.snapshot(),
+            "par": dict(self._par), "u": list(self._u),
+            "out": None if self._out is None else dict(self._out),
+            "t_start": self._t_start, "t_stop": self._t_stop,
+        }
+
+    def _set_fmu_state(self, state):
+        self._par = dict(state["par"])
+        self._u = list(state["u"])
+        self._out = None if state["out"] is None else dict(state["out"])
+        self._t_start, self._t_stop = state["t_start"], state["t_stop"]
+        if state["sim"] is None:
+            self._sim = None
+        else:
+            if self._sim is None:
+                self._sim = Simulator.__new__(Simulator)
+            self._sim.restore(state["sim"])
