@@ -55,7 +55,7 @@ def complete_model_description(xml: bytes, cls) -> bytes:
     from pogofmu.units import UNITS
 
     model = cls.model
-    units = {v.name: v.unit for v in model.outputs + model.inputs}
+    units = {v.name: v.unit for v in model.all_outputs() + model.inputs}
     units.update({p.name: p.unit for p in model.parameters})
     root = ET.fromstring(xml)
     used = set()

@@ -238,13 +238,15 @@ def solver_parameters():
         Parameter("abs_tol", 1e-12, "", "absolute error tolerance of the internal solver (state units)"),
         Parameter("max_step", 0.01, "s", "largest internal step (0 or inf: unbounded)"),
         Parameter("initial_step", 0.0, "s", "first internal step (0: chosen automatically)"),
+        Parameter("log_events", 0, "", "1: report every state event through the FMI logger (category logEvents)",
+                  integer=True),
     )
 
 
 def check_solver_parameters(p: Params):
     from .model import require
 
-    for name in ("method", "rel_tol", "abs_tol", "max_step", "initial_step"):
+    for name in ("method", "rel_tol", "abs_tol", "max_step", "initial_step", "log_events"):
         v = p[name]
         if not isinstance(v, (int, float)) or math.isnan(v):
             raise ParameterError(f"parameter {name} = {v!r} violates the rule: {name} must be a number")
@@ -252,6 +254,7 @@ def check_solver_parameters(p: Params):
     require(1e-14 <= p.rel_tol < 1.0, "rel_tol", p.rel_tol, "1e-14 <= rel_tol < 1")
     require(p.abs_tol > 0 and math.isfinite(p.abs_tol), "abs_tol", p.abs_tol, "0 < abs_tol < inf")
     require(p.max_step >= 0, "max_step", p.max_step, "max_step >= 0 (0 or inf: unbounded)")
+    require(p.log_events in (0, 1), "log_events", p.log_events, "log_events is 0 or 1")
     require(p.initial_step >= 0 and math.isfinite(p.initial_step), "initial_step", p.initial_step,
             "0 <= initial_step < inf (0: automatic)")
 

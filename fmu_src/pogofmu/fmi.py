@@ -16,12 +16,20 @@ Behaviour (FMI 2.0 co-simulation, on pythonfmu 0.7):
   (handling every event inside it) and caches all outputs;
 * errors name the variable, its value and the rule, and never take the host process down:
 
-  - a broken parameter rule (checked in ``fmi2ExitInitializationMode``), the trajectory leaving
-    the model's domain or an event storm raise :class:`FMUError`: pythonfmu returns
-    ``fmi2Fatal`` and logs the message (the instance is finished; free it and make a new one);
+  - a broken parameter rule (checked in ``fmi2ExitInitializationMode``) raises
+    :class:`FMUError`: pythonfmu returns ``fmi2Fatal`` and logs the message (free the instance
+    and make a new one);
   - a non-finite input, a negative step size or a wrong communication point make
     ``fmi2DoStep`` return ``fmi2Discard`` with the reason logged at status ``fmi2Error``: the
     instance stays usable, the master can correct the input and step again;
+  - the trajectory leaving the model's domain (e.g. the leg bottoming out) or an event storm
+    raise :class:`FMUError` (``fmi2Fatal``, message naming the condition and the time): a
+    truncated run must not pass for a result (fmpy's ``simulate_fmu`` would stop quietly on
+    fmi2Discard);
+* pythonfmu forwards log messages only when the instance was created with ``loggingOn``
+  (fmpy: ``debug_logging=True``);
+* with the parameter ``log_events = 1`` every event is reported through the FMI logger
+  (category ``logEvents``): kind, exact time and the state before the jump;
 * ``fmi2GetFMUstate`` / ``fmi2SetFMUstate`` save and restore the whole engine: continuous and
   discrete state (mode, element memories), the integrator's step size and current step, the
   event history and the inputs.
@@ -65,6 +73,7 @@ class HybridSlave(Fmi2Slave):
         self._out = None
         self._t_start = 0.0
         self._t_stop = math.inf
+        self.log_categories = dict(self.log_categories, logEvents="every state event: kind, time, state")
         for par in model.parameters:
             cls = Integer if par.integer else Real
             self.register_variable(cls(
@@ -78,8 +87,9 @@ class HybridSlave(Fmi2Slave):
                 description=var.description,
                 getter=(lambda i=i: self._u[i]),
                 setter=(lambda v, i=i, n=var.name: self._set_input(i, n, v))))
-        for var in model.outputs:
-            if var.name in model.integer_outputs:
+        integers = model.all_integer_outputs()
+        for var in model.all_outputs():
+            if var.name in integers:
                 cls, variability = Integer, Fmi2Variability.discrete
             else:
                 cls, variability = Real, Fmi2Variability.continuous
@@ -111,15 +121,20 @@ class HybridSlave(Fmi2Slave):
             p = Params(self._par)
             x, q = model.initial(p)
         except ModelError:
-            return {v.name: 0 for v in model.outputs}
-        return model.output_fn(self._t_start, x, q, tuple(self._u), p, 0, self._t_start)
+            return {v.name: 0 for v in model.all_outputs()}
+        out = model.output_fn(self._t_start, x, q, tuple(self._u), p)
+        out.update(n_events=0, t_last_event=self._t_start, last_event=0)
+        return out
 
     def _update_outputs(self):
         sim = self._sim
         ev = sim.events
         x, q = sim.x_out, sim.q_out
-        self._out = type(self).model.output_fn(
-            sim.t_out, x, q, sim.u, sim.p, len(ev), ev[-1].time if ev else self._t_start)
+        out = type(self).model.output_fn(sim.t_out, x, q, sim.u, sim.p)
+        out["n_events"] = len(ev)
+        out["t_last_event"] = ev[-1].time if ev else self._t_start
+        out["last_event"] = ev[-1].index + 1 if ev else 0
+        self._out = out
 
     # ---- FMI calls ----------------------------------------------------------------------------
     def setup_experiment(self, start_time, stop_time=None, tolerance=None):
@@ -137,23 +152,34 @@ class HybridSlave(Fmi2Slave):
         self._update_outputs()
 
     def do_step(self, current_time, step_size):
-        sim = self._sim
         problem = self._step_problem(current_time, step_size)
         if problem is not None:
-            # recoverable: refuse the step (fmi2Discard) with the reason logged as an error; the
-            # instance stays usable (the master may correct the input or the step and retry)
+            # pythonfmu can only return fmi2Discard (or fmi2Fatal by raising, which destroys the
+            # instance): refuse the step with the reason logged at status fmi2Error; the master
+            # can correct the input or the step and go on with the same instance.
             self.log(problem, Fmi2Status.error)
             return False
-        t_end = max(current_time + step_size, sim.t_out)
+        sim = self._sim
+        n_before = len(sim.events)
         try:
             sim.set_input(self._u)
-            sim.advance(t_end)
+            sim.advance(max(current_time + step_size, sim.t_out))
         except ModelError as exc:
-            # not recoverable (the trajectory left the domain, an event storm): fmi2Fatal with the
-            # message logged by pythonfmu (no self.log in this call, or the message would be lost)
-            raise FMUError(f"{type(self).model.name}: step from t = {current_time!r} s failed: {exc}") from None
+            # the model cannot go on: fmi2Fatal (raise), so that no master mistakes a truncated
+            # run for a result.  Nothing is logged in this call: pythonfmu would drop the message.
+            raise FMUError(f"{type(self).model.name}: {exc}") from None
+        self._log_events(n_before)
         self._update_outputs()
         return True
+
+    def _log_events(self, start):
+        if not self._par.get("log_events"):
+            return
+        names = [v.name for v in type(self).model.states]
+        for k, ev in enumerate(self._sim.events[start:], start=start + 1):
+            state = ", ".join(f"{n}={v!r}" for n, v in zip(names, ev.x_before))
+            self.log(f"event {k} {ev.name} at t = {ev.time!r} s; state before jump: {state}",
+                     Fmi2Status.ok, "logEvents")
 
     def _step_problem(self, current_time, step_size):
         sim = self._sim

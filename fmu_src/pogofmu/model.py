@@ -100,8 +100,11 @@ class HybridModel:
     ``initial(p) -> (x0, q0)`` derives the initial state from the parameters (it may raise
     :class:`ParameterError`); ``check(p)`` validates the parameters; ``domain(t, x, q, u, p)``
     returns ``None`` or the text of the violated domain condition;
-    ``output_fn(t, x, q, u, p, n_events, t_last_event)`` returns a dict of output values;
-    ``integer_outputs`` names the outputs that are integers (modes, counters).
+    ``output_fn(t, x, q, u, p)`` returns a dict of the model's output values (the engine adds
+    ``n_events``, ``t_last_event`` and ``last_event``, see :meth:`engine_outputs`);
+    ``integer_outputs`` names the outputs that are integers (modes, branches);
+    ``plots`` lists the figures the master script draws: each a tuple of panels, a panel being a
+    tuple of output names against time, or ``("x", "r")`` style pairs marked ``vs``.
     """
 
     name: str
@@ -117,8 +120,24 @@ class HybridModel:
     check: Callable = lambda p: None
     domain: Callable = lambda t, x, q, u, p: None
     integer_outputs: frozenset = frozenset()
+    plots: tuple = ()
     default_stop_time: float = 10.0
     default_step: float = 1e-3
+
+    def engine_outputs(self) -> Tuple[Variable, ...]:
+        """Outputs every model has, kept by the engine: event counter, time and kind of the latest."""
+        codes = ", ".join(f"{i} {ev.name}" for i, ev in enumerate(self.events, start=1))
+        return (
+            Variable("n_events", "", "number of state events handled so far"),
+            Variable("t_last_event", "s", "time of the latest state event (the start time before the first)"),
+            Variable("last_event", "", f"kind of the latest state event: 0 none, {codes}"),
+        )
+
+    def all_outputs(self) -> Tuple[Variable, ...]:
+        return self.outputs + self.engine_outputs()
+
+    def all_integer_outputs(self) -> frozenset:
+        return self.integer_outputs | {"n_events", "last_event"}
 
     def defaults(self) -> dict:
         return {par.name: par.default for par in self.parameters}

@@ -41,14 +41,12 @@ BASE_OUTPUTS = BASE_STATES + (
     Variable("x", "m", "leg deflection x = xbar - x_i (<= 0: the spring never extends)"),
     Variable("r", "N", "restoring force of the leg (0 in flight)"),
     Variable("s", "", "mode: 0 flight (no contact), 1 contact"),
-    Variable("n_events", "", "number of state events handled so far"),
-    Variable("t_last_event", "s", "time of the latest state event (start time before the first)"),
     Variable("E", "J", "mechanical energy of the mass, E = m ydot^2/2 + m g y"),
     Variable("W_leg", "J", "work absorbed by the leg, integral of r*xdot over contact"),
     Variable("W_ext", "J", "work done by F_ext on the mass, integral of F_ext*ydot"),
 )
 
-INTEGER_OUTPUTS = frozenset({"s", "n_events"})
+INTEGER_OUTPUTS = frozenset({"s"})
 
 INPUTS = (Variable("F_ext", "N", "external vertical force on the mass (positive up)", 0.0),)
 
@@ -70,7 +68,13 @@ def _tail_parameters(leg):
     ) + tuple(par for el in leg for par in el.parameters if par.name.endswith("_0"))
 
 
-def make_stick_model(name: str, description: str, leg: Sequence[Element]) -> HybridModel:
+DEFAULT_PLOTS = (
+    (("y", "z", "xbar"), ("s",)),  # time histories, like the paper's Fig. 23
+    (("E", "W_leg"),),  # energy book-keeping
+)
+
+
+def make_stick_model(name: str, description: str, leg: Sequence[Element], plots=DEFAULT_PLOTS) -> HybridModel:
     """Build the hybrid model of a pogo stick whose leg is the parallel composition ``leg``."""
     leg = tuple(leg)
     slices = []
@@ -188,13 +192,12 @@ def make_stick_model(name: str, description: str, leg: Sequence[Element]) -> Hyb
             return f"leg deflection x = {xbar - p.x_i:.6g} m must stay <= 0 (the spring never extends)"
         return None
 
-    def output_fn(t, X, q, u, p, n_events, t_last_event):
+    def output_fn(t, X, q, u, p):
         xbar, xdot, y, ydot, z = X[0], X[1], X[2], X[3], X[4]
         x = xbar - p.x_i
         r = leg_force(x, xdot, X, q, p) if q["s"] else 0.0
         out = {
             "xbar": xbar, "xdot": xdot, "y": y, "ydot": ydot, "z": z, "x": x, "r": r, "s": q["s"],
-            "n_events": n_events, "t_last_event": t_last_event,
             "E": 0.5 * p.m * ydot * ydot + p.m * p.g * y, "W_leg": X[I_WLEG], "W_ext": X[I_WEXT],
         }
         for el, sl in parts:
@@ -204,7 +207,7 @@ def make_stick_model(name: str, description: str, leg: Sequence[Element]) -> Hyb
     return HybridModel(
         name=name, description=description, states=states, parameters=parameters, inputs=INPUTS,
         outputs=outputs, flow=flow, events=tuple(events), initial=initial, output_fn=output_fn,
-        check=check, domain=domain, integer_outputs=INTEGER_OUTPUTS | frozenset(
+        check=check, domain=domain, plots=plots, integer_outputs=INTEGER_OUTPUTS | frozenset(
             v.name for el in leg for v in el.outputs if getattr(el, "integer_outputs", None)
             and v.name in el.integer_outputs))
 

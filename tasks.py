@@ -1,0 +1,71 @@
+#!/usr/bin/env python3
+"""The project's two commands (and a few more), runnable on a machine with nothing but Python.
+
+    python3 tasks.py run     # build + validate every FMU, simulate default experiments -> results/
+    python3 tasks.py test    # the test suite (what CI runs)
+    python3 tasks.py bench   # the benchmarks (benchmarks/)
+
+The first call creates ``.venv/`` beside this file and installs the project with its test
+dependencies into it (again whenever pyproject.toml changes); every command then runs inside it.
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+import subprocess
+import sys
+import venv
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent
+VENV = ROOT / ".venv"
+PY = VENV / ("Scripts/python.exe" if os.name == "nt" else "bin/python")
+STAMP = VENV / ".pogofmu-installed"
+
+
+def ensure_venv():
+    want = hashlib.sha256((ROOT / "pyproject.toml").read_bytes()).hexdigest()
+    if PY.exists() and STAMP.exists() and STAMP.read_text() == want:
+        return
+    if not PY.exists():
+        print(f"creating virtual environment {VENV}", flush=True)
+        venv.EnvBuilder(with_pip=True).create(VENV)
+    print("installing pogofmu and its dependencies into .venv", flush=True)
+    subprocess.check_call([str(PY), "-m", "pip", "install", "--quiet", "--upgrade", "pip"])
+    subprocess.check_call([str(PY), "-m", "pip", "install", "--quiet", "-e", f"{ROOT}[test]"])
+    STAMP.write_text(want)
+
+
+def in_venv() -> bool:
+    return Path(sys.prefix).resolve() == VENV.resolve()
+
+
+def main(argv):
+    if not argv or argv[0] not in ("run", "test", "bench", "build"):
+        print(__doc__)
+        return 2
+    if not in_venv():
+        ensure_venv()
+        return subprocess.call([str(PY), str(ROOT / "tasks.py"), *argv], cwd=ROOT)
+    cmd, rest = argv[0], argv[1:]
+    os.environ.setdefault("MPLBACKEND", "Agg")
+    if cmd == "build":
+        return subprocess.call([sys.executable, str(ROOT / "build_fmu.py"), *rest], cwd=ROOT)
+    if cmd == "run":
+        rc = subprocess.call([sys.executable, str(ROOT / "build_fmu.py")], cwd=ROOT)
+        if rc:
+            return rc
+        return subprocess.call([sys.executable, "-m", "pogofmu.master", *rest], cwd=ROOT)
+    if cmd == "test":
+        rc = subprocess.call([sys.executable, "-m", "pytest", *rest], cwd=ROOT)
+        return 0 if rc == 5 and os.environ.get("POGOFMU_ALLOW_EMPTY") else rc
+    if cmd == "bench":
+        rc = subprocess.call([sys.executable, str(ROOT / "build_fmu.py")], cwd=ROOT)
+        for script in sorted((ROOT / "benchmarks").glob("bench_*.py")):
+            rc |= subprocess.call([sys.executable, str(script), *rest], cwd=ROOT)
+        return rc
+    return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

@@ -1,0 +1,21 @@
+"""Session setup: build every FMU into dist/ once, from the current sources."""
+import os
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tests"))
+
+
+def pytest_configure(config):
+    os.environ.setdefault("MPLBACKEND", "Agg")
+
+
+@pytest.fixture(scope="session", autouse=True)
+def built_fmus():
+    import build_fmu
+
+    return build_fmu.main([])

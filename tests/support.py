@@ -1,0 +1,184 @@
+"""Helpers shared by the tests: build once, simulate through fmpy, read logs, run libcosimpy.
+
+Everything here drives the *built* FMUs in dist/, as an importer would.
+"""
+from __future__ import annotations
+
+import csv
+import json
+import math
+import subprocess
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import scipy.integrate  # noqa: F401  (imported before any FMU is loaded; see README "Known issues")
+
+ROOT = Path(__file__).resolve().parents[1]
+DIST = ROOT / "dist"
+REFERENCE = ROOT.parent / "shared" / "reference"
+
+
+def fmu_path(name: str) -> Path:
+    path = DIST / f"{name}.fmu"
+    assert path.exists(), f"{path} missing: the session fixture builds every FMU first"
+    return path
+
+
+def all_fmus():
+    return sorted(p.stem for p in DIST.glob("*.fmu"))
+
+
+def _message(status, category, message):
+    decode = lambda b: b.decode(errors="replace") if b else ""  # noqa: E731 (None for some messages)
+    return status, decode(category), decode(message)
+
+
+@dataclass
+class Run:
+    res: object
+    messages: list = field(default_factory=list)  # (status, category, text)
+
+    def __getitem__(self, name):
+        return self.res[name]
+
+    @property
+    def errors(self):
+        return [m for m in self.messages if m[0] >= 3]
+
+    def events(self):
+        """Events reported through the logEvents category (needs log_events=1)."""
+        return parse_event_log(self.messages)
+
+
+def parse_event_log(messages):
+    out = []
+    for status, category, text in messages:
+        if category != "logEvents":
+            continue
+        # "event 3 touchdown at t = 1.2631688706933197 s; state before jump: xbar=1.0, ..."
+        head, _, state = text.partition("; state before jump: ")
+        words = head.split()
+        values = dict(kv.split("=") for kv in state.split(", ")) if state else {}
+        out.append({"index": int(words[1]), "name": words[2], "time": float(words[5]),
+                    "state": {k: float(v) for k, v in values.items()}})
+    return out
+
+
+def simulate(name, start_values=None, stop_time=None, output_interval=None, input=None,
+             check_complete=True, **kwargs) -> Run:
+    """fmpy simulate_fmu with every log message collected; by default assert the run completed."""
+    from fmpy import read_model_description, simulate_fmu
+
+    path = fmu_path(name)
+    md = read_model_description(str(path))
+    stop = float(md.defaultExperiment.stopTime) if stop_time is None else stop_time
+    messages = []
+
+    def logger(component, instance, status, category, message):
+        messages.append(_message(status, category, message))
+
+    res = simulate_fmu(str(path), start_values=start_values or {}, stop_time=stop,
+                       output_interval=output_interval or float(md.defaultExperiment.stepSize),
+                       input=input, debug_logging=True, logger=logger, **kwargs)
+    run = Run(res, messages)
+    if check_complete:
+        assert math.isclose(res["time"][-1], stop, abs_tol=1e-9 * max(1, stop)), (
+            f"{name} stopped at t = {res['time'][-1]} < {stop}: {run.errors}")
+    return run
+
+
+def reference_events():
+    path = REFERENCE / "pogo_basic_events.csv"
+    with path.open() as f:
+        rows = list(csv.DictReader(line for line in f if not line.startswith("#")))
+    return [{"index": int(r["index"]), "name": r["event"], "time": float(r["time_s"]),
+             "y": float(r["y_m"]), "ydot": float(r["ydot_m_per_s"])} for r in rows]
+
+
+class Instance:
+    """One FMU instance stepped by hand through fmpy's FMU2Slave, with its log collected."""
+
+    def __init__(self, name, instance_name="test"):
+        from fmpy import extract, read_model_description
+        from fmpy.fmi2 import FMU2Slave
+
+        path = fmu_path(name)
+        self.md = read_model_description(str(path))
+        self.vars = {v.name: v for v in self.md.modelVariables}
+        self.dir = extract(str(path))
+        self.messages = []
+
+        def logger(component, instance, status, category, message):
+            self.messages.append(_message(status, category, message))
+
+        self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self.dir,
+                             modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName=instance_name)
+        self._instantiate_with(logger)
+        self.t = 0.0
+
+    def _instantiate_with(self, logger):
+        from fmpy.fmi2 import fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, fmi2CallbackAllocateMemoryTYPE, \
+            fmi2CallbackFreeMemoryTYPE
+        from fmpy import calloc, free
+
+        cb = fmi2CallbackFunctions()
+        cb.logger = fmi2CallbackLoggerTYPE(logger)
+        cb.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+        cb.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+        self._callbacks = cb
+        self.fmu.instantiate(loggingOn=True, callbacks=cb)
+
+    def set(self, **values):
+        for name, value in values.items():
+            v = self.vars[name]
+            if v.type == "Real":
+                self.fmu.setReal([v.valueReference], [float(value)])
+            else:
+                self.fmu.setInteger([v.valueReference], [int(value)])
+
+    def get(self, *names):
+        out = []
+        for name in names:
+            v = self.vars[name]
+            if v.type == "Real":
+                out.append(self.fmu.getReal([v.valueReference])[0])
+            else:
+                out.append(self.fmu.getInteger([v.valueReference])[0])
+        return out if len(out) > 1 else out[0]
+
+    def outputs(self):
+        return {n: self.get(n) for n, v in self.vars.items() if v.causality == "output"}
+
+    def init(self, start_time=0.0, stop_time=None, **params):
+        self.fmu.setupExperiment(startTime=start_time, stopTime=stop_time)
+        self.fmu.enterInitializationMode()
+        self.set(**params)
+        self.fmu.exitInitializationMode()
+        self.t = start_time
+        return self
+
+    def step(self, h):
+        self.fmu.doStep(currentCommunicationPoint=self.t, communicationStepSize=h)
+        self.t += h
+
+    def run_to(self, t_end, h):
+        n = int(round((t_end - self.t) / h))
+        for _ in range(n):
+            self.step(h)
+
+    def close(self):
+        try:
+            self.fmu.terminate()
+        finally:
+            self.fmu.freeInstance()
+
+
+def run_libcosim(name, stop_time, step, outputs, initial=None, timeout=120):
+    """Run one FMU under libcosimpy in a separate process; return {output: final value}."""
+    script = ROOT / "tests" / "_libcosim_runner.py"
+    payload = json.dumps({"fmu": str(fmu_path(name)), "stop_time": stop_time, "step": step,
+                          "outputs": outputs, "initial": initial or {}})
+    proc = subprocess.run([sys.executable, str(script), payload], capture_output=True, text=True, timeout=timeout)
+    assert proc.returncode == 0, f"libcosimpy run failed ({proc.returncode}): {proc.stderr[-2000:]}"
+    return json.loads(proc.stdout.strip().splitlines()[-1])

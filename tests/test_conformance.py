@@ -1,0 +1,153 @@
+"""What every FMU in dist/ must satisfy; a new FMU joins by existing.
+
+Validation, units and descriptions, the default experiment reaching its stop time, bad input
+ending in an error status with a clear message while the host survives, FMU state round trips,
+and agreement with an independent importer (libcosimpy).
+"""
+import math
+import xml.etree.ElementTree as ET
+import zipfile
+
+import pytest
+
+import build_fmu
+from support import DIST, Instance, fmu_path, run_libcosim, simulate
+
+FMUS = sorted(build_fmu.slave_class(s).__name__ for s in build_fmu.slave_files())
+
+
+def model_description(name):
+    with zipfile.ZipFile(fmu_path(name)) as z:
+        return ET.fromstring(z.read("modelDescription.xml"))
+
+
+def slave_model(name):
+    for script in build_fmu.slave_files():
+        cls = build_fmu.slave_class(script)
+        if cls.__name__ == name:
+            return cls.model
+    raise KeyError(name)
+
+
+def test_every_slave_was_built():
+    assert FMUS, "no slave files found"
+    assert sorted(p.stem for p in DIST.glob("*.fmu")) == FMUS
+
+
+@pytest.mark.parametrize("name", FMUS)
+def test_fmpy_validation_reports_no_problem(name):
+    from fmpy.validation import validate_fmu
+
+    assert validate_fmu(str(fmu_path(name))) == []
+
+
+@pytest.mark.parametrize("name", FMUS)
+def test_units_and_descriptions(name):
+    root = model_description(name)
+    defined = {u.get("name") for u in root.iter("Unit")}
+    model = slave_model(name)
+    declared = {v.name: v.unit for v in model.all_outputs() + model.inputs}
+    declared.update({p.name: p.unit for p in model.parameters})
+    n_with_unit = 0
+    for sv in root.iter("ScalarVariable"):
+        name_ = sv.get("name")
+        assert sv.get("description"), f"{name_} has no description"
+        real = sv.find("Real")
+        if real is None:
+            continue
+        unit = real.get("unit")
+        assert unit == (declared[name_] or None), f"{name_}: unit {unit!r} != model's {declared[name_]!r}"
+        if unit:
+            assert unit in defined, f"unit {unit} of {name_} missing from UnitDefinitions"
+            n_with_unit += 1
+    assert n_with_unit >= 5
+    de = root.find("DefaultExperiment")
+    assert de is not None and float(de.get("stopTime")) > 0 and float(de.get("stepSize")) > 0
+    assert root.find("CoSimulation").get("canGetAndSetFMUstate") == "true"
+
+
+@pytest.mark.parametrize("name", FMUS)
+def test_default_experiment_reaches_stop_time(name):
+    run = simulate(name)  # asserts the final time
+    assert not run.errors
+    for col in run.res.dtype.names:
+        assert all(math.isfinite(v) for v in run.res[col]), f"{col} not finite"
+
+
+@pytest.mark.parametrize("name", FMUS)
+def test_nan_parameter_is_rejected_and_host_survives(name):
+    from fmpy.fmi1 import FMICallException
+
+    model = slave_model(name)
+    par = next(p for p in model.parameters if not p.integer)
+    inst = Instance(name)
+    with pytest.raises(FMICallException) as exc:
+        inst.init(**{par.name: float("nan")})
+    assert "fatal" in str(exc.value)
+    # FMI 2.0: after fmi2Fatal no function of the instance may be called, not even fmi2FreeInstance
+    text = " ".join(m[2] for m in inst.messages)
+    assert f"parameter {par.name} = nan" in text and "finite" in text, text
+    # a fresh instance works
+    run = simulate(name, stop_time=0.1)
+    assert run.res["time"][-1] == pytest.approx(0.1)
+
+
+@pytest.mark.parametrize("name", FMUS)
+def test_bad_step_and_nan_input_are_refused_instance_survives(name):
+    from fmpy.fmi1 import FMICallException
+
+    model = slave_model(name)
+    inst = Instance(name).init()
+    try:
+        with pytest.raises(FMICallException) as exc:
+            inst.fmu.doStep(currentCommunicationPoint=0.0, communicationStepSize=-1e-3)
+        assert "discard" in str(exc.value)
+        assert any("step_size = -0.001" in m[2] and "0 <= step_size" in m[2] for m in inst.messages)
+        for var in model.inputs:
+            inst.set(**{var.name: float("nan")})
+            with pytest.raises(FMICallException):
+                inst.fmu.doStep(currentCommunicationPoint=0.0, communicationStepSize=1e-3)
+            assert any(f"input {var.name} = nan" in m[2] for m in inst.messages), inst.messages
+            inst.set(**{var.name: var.start})
+        # the same instance goes on after the refused steps
+        inst.run_to(0.05, 1e-3)
+        assert inst.t == pytest.approx(0.05)
+    finally:
+        inst.close()
+
+
+@pytest.mark.parametrize("name", FMUS)
+def test_fmu_state_round_trip(name):
+    """Save the state at several times, run on, restore, run again: identical outputs."""
+    stop = 2.0
+    inst = Instance(name).init()
+    try:
+        for t_save in (0.2, 0.5, 0.9, 1.3):
+            inst.run_to(t_save, 1e-3)
+            state = inst.fmu.getFMUstate()
+            t0 = inst.t
+            inst.run_to(t_save + 0.4, 1e-2)
+            first = inst.outputs()
+            inst.fmu.setFMUstate(state)
+            inst.t = t0
+            inst.run_to(t_save + 0.4, 1e-2)
+            second = inst.outputs()
+            assert first == second, f"{name}: state restored at t = {t_save} gives different outputs"
+            inst.fmu.setFMUstate(state)  # restore again: the saved state is reusable
+            inst.t = t0
+            inst.fmu.freeFMUstate(state)
+        inst.run_to(stop, 1e-2)
+    finally:
+        inst.close()
+
+
+@pytest.mark.parametrize("name", FMUS)
+def test_libcosimpy_agrees_with_fmpy(name):
+    model = slave_model(name)
+    outputs = [v.name for v in model.all_outputs()]
+    stop, step = 2.0, 1e-3
+    ref = simulate(name, stop_time=stop, output_interval=step)
+    got = run_libcosim(name, stop, step, outputs)
+    assert got.pop("_ok")
+    for out in outputs:
+        assert got[out] == pytest.approx(float(ref.res[out][-1]), rel=1e-9, abs=1e-12), out
