@@ -17,5 +17,6 @@ def pytest_configure(config):
 @pytest.fixture(scope="session", autouse=True)
 def built_fmus():
     import build_fmu
+    from support import DIST
 
-    return build_fmu.main([])
+    return build_fmu.main(["--dest", str(DIST)])

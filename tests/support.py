@@ -7,6 +7,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import os
 import subprocess
 import sys
 from dataclasses import dataclass, field
@@ -15,7 +16,7 @@ from pathlib import Path
 import scipy.integrate  # noqa: F401  (imported before any FMU is loaded; see README "Known issues")
 
 ROOT = Path(__file__).resolve().parents[1]
-DIST = ROOT / "dist"
+DIST = Path(os.environ.get("POGOFMU_DIST", ROOT / "dist")).resolve()  # build target of the session
 REFERENCE = ROOT.parent / "shared" / "reference"
 
 
