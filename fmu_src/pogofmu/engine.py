@@ -103,7 +103,7 @@ class DOPRI5(_Pair):
             f"    for y_, yn_, {', '.join(k + '_' for k in ks)} in zip(y, y_new, {', '.join(ks)}):\n"
             f"        e = h*({expr}) / (atol + rtol*max(abs(y_), abs(yn_)))\n"
             f"        acc += e*e\n"
-            f"    return sqrt(acc/len(y))\n", "error_norm")
+            f"    return sqrt(acc/len(y)) if y else 0.0\n", "error_norm")
         qs = []
         for r in range(4):
             expr, ks = _lincomb([P[j][r] for j in range(ns + 1)], K)
@@ -140,7 +140,7 @@ class DOP853(_Pair):
             f"        n3 += b*b\n"
             f"    if n5 == 0.0 and n3 == 0.0:\n"
             f"        return 0.0\n"
-            f"    return abs(h) * n5 / sqrt((n5 + 0.01*n3) * len(y))\n", "error_norm")
+            f"    return abs(h) * n5 / sqrt((n5 + 0.01*n3) * len(y))\n", "error_norm")  # y empty: n5 = 0
         # dense output (Hairer's contd8): three more stages, then seven coefficient vectors
         lines = ["def coeffs(fun, t0, y0, y1, h, K):", f"    {', '.join(K)} = K"]
         # stage ns (index 12) of the extended tableau is f_new = K[ns]
@@ -190,7 +190,7 @@ METHODS = {5: DOPRI5(), 8: DOP853()}
 
 
 def _rms(v):
-    return math.sqrt(sum(a * a for a in v) / len(v))
+    return math.sqrt(sum(a * a for a in v) / len(v)) if len(v) else 0.0
 
 
 # =============================================================================================
