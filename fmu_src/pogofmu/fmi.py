@@ -82,8 +82,12 @@ class HybridSlave(Fmi2Slave):
                 getter=(lambda n=par.name: self._par[n]),
                 setter=(lambda v, n=par.name: self._set_parameter(n, v))))
         for i, var in enumerate(model.inputs):
-            self.register_variable(Real(
-                var.name, causality=Fmi2Causality.input, variability=Fmi2Variability.continuous,
+            if var.name in model.integer_inputs:
+                cls, variability = Integer, Fmi2Variability.discrete
+            else:
+                cls, variability = Real, Fmi2Variability.continuous
+            self.register_variable(cls(
+                var.name, causality=Fmi2Causality.input, variability=variability,
                 description=var.description,
                 getter=(lambda i=i: self._u[i]),
                 setter=(lambda v, i=i, n=var.name: self._set_input(i, n, v))))

@@ -102,7 +102,8 @@ class HybridModel:
     returns ``None`` or the text of the violated domain condition;
     ``output_fn(t, x, q, u, p)`` returns a dict of the model's output values (the engine adds
     ``n_events``, ``t_last_event`` and ``last_event``, see :meth:`engine_outputs`);
-    ``integer_outputs`` names the outputs that are integers (modes, branches);
+    ``integer_outputs`` / ``integer_inputs`` name the outputs / inputs that are integers (modes,
+    branches; an FMI Integer connects only to an Integer);
     ``plots`` lists the figures the master script draws: each a tuple of panels, a panel being a
     tuple of output names against time, or ``("x", "r")`` style pairs marked ``vs``.
     """
@@ -120,6 +121,7 @@ class HybridModel:
     check: Callable = lambda p: None
     domain: Callable = lambda t, x, q, u, p: None
     integer_outputs: frozenset = frozenset()
+    integer_inputs: frozenset = frozenset()
     plots: tuple = ()
     default_stop_time: float = 10.0
     default_step: float = 1e-3
