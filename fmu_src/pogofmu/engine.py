@@ -310,8 +310,11 @@ class Simulator:
 
     def _rebind(self):
         model, q, u, p = self.model, self.q, self.u, self.p
-        flow = model.flow
-        self.fun = lambda t, x: flow(t, x, q, u, p)
+        if model.bind is not None:
+            self.fun = model.bind(q, u, p)
+        else:
+            flow = model.flow
+            self.fun = lambda t, x: flow(t, x, q, u, p)
         self.active = [(i, ev) for i, ev in enumerate(model.events) if ev.active(q)]
 
     def _initial_step(self):

@@ -104,6 +104,8 @@ class HybridModel:
     ``n_events``, ``t_last_event`` and ``last_event``, see :meth:`engine_outputs`);
     ``integer_outputs`` / ``integer_inputs`` name the outputs / inputs that are integers (modes,
     branches; an FMI Integer connects only to an Integer);
+    ``bind(q, u, p) -> f(t, x)`` (optional) returns the flow for fixed ``(q, u, p)``, equal to
+    ``flow(t, x, q, u, p)`` but free to hoist lookups out of the hot loop;
     ``plots`` lists the figures the master script draws: each a tuple of panels, a panel being a
     tuple of output names against time, or ``("x", "r")`` style pairs marked ``vs``.
     """
@@ -122,6 +124,7 @@ class HybridModel:
     domain: Callable = lambda t, x, q, u, p: None
     integer_outputs: frozenset = frozenset()
     integer_inputs: frozenset = frozenset()
+    bind: Optional[Callable] = None
     plots: tuple = ()
     default_stop_time: float = 10.0
     default_step: float = 1e-3

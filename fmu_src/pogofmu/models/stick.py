@@ -100,26 +100,43 @@ def make_stick_model(name: str, description: str, leg: Sequence[Element], plots=
         return r
 
     sized = tuple((el, sl) for el, sl in parts if sl.start != sl.stop)
-    n_elem = n_states - N_BASE - 2
 
     def flow(t, X, q, u, p):
-        xbar, xdot, y, ydot = X[0], X[1], X[2], X[3]
-        x = xbar - p.x_i
-        F = u[0]
-        if q["s"]:
-            r = leg_force(x, xdot, X, q, p)
-            acc = (F - r) / p.m - p.g
+        return bind(q, u, p)(t, X)
+
+    def bind(q, u, p):
+        """The flow for fixed (q, u, p) as a closure over local constants: the engine calls it
+        7-13 times per step, so attribute and dict lookups are hoisted out of it."""
+        F, m, g, x_i = u[0], p.m, p.g, p.x_i
+        fa = F / m - g
+        rates = tuple((el.rates, sl) for el, sl in sized)
+        if not q["s"]:
+            def flight(t, X):
+                xdot, ydot = X[1], X[3]
+                dX = [xdot, 0.0, ydot, fa, ydot - xdot]
+                for rate, sl in rates:
+                    dX.extend(rate(X[0] - x_i, xdot, X[sl], q, p))
+                dX.append(0.0)
+                dX.append(F * ydot)
+                return dX
+            return flight
+        forces = tuple((el.force, sl if sl.start != sl.stop else None) for el, sl in parts)
+        inv_m = 1.0 / m
+
+        def contact(t, X):
+            xdot, ydot = X[1], X[3]
+            x = X[0] - x_i
+            r = 0.0
+            for force, sl in forces:
+                r += force(x, xdot, () if sl is None else X[sl], q, p)
+            acc = fa - r * inv_m
             dX = [xdot, acc, ydot, acc, 0.0]
-            W = r * xdot
-        else:
-            dX = [xdot, 0.0, ydot, F / p.m - p.g, ydot - xdot]
-            W = 0.0
-        if n_elem:
-            for el, sl in sized:
-                dX.extend(el.rates(x, xdot, X[sl], q, p))
-        dX.append(W)
-        dX.append(F * ydot)
-        return dX
+            for rate, sl in rates:
+                dX.extend(rate(x, xdot, X[sl], q, p))
+            dX.append(r * xdot)
+            dX.append(F * ydot)
+            return dX
+        return contact
 
     # ---- events ----
     def touchdown_jump(X, q, u, p):
@@ -207,7 +224,7 @@ def make_stick_model(name: str, description: str, leg: Sequence[Element], plots=
     return HybridModel(
         name=name, description=description, states=states, parameters=parameters, inputs=INPUTS,
         outputs=outputs, flow=flow, events=tuple(events), initial=initial, output_fn=output_fn,
-        check=check, domain=domain, plots=plots, integer_outputs=INTEGER_OUTPUTS | frozenset(
+        check=check, domain=domain, bind=bind, plots=plots, integer_outputs=INTEGER_OUTPUTS | frozenset(
             v.name for el in leg for v in el.outputs if getattr(el, "integer_outputs", None)
             and v.name in el.integer_outputs))
 
