@@ -1,0 +1,14 @@
+"""FMU slave: PogoStickMem (MODELS.md Sect. 2), built into dist/PogoStickMem.fmu by build_fmu.py.
+
+pythonfmu's native loader looks for a line ``class <Name>(Fmi2Slave):`` in this file, and a
+second instance in the same process crashes if the class body holds no method: keep both.
+"""
+from pogofmu.fmi import HybridSlave as Fmi2Slave
+from pogofmu.models.pogo_stick_mem import MODEL
+
+
+class PogoStickMem(Fmi2Slave):
+    model = MODEL
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
