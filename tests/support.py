@@ -61,7 +61,7 @@ def parse_event_log(messages):
         head, _, state = text.partition("; state before jump: ")
         words = head.split()
         values = dict(kv.split("=") for kv in state.split(", ")) if state else {}
-        out.append({"index": int(words[1]), "name": words[2], "time": float(words[5]),
+        out.append({"index": int(words[1]), "name": words[2], "time": float(words[words.index("=") + 1]),
                     "state": {k: float(v) for k, v in values.items()}})
     return out
 
