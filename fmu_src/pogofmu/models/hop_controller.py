@@ -1,0 +1,122 @@
+"""HopController: a hop-height regulator for the pogo stick (issue 5; README "HopController.fmu").
+
+A feedback law with no state of its own (zero continuous states, no events): it reads the
+stick's ``y``, ``ydot`` and mode ``s`` and returns the thrust ``F_ext`` on the mass.
+
+Energy of the hopper as the controller sees it (the leg length is ``y`` in contact, the foot
+being on the ground)::
+
+    E_est = m ydot^2/2 + m g y + s * k (y - x_i)^2/2          (mass + spring energy)
+    E_T   = m g h_target                                       (energy of an apex at h_target)
+    e     = E_T - E_est                                        (energy deficit)
+
+Thrust, only while the leg extends in contact (``s = 1`` and ``ydot > 0``), zero otherwise::
+
+    F_ext = clip( K_D c ydot + e / (tau_E ydot), 0, F_max )
+
+With ``K_D = 1`` the first term cancels the dashpot's loss (``dE_est/dt = (F_ext - c ydot) ydot``
+in contact), and the second makes the deficit decay as ``de/dt = -e/tau_E``: the energy at
+liftoff, hence the next apex ``E/(m g)`` (flight is conservative), tends to ``E_T``.  The
+per-hop return map and the effect of the communication step are analysed in the README.
+
+``m``, ``g``, ``k``, ``c``, ``x_i`` are the controller's knowledge of the plant: they carry the
+plant's names so that one SSP parameter set (.ssv) sets both components consistently.
+"""
+from __future__ import annotations
+
+from ..engine import solver_parameters
+from ..model import HybridModel, Parameter, Variable, require, require_finite, require_nonnegative, \
+    require_positive
+
+PARAMETERS = (
+    Parameter("h_target", 1.5, "m", "apex height to regulate (> x_i: the stick must leave the ground)"),
+    Parameter("tau_E", 0.02, "s", "time constant of the energy-deficit decay during leg extension (> 0)"),
+    Parameter("K_D", 1.0, "", "fraction of the dashpot loss c*ydot fed forward (1: full compensation, 0: none)"),
+    Parameter("F_max", 20.0, "N", "largest thrust (the thrust is clipped to [0, F_max])"),
+    Parameter("m", 1.0, "kg", "mass of the hopper (controller's model of the plant)"),
+    Parameter("g", 9.81, "m/s2", "gravitational acceleration (Earth 9.81, Moon 1.62, Ceres 0.28)"),
+    Parameter("k", 100.0, "N/m", "leg stiffness (controller's model of the plant)"),
+    Parameter("c", 0.5, "N.s/m", "leg damping (controller's model of the plant)"),
+    Parameter("x_i", 1.0, "m", "free leg length (controller's model of the plant)"),
+) + solver_parameters()  # required by the engine; meaningless for a model without states
+
+INPUTS = (
+    Variable("y", "m", "height of the hopper's mass (from the stick)", 1.5),
+    Variable("ydot", "m/s", "vertical velocity of the hopper's mass (from the stick)", 0.0),
+    Variable("s", "", "mode of the stick: 1 contact, anything else flight (no thrust)", 0),
+)
+
+OUTPUTS = (
+    Variable("F_ext", "N", "thrust on the mass, positive up (to the stick's input F_ext)"),
+    Variable("E_est", "J", "energy seen by the controller: m ydot^2/2 + m g y + s k (y - x_i)^2/2"),
+    Variable("E_err", "J", "energy deficit m g h_target - E_est"),
+    Variable("phase", "", "0 flight, 1 compression (no thrust), 2 extension (thrust law active)"),
+)
+
+
+def phase(y, ydot, s):
+    if s != 1:
+        return 0
+    return 2 if ydot > 0.0 else 1
+
+
+def thrust(y, ydot, s, p):
+    """The control law (module docstring): thrust [N] for the stick's outputs (y, ydot, s)."""
+    if s != 1 or not ydot > 0.0:
+        return 0.0, energy(y, ydot, s, p)
+    E = energy(y, ydot, s, p)
+    e = p.m * p.g * p.h_target - E
+    F = p.K_D * p.c * ydot + e / (p.tau_E * ydot)  # +-inf for a tiny ydot: clipped below
+    return min(max(F, 0.0), p.F_max), E
+
+
+def energy(y, ydot, s, p):
+    E = 0.5 * p.m * ydot * ydot + p.m * p.g * y
+    if s == 1:
+        x = y - p.x_i
+        E += 0.5 * p.k * x * x
+    return E
+
+
+def _check(p):
+    require_finite(p)
+    require_positive(p, "m", "x_i", "tau_E", "F_max")
+    require_nonnegative(p, "g", "k", "c", "K_D")
+    require(p.h_target > p.x_i, "h_target", p.h_target,
+            f"h_target > x_i = {p.x_i!r} (an apex below the free leg length never leaves the ground)")
+
+
+def _initial(p):
+    _check(p)
+    return [], {}
+
+
+def _flow(t, x, q, u, p):
+    return []
+
+
+def _outputs(t, x, q, u, p):
+    y, ydot, s = u[0], u[1], int(u[2])
+    F, E = thrust(y, ydot, s, p)
+    return {"F_ext": F, "E_est": E, "E_err": p.m * p.g * p.h_target - E, "phase": phase(y, ydot, s)}
+
+
+MODEL = HybridModel(
+    name="HopController",
+    description="Hop-height regulator for the pogo stick: thrust during leg extension that drives the "
+                "hopper's energy to m g h_target (dashpot feed-forward + energy-deficit feedback)",
+    states=(),
+    parameters=PARAMETERS,
+    inputs=INPUTS,
+    outputs=OUTPUTS,
+    flow=_flow,
+    events=(),
+    initial=_initial,
+    output_fn=_outputs,
+    check=_check,
+    integer_inputs=frozenset({"s"}),
+    integer_outputs=frozenset({"phase"}),
+    plots=((("F_ext",), ("E_est", "E_err"), ("phase",)),),
+    default_stop_time=2.0,
+    default_step=1e-3,
+)
