@@ -1,0 +1,228 @@
+"""Penetrator: the pogo stick driven into a Hunt–Crossley soil (MODELS.md Sect. 4; paper Sect. 5,
+Appendix A.3, Eqs. 49-50).
+
+A mass ``m`` on a massless leg (linear spring ``k`` parallel to a linear dashpot ``c``, free length
+``x_i``) whose massless foot penetrates a compliant soil (:class:`~pogofmu.soil.HuntCrossley`).
+The foot's penetration ``delta`` (positive into the soil) is a state: the leg and the soil are in
+series, and the force balance on the massless foot gives its rate.
+
+Continuous states ``[y, ydot, delta, W_leg, W_soil, W_ext]``; discrete state
+``q = {s, d0dot, delta_max}``: the mode (0 flight, 1 contact), the reference velocity of the
+current contact's restitution law, and the largest penetration recorded so far.
+
+Flow, with ``x = y + delta - x_i`` the leg deflection and ``P = max(0, delta)^n``::
+
+    delta' = s (-k x - c ydot - K P) / (lambda P + c)          (force balance on the foot)
+    y'     = ydot
+    ydot'  = -g + F_ext/m - s r/m,     r = k x + c (ydot + delta')   (leg force; r = -F_soil)
+    W_leg'  = s r (ydot + delta')      (power the leg absorbs: r times its length rate)
+    W_soil' = -s r delta' = s F_soil delta'   (power the soil absorbs)
+    W_ext'  = F_ext ydot
+
+so ``E + W_leg + W_soil = E(0) + W_ext`` holds exactly (``E = m ydot^2/2 + m g y``).
+
+Events, in priority order:
+
+1. touchdown (flight): ``y - x_i`` falling; ``s <- 1``, ``delta <- 0``, ``d0dot`` of the contact
+   from the impact speed ``-ydot`` when ``d0dot_from_impact = 1``;
+2. liftoff (contact): ``delta`` falling; ``s <- 0``, ``delta <- 0``;
+3. max_penetration (contact): ``max(delta', delta_max - delta)`` falling, i.e. ``delta`` turns
+   back (``delta'`` falls through 0) while above every earlier penetration: ``delta_max <- delta``.
+   It fires only when the record is broken (once in the default run, at the first impact); the
+   output ``delta_max = max(q.delta_max, delta)`` is the exact running maximum at any time, because
+   between records either ``delta`` is below the record or rising above it.
+"""
+from __future__ import annotations
+
+from ..engine import solver_parameters
+from ..model import (FALLING, Event, HybridModel, Parameter, ParameterError, Variable, require,
+                     require_finite, require_nonnegative, require_positive)
+from ..soil import HuntCrossley
+
+SOIL = HuntCrossley()
+
+I_Y, I_YDOT, I_DELTA, I_WLEG, I_WSOIL, I_WEXT = range(6)
+
+STATES = (
+    Variable("y", "m", "height of the mass above the soil surface"),
+    Variable("ydot", "m/s", "vertical velocity of the mass"),
+    Variable("delta", "m", "penetration of the foot into the soil (positive down; 0 in flight)"),
+    Variable("W_leg", "J", "work absorbed by the leg"),
+    Variable("W_soil", "J", "work absorbed by the soil"),
+    Variable("W_ext", "J", "work done by F_ext"),
+)
+
+OUTPUTS = (
+    Variable("y", "m", "height of the mass above the soil surface"),
+    Variable("ydot", "m/s", "vertical velocity of the mass"),
+    Variable("delta", "m", "penetration of the foot into the soil (positive down; 0 in flight)"),
+    Variable("delta_dot", "m/s", "penetration rate of the foot (0 in flight)"),
+    Variable("F_soil", "N", "Hunt-Crossley soil force on the foot, positive up (0 in flight); "
+             "equals minus the leg force r"),
+    Variable("s", "", "mode: 0 flight (no contact), 1 contact"),
+    Variable("delta_max", "m", "largest penetration so far (exact running maximum)"),
+    Variable("d0dot_used", "m/s", "reference velocity of the restitution law in the current (or latest) "
+             "contact: d0dot, or the impact speed with d0dot_from_impact = 1"),
+    Variable("E", "J", "mechanical energy of the mass, E = m ydot^2/2 + m g y"),
+    Variable("W_leg", "J", "work absorbed by the leg, integral of r*(ydot + delta_dot) over contact"),
+    Variable("W_soil", "J", "work absorbed by the soil, integral of F_soil*delta_dot over contact"),
+    Variable("W_ext", "J", "work done by F_ext on the mass, integral of F_ext*ydot; "
+             "E + W_leg + W_soil = E(0) + W_ext"),
+)
+
+INPUTS = (Variable("F_ext", "N", "external vertical force on the mass (positive up)", 0.0),)
+
+PARAMETERS = (
+    Parameter("m", 1.0, "kg", "mass of the body"),
+    Parameter("k", 100.0, "N/m", "stiffness of the leg spring"),
+    Parameter("c", 0.5, "N.s/m", "damping coefficient of the leg dashpot (> 0: it sets the foot's rate)"),
+    Parameter("x_i", 1.0, "m", "free length of the leg"),
+    Parameter("g", 9.81, "m/s2", "gravitational acceleration (Earth 9.81, Moon 1.62, Ceres 0.28)"),
+) + SOIL.parameters + (
+    Parameter("y_0", 1.5, "m", "initial height of the mass (flight if y_0 > x_i, else contact)"),
+    Parameter("ydot_0", 0.0, "m/s", "initial velocity of the mass"),
+) + solver_parameters()
+
+PLOTS = (
+    (("y",), ("delta", "delta_max"), ("F_soil",), ("s",)),  # penetration and soil force vs time
+    (("vs", "delta", "F_soil"),),  # the Hunt-Crossley hysteresis loop
+    (("E", "W_leg", "W_soil"),),  # energy book-keeping
+)
+
+
+def _initial_mode(p) -> int:
+    """0 (flight) when the foot starts above the surface or leaves it, else 1 (contact)."""
+    return 0 if (p.y_0 > p.x_i or (p.y_0 == p.x_i and p.ydot_0 > 0)) else 1
+
+
+def check(p):
+    require_finite(p)
+    require_positive(p, "m", "x_i", "y_0")
+    require_nonnegative(p, "k")
+    require(p.c > 0, "c", p.c, "c > 0 (the leg dashpot sets the rate of the massless foot: "
+            "delta' = (...)/(lambda P + c))")
+    require(p.g >= 0, "g", p.g, "g >= 0")
+    SOIL.check(p)
+    if _initial_mode(p) == 1:
+        # contact at t = 0 with delta = 0: the foot must not be pulled out of the soil at once
+        limit = p.k * (p.x_i - p.y_0) / p.c
+        if not p.ydot_0 <= limit:
+            raise ParameterError(
+                f"parameter ydot_0 = {p.ydot_0!r} violates the rule: with y_0 = {p.y_0!r} <= x_i = {p.x_i!r} "
+                f"the stick starts in contact (delta = 0), which needs ydot_0 <= k (x_i - y_0)/c = {limit!r} "
+                f"(otherwise the foot leaves the soil at once)")
+
+
+def initial(p):
+    check(p)
+    X = [float(p.y_0), float(p.ydot_0), 0.0, 0.0, 0.0, 0.0]
+    q = {"s": _initial_mode(p), "d0dot": float(p.d0dot), "delta_max": 0.0}
+    return X, q
+
+
+def bind(q, u, p):
+    """The flow for fixed (q, u, p), constants hoisted out of the 7-13 calls per step."""
+    F = float(u[0])
+    fa = F / p.m - p.g
+    if not q["s"]:
+        def flight(t, X):
+            ydot = X[1]
+            return [ydot, fa, 0.0, 0.0, 0.0, F * ydot]
+        return flight
+    k, c, x_i, inv_m = p.k, p.c, p.x_i, 1.0 / p.m
+    rate = SOIL.bind(p, q["d0dot"])[1]
+
+    def contact(t, X):
+        y, ydot, d = X[0], X[1], X[2]
+        x = y + d - x_i
+        dd = rate(-k * x - c * ydot, c, d)
+        v = ydot + dd  # leg length rate
+        r = k * x + c * v  # leg force (compression < 0) = -F_soil
+        return [ydot, fa - r * inv_m, dd, r * v, -r * dd, F * ydot]
+
+    return contact
+
+
+def flow(t, X, q, u, p):
+    return bind(q, u, p)(t, X)
+
+
+def _delta_dot(X, q, p):
+    """Penetration rate from the force balance on the massless foot (contact)."""
+    x = X[I_Y] + X[I_DELTA] - p.x_i
+    return SOIL.rate_of(p, q["d0dot"], -p.k * x - p.c * X[I_YDOT], p.c, X[I_DELTA])
+
+
+# ---- events ----
+def touchdown_jump(X, q, u, p):
+    X = list(X)
+    X[I_DELTA] = 0.0
+    return X, dict(q, s=1, d0dot=SOIL.reference_velocity(p, -X[I_YDOT]))
+
+
+def liftoff_jump(X, q, u, p):
+    X = list(X)
+    X[I_DELTA] = 0.0
+    return X, dict(q, s=0)
+
+
+def peak_guard(X, q, u, p):
+    return max(_delta_dot(X, q, p), q["delta_max"] - X[I_DELTA])
+
+
+def peak_jump(X, q, u, p):
+    return list(X), dict(q, delta_max=max(q["delta_max"], X[I_DELTA]))
+
+
+def _in_contact(q):
+    return q["s"] == 1
+
+
+EVENTS = (
+    Event("touchdown", FALLING, lambda X, q, u, p: X[I_Y] - p.x_i, touchdown_jump, lambda q: q["s"] == 0),
+    Event("liftoff", FALLING, lambda X, q, u, p: X[I_DELTA], liftoff_jump, _in_contact),
+    Event("max_penetration", FALLING, peak_guard, peak_jump, _in_contact),
+)
+
+
+def domain(t, X, q, u, p):
+    y, ydot, d = X[I_Y], X[I_YDOT], X[I_DELTA]
+    if y <= 0:
+        return f"mass height y = {y:.6g} m must stay > 0 (the body reached the soil surface)"
+    if q["s"]:
+        if y + d <= 0:
+            return f"leg length y + delta = {y + d:.6g} m must stay > 0 (the leg bottomed out)"
+    elif ydot < 0 and y < p.x_i - 10.0 * (p.rel_tol * p.x_i + p.abs_tol):
+        # (the slack admits the touchdown itself, located a few ulps past y = x_i)
+        return (f"in flight the mass falls (ydot = {ydot:.6g} m/s) with y = {y:.6g} m below the free leg "
+                f"length x_i = {p.x_i:.6g} m: it lifted off too slowly to regain the free length, and the "
+                f"model (the massless leg snaps back to x_i at liftoff) has no touchdown for this")
+    return None
+
+
+def output_fn(t, X, q, u, p):
+    y, ydot, d = X[I_Y], X[I_YDOT], X[I_DELTA]
+    if q["s"]:
+        dd = _delta_dot(X, q, p)
+        F_soil = SOIL.force_of(p, q["d0dot"], d, dd)
+        d_max = max(q["delta_max"], d)
+    else:
+        dd = F_soil = 0.0
+        d_max = q["delta_max"]
+    return {
+        "y": y, "ydot": ydot, "delta": d, "delta_dot": dd, "F_soil": F_soil, "s": q["s"],
+        "delta_max": d_max, "d0dot_used": q["d0dot"],
+        "E": 0.5 * p.m * ydot * ydot + p.m * p.g * y,
+        "W_leg": X[I_WLEG], "W_soil": X[I_WSOIL], "W_ext": X[I_WEXT],
+    }
+
+
+MODEL = HybridModel(
+    name="Penetrator",
+    description="Pogo stick driven into a Hunt-Crossley soil (Pei, Quadrelli & Wright 2020, Sect. 5): "
+                "mass on a massless spring-dashpot leg whose massless foot penetrates a compliant soil; "
+                "state events located by the internal solver",
+    states=STATES, parameters=PARAMETERS, inputs=INPUTS, outputs=OUTPUTS, flow=flow, events=EVENTS,
+    initial=initial, output_fn=output_fn, check=check, domain=domain, bind=bind,
+    integer_outputs=frozenset({"s"}), plots=PLOTS,
+)
