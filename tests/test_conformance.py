@@ -104,6 +104,8 @@ def test_bad_step_and_nan_input_are_refused_instance_survives(name):
         assert "discard" in str(exc.value)
         assert any("step_size = -0.001" in m[2] and "0 <= step_size" in m[2] for m in inst.messages)
         for var in model.inputs:
+            if var.name in model.integer_inputs:
+                continue  # an FMI Integer cannot hold NaN
             inst.set(**{var.name: float("nan")})
             with pytest.raises(FMICallException):
                 inst.fmu.doStep(currentCommunicationPoint=0.0, communicationStepSize=1e-3)

@@ -399,6 +399,12 @@ class Simulator:
                 t_new = self.t_stop
                 h = t_new - t
             if h <= 10 * EPS * max(abs(t), 1.0):
+                if self.events and self.events[-1].time == t:
+                    last = self.events[-1]
+                    raise ZenoError(
+                        f"event storm: the step size collapsed to {h:.3g} s right after event "
+                        f"{len(self.events)} ({last.name}) at t = {t:.15g} s: the events accumulate "
+                        f"(Zeno behaviour)")
                 raise ModelError(f"step size collapsed to {h:.3g} s at t = {t:.15g} s "
                                  f"(the model is stiff or singular here)")
             y_new, f_new, K = pair.step(fun, t, y, f, h)
@@ -422,10 +428,19 @@ class Simulator:
         g_new = [ev.guard(y_new, q, u, p) for _, ev in self.active]
         hit = None
         for k, ((i, ev), g0, g1) in enumerate(zip(self.active, self.g, g_new)):
-            if (ev.direction == FALLING and g0 > 0.0 >= g1) or (ev.direction != FALLING and g0 < 0.0 <= g1):
-                te = self._locate(seg, ev, g0, g1)
-                if hit is None or te < hit[0]:
-                    hit = (te, k)
+            sgn = -1.0 if ev.direction == FALLING else 1.0  # before side: sgn*g < 0; after: >= 0
+            if sgn * g1 < 0.0:
+                continue
+            if sgn * g0 < 0.0:
+                te = self._locate(seg, ev, t, g0, g1)
+            elif g0 == 0.0:
+                te = self._locate_from_zero(seg, ev, g1)
+                if te is None:
+                    continue
+            else:
+                continue
+            if hit is None or te < hit[0]:
+                hit = (te, k)
         if hit is None:
             self._check_domain(t_new, y_new, seg)
             self.seg, self.t, self.x, self.f, self.g = seg, t_new, y_new, f_new, g_new
@@ -442,8 +457,26 @@ class Simulator:
         self.seg, self.t, self.x, self.f = seg, te, y_e, f_e
         self.pending = (i, y_e)
 
-    def _locate(self, seg, ev, g0, g1):
-        """Earliest time in the segment where ``ev``'s guard crosses zero in its direction.
+    def _locate_from_zero(self, seg, ev, g1):
+        """A guard that starts the step exactly at zero (disarmed after a jump) and ends it on the
+        after side: did it visit the before side in between?  A large first step after a jump
+        (a flight parabola is integrated exactly, so the step size grows fast) may hold a whole
+        arc: probe the dense output near the start; if the guard is on the before side there,
+        the crossing lies between that probe and the end of the step."""
+        q, u, p = self.q, self.u, self.p
+        sgn = -1.0 if ev.direction == FALLING else 1.0
+        h = seg.t1 - seg.t0
+        for frac in (1e-7, 1e-4, 1e-2, 0.1, 0.5):
+            tp = seg.t0 + frac * h
+            gp = ev.guard(seg(tp), q, u, p)
+            if sgn * gp < 0.0:
+                return self._locate(seg, ev, tp, gp, g1)
+            if gp != 0.0:
+                return None  # left zero towards the after side: no crossing from the before side
+        return None
+
+    def _locate(self, seg, ev, a, ga, gb):
+        """Earliest time in ``[a, seg.t1]`` where ``ev``'s guard crosses zero in its direction.
 
         Illinois iteration keeping a bracket ``[a, b]`` with the guard strictly on the before side
         at ``a`` and on the after side at ``b``; returns ``b`` (the event has happened there).
@@ -451,8 +484,8 @@ class Simulator:
         q, u, p = self.q, self.u, self.p
         guard = ev.guard
         sgn = -1.0 if ev.direction == FALLING else 1.0  # after side: sgn*g >= 0
-        a, b = seg.t0, seg.t1
-        fa, fb = sgn * g0, sgn * g1  # fa < 0 <= fb
+        b = seg.t1
+        fa, fb = sgn * ga, sgn * gb  # fa < 0 <= fb
         side = 0
         tol = 4 * EPS * max(abs(a), abs(b), 1e-300)
         for _ in range(200):
@@ -487,6 +520,10 @@ class Simulator:
         self._check_zeno()
         self._check_domain(self.t, self.x)
         self._bind()
+        # clean restart: the dynamics after a jump may be much faster than before it (the step
+        # size grows tenfold per step on an exactly integrated flight parabola); never restart
+        # with a step larger than the starting-step estimate for the new state
+        self.h = min(self.h, self._initial_step())
 
     def _check_zeno(self):
         n = self.zeno_max_events
