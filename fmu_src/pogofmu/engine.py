@@ -328,11 +328,10 @@ class Simulator:
         y1 = [a + h0 * b for a, b in zip(y, f)]
         f1 = self.fun(t + h0, y1)
         d2 = _rms([(a - b) / c for a, b, c in zip(f1, f, scale)]) / h0
-        order = 5 if self.pair.order == 5 else 8
         if d1 <= 1e-15 and d2 <= 1e-15:
             h1 = max(1e-6, h0 * 1e-3)
-        else:
-            h1 = (0.01 / max(d1, d2)) ** (1.0 / order)
+        else:  # exponent 1/(p+1) with p the order of the error estimate: 4 and 7
+            h1 = (0.01 / max(d1, d2)) ** (1.0 / self.pair.order)
         return min(100 * h0, h1, self.max_step)
 
     # ---- public API -------------------------------------------------------------------------
