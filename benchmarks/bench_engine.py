@@ -1,0 +1,121 @@
+#!/usr/bin/env python3
+"""Benchmark (a): the engine alone against a scipy ``solve_ivp`` restart loop of the same model.
+
+For every case of ``benchmarks/cases/`` (see its docstring to add one): the engine
+(``pogofmu.engine.Simulator`` on the model, no FMI) and the case's scipy loop (terminal events,
+restart loop) integrate the case's experiment at ``rel_tol = 1e-9``, ``abs_tol = 1e-12``,
+``max_step = 0.01``; engine method 5 (Dormand-Prince 5(4)) against ``RK45``, method 8 (DOP853)
+against ``DOP853``.  The runs alternate (engine, scipy, scipy, engine, ...) so that load from other
+processes hits both alike; the best wall time of ``--repeat`` runs of each counts (the median is
+printed too).  The event error is the largest ``|t_i - t_ref_i|`` against the case's reference
+event times (both sequences must match the reference in count and kind).
+
+Targets (issue 2): the engine at least 2x faster than scipy, with an event error no larger.
+Exit status 1 if a target is missed.
+
+    python benchmarks/bench_engine.py [--repeat 9] [--case PogoStick ...]
+"""
+from __future__ import annotations
+
+import argparse
+import gc
+import statistics
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from cases import all_cases, event_error  # noqa: E402
+
+RTOL, ATOL, MAX_STEP = 1e-9, 1e-12, 0.01
+PAIRS = ((5, "RK45"), (8, "DOP853"))  # engine method -> scipy method
+SPEED_TARGET = 2.0
+
+
+def run_engine(model, p, stop_time):
+    from pogofmu.engine import Simulator
+
+    sim = Simulator(model, p, t_stop=stop_time)
+    sim.advance(stop_time)
+    return [(ev.time, ev.name) for ev in sim.events]
+
+
+def timed(fn):
+    gc.collect()
+    t0 = time.perf_counter()
+    result = fn()
+    return time.perf_counter() - t0, result
+
+
+def bench_case(case, repeat):
+    model = case.load_model()
+    reference = case.reference_events()
+    rows = []
+    for method, scipy_method in PAIRS:
+        p = model.params(**case.params, method=method, rel_tol=RTOL, abs_tol=ATOL, max_step=MAX_STEP)
+        full = case.full_params()
+        engine = lambda: run_engine(model, p, case.stop_time)  # noqa: E731
+        peer = lambda: case.scipy_loop(full, case.stop_time, scipy_method, RTOL, ATOL, MAX_STEP)  # noqa: E731
+        t_engine, t_peer = [], []
+        ev_engine = ev_peer = None
+        for i in range(repeat):
+            order = ((engine, t_engine), (peer, t_peer))
+            for fn, times in (order if i % 2 == 0 else order[::-1]):
+                dt, events = timed(fn)
+                times.append(dt)
+                if fn is engine:
+                    ev_engine = events
+                else:
+                    ev_peer = events
+        err_engine = event_error(ev_engine, reference)
+        err_peer = event_error(ev_peer, reference)
+        best_e, best_p = min(t_engine), min(t_peer)
+        rows.append(dict(
+            case=case.name, pair=f"{method} vs {scipy_method}", t_engine=best_e, t_peer=best_p,
+            med_engine=statistics.median(t_engine), med_peer=statistics.median(t_peer),
+            ratio=best_p / best_e, err_engine=err_engine, err_peer=err_peer,
+            n_engine=len(ev_engine), n_peer=len(ev_peer), n_ref=len(reference),
+            fast=best_p / best_e >= SPEED_TARGET,
+            accurate=err_engine <= err_peer and err_engine != float("inf")))
+    return rows
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--repeat", type=int, default=9, help="timed runs of each solver (best counts)")
+    ap.add_argument("--case", action="append", help="run only this case (name or FMU; repeatable)")
+    args = ap.parse_args(argv)
+
+    cases = all_cases(args.case)
+    print(f"(a) engine alone vs scipy solve_ivp restart loop: rel_tol {RTOL:g}, abs_tol {ATOL:g}, "
+          f"max_step {MAX_STEP:g}; best of {args.repeat} alternating runs (median in brackets)")
+    for case in cases:
+        print(f"  {case.name}: {case.stop_time:g} s, params {case.params or 'default'}; "
+              f"reference: {case.reference_label}")
+    head = (f"{'case':<14} {'method':<13} {'engine s':>17} {'scipy s':>17} {'scipy/engine':>12} "
+            f"{'engine err s':>12} {'scipy err s':>12} {'events e/s/ref':>14}  {'>=2x':>4} {'err<=':>5}")
+    print(head)
+    print("-" * len(head))
+    missed = []
+    for case in cases:
+        for r in bench_case(case, args.repeat):
+            print(f"{r['case']:<14} {r['pair']:<13} "
+                  f"{r['t_engine']:>7.4f} ({r['med_engine']:.4f}) {r['t_peer']:>7.4f} ({r['med_peer']:.4f}) "
+                  f"{r['ratio']:>11.2f}x {r['err_engine']:>12.2e} {r['err_peer']:>12.2e} "
+                  f"{r['n_engine']:>4}/{r['n_peer']}/{r['n_ref']:<5}  "
+                  f"{'yes' if r['fast'] else 'NO':>4} {'yes' if r['accurate'] else 'NO':>5}", flush=True)
+            if not r["fast"]:
+                missed.append(f"{r['case']} {r['pair']}: {r['ratio']:.2f}x < {SPEED_TARGET:g}x")
+            if not r["accurate"]:
+                missed.append(f"{r['case']} {r['pair']}: event error {r['err_engine']:.2e} > "
+                              f"scipy's {r['err_peer']:.2e}")
+    if missed:
+        print("targets MISSED: " + "; ".join(missed))
+        return 1
+    print(f"targets hold: engine >= {SPEED_TARGET:g}x faster than scipy with an event error no larger, every row")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
