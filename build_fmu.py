@@ -130,9 +130,13 @@ def pack_ssp(system_dir: Path, dest: Path) -> Path:
         z.write(ssd, "SystemStructure.ssd")
         for ssv in sorted(system_dir.glob("*.ssv")):
             z.write(ssv, f"resources/{ssv.name}")
-        for fmu in sorted(dest.glob("*.fmu")):
-            if f"resources/{fmu.name}" in text:
-                z.write(fmu, f"resources/{fmu.name}")
+        import re
+
+        for source in sorted(set(re.findall(r'source="(resources/[^"]+\.fmu)"', text))):
+            fmu = dest / Path(source).name
+            if not fmu.exists():  # an .ssp without its FMUs would only fail when run
+                raise SystemExit(f"{ssd}: component source {source} is not built in {dest}")
+            z.write(fmu, source)
     print(f"packed {out.relative_to(ROOT) if out.is_relative_to(ROOT) else out}")
     return out
 

@@ -560,7 +560,10 @@ def simulate(ssp, parameters: Optional[str] = None, stop_time: Optional[float] =
         for name in order:
             comp = system.components[name]
             inst = instances[name] = _Instance(comp, work, echo_log)
-            inst.fmu.setupExperiment(startTime=t0, stopTime=t_end)
+            # no stop time for the FMUs (stopTimeDefined = false): the engine clamps its steps at a
+            # defined stop time, and an input change within ~1e-14 s of it ends in a 'step size
+            # collapsed' fatal error (seen with PogoStick at t = 6 - 1e-14 s; report of issue 5)
+            inst.fmu.setupExperiment(startTime=t0)
             inst.fmu.enterInitializationMode()
             ps = selected.get(name)
             try:

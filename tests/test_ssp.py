@@ -1,0 +1,337 @@
+"""SpaceHopper.ssp (issue 5): PogoStick + HopController composed in SSP, run by two masters.
+
+References are independent of the code under test: the SSP 1.0 XSD schemas shipped with fmpy,
+the closed-form flight parabola (apex = y + ydot^2/(2 g)), the control law re-implemented here
+from its README formula, a scipy solution of the *continuous-time* closed loop (no coupling
+delay), and libcosim (a second, independent FMI/SSP importer).
+"""
+import json
+import math
+import shutil
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+from xml.etree import ElementTree as ET
+
+import numpy as np
+import pytest
+
+from support import DIST, ROOT
+
+from pogofmu import ssp as master
+
+SSP = DIST / "SpaceHopper.ssp"
+SCHEMAS = Path(__import__("fmpy").__file__).parent / "ssp" / "schema"
+NS_SSV = "{http://ssp-standard.org/SSP1/SystemStructureParameterValues}"
+BODIES = {"earth": 9.81, "moon": 1.62, "ceres": 0.28}
+
+
+def ssv_values(body):
+    """The parameter set as written in ssp/SpaceHopper/<body>.ssv (read here, not by the master)."""
+    root = ET.parse(ROOT / "ssp" / "SpaceHopper" / f"{body}.ssv").getroot()
+    return {p.get("name"): float(p.find(f"{NS_SSV}Real").get("value")) for p in root.iter(f"{NS_SSV}Parameter")}
+
+
+def law(y, ydot, s, p):
+    """README: F = clip(K_D c ydot + e/(tau_E ydot), 0, F_max) while s = 1 and ydot > 0, else 0."""
+    if s != 1 or ydot <= 0:
+        return 0.0
+    E = 0.5 * p["m"] * ydot ** 2 + p["m"] * p["g"] * y + 0.5 * p["k"] * (y - p["x_i"]) ** 2
+    e = p["m"] * p["g"] * p["h_target"] - E
+    return min(max(p["K_D"] * p["c"] * ydot + e / (p["tau_E"] * ydot), 0.0), p["F_max"])
+
+
+def apexes(res, g):
+    """Apex heights: at each flight sample where ydot changes sign (+ to -), the flight parabola's
+    top y + ydot^2/(2 g) (exact in flight, where the thrust is zero)."""
+    y, yd, s, F = res["PogoStick.y"], res["PogoStick.ydot"], res["PogoStick.s"], res["PogoStick.F_ext"]
+    out = []
+    for k in range(1, len(y)):
+        if s[k] == 0 and s[k - 1] == 0 and yd[k - 1] > 0 >= yd[k]:
+            assert F[k - 1] == 0.0  # no thrust held in flight at the apex: the parabola is exact
+            out.append((res["time"][k], y[k] + yd[k] ** 2 / (2 * g)))
+    return out
+
+
+def variant(tmp_path, edit_ssd=None, files=None, remove=()):
+    """The packed SpaceHopper.ssp unpacked into a directory, with the .ssd edited."""
+    d = tmp_path / "pkg"
+    with zipfile.ZipFile(SSP) as z:
+        z.extractall(d)
+    ssd = d / "SystemStructure.ssd"
+    if edit_ssd:
+        text = ssd.read_text()
+        new = edit_ssd(text)
+        assert new != text, "the edit did not change the .ssd"
+        ssd.write_text(new)
+    for name, text in (files or {}).items():
+        (d / name).write_text(text)
+    for name in remove:
+        (d / name).unlink()
+    return d
+
+
+# ---------------------------------------------------------------------------------------------
+# the package
+# ---------------------------------------------------------------------------------------------
+
+def test_package_holds_ssd_ssv_and_fmus():
+    with zipfile.ZipFile(SSP) as z:
+        names = set(z.namelist())
+    assert names == {"SystemStructure.ssd", "resources/earth.ssv", "resources/moon.ssv", "resources/ceres.ssv",
+                     "resources/PogoStick.fmu", "resources/HopController.fmu"}
+
+
+def test_ssd_and_ssv_validate_against_the_ssp_1_0_schemas():
+    from lxml import etree
+
+    ssd_schema = etree.XMLSchema(file=str(SCHEMAS / "SystemStructureDescription.xsd"))
+    ssv_schema = etree.XMLSchema(file=str(SCHEMAS / "SystemStructureParameterValues.xsd"))
+    assert "Version: 1.0" in (SCHEMAS / "SystemStructureDescription.xsd").read_text()
+    with zipfile.ZipFile(SSP) as z:
+        ssd = etree.fromstring(z.read("SystemStructure.ssd"))
+        assert ssd_schema.validate(ssd), ssd_schema.error_log
+        for body in BODIES:
+            ssv = etree.fromstring(z.read(f"resources/{body}.ssv"))
+            assert ssv_schema.validate(ssv), (body, ssv_schema.error_log)
+            assert float(ssv.find(f".//{NS_SSV}Parameter[@name='g']/{NS_SSV}Real").get("value")) == BODIES[body]
+    # the schema does reject a broken document (the check above can fail)
+    bad = etree.fromstring(etree.tostring(ssd).replace(b'kind="input"', b'kind="sideways"', 1))
+    assert not ssd_schema.validate(bad)
+
+
+def test_check_command_accepts_the_package():
+    proc = subprocess.run([sys.executable, "-m", "pogofmu.ssp", "check", str(SSP)], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    assert "['PogoStick', 'HopController']" in proc.stdout  # Gauss-Seidel order: plant first
+
+
+# ---------------------------------------------------------------------------------------------
+# regulation on each body
+# ---------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("body,stop", [("earth", 10.0), ("moon", 16.0), ("ceres", 30.0)])
+def test_apex_settles_at_h_target_on_each_body(body, stop):
+    p = ssv_values(body)
+    res = master.simulate(SSP, parameters=body, stop_time=stop, step=1e-3)
+    assert res["time"][-1] == pytest.approx(stop)
+    tops = [h for _, h in apexes(res, p["g"])]
+    h_t = p["h_target"]
+    assert p["y_0"] < 0.98 * h_t  # dropped from below the band: the controller must lift it
+    settled = tops[3:]  # transient: at most three hops (F_max limits the energy per hop)
+    assert len(settled) >= 3, tops
+    assert all(abs(h - h_t) <= 0.02 * h_t for h in settled), (body, tops)
+    # the controller keeps doing work against the dashpot (no passive decay)
+    assert res["PogoStick.W_ext"][-1] > 0
+
+
+def test_without_thrust_the_apex_decays(tmp_path):
+    """Control: F_max -> tiny, the same system loses height every hop (the 2 % test can fail)."""
+    text = (ROOT / "ssp" / "SpaceHopper" / "moon.ssv").read_text()
+    pkg = variant(tmp_path, files={"resources/moon.ssv": text.replace('name="F_max"><ssv:Real value="4"',
+                                                                      'name="F_max"><ssv:Real value="1e-9"')})
+    res = master.simulate(pkg, parameters="moon", stop_time=8.0, step=1e-3)
+    tops = [h for _, h in apexes(res, 1.62)]
+    assert len(tops) >= 3 and all(b < a for a, b in zip(tops, tops[1:])), tops
+    assert tops[-1] < 0.98 * 1.5
+
+
+# ---------------------------------------------------------------------------------------------
+# coupling delay and convergence in the communication step
+# ---------------------------------------------------------------------------------------------
+
+def continuous_first_apex(p):
+    """First apex of the continuous-time closed loop (thrust law inside the ODE, no coupling
+    delay), from the .ssv's drop at rest: flight in closed form, contact by scipy DOP853."""
+    from scipy.integrate import solve_ivp
+
+    m, g, k, c, xi = p["m"], p["g"], p["k"], p["c"], p["x_i"]
+    v_td = -math.sqrt(2 * g * (p["y_0"] - xi))
+
+    def compression(t, X):
+        return [X[1], (-k * (X[0] - xi) - c * X[1]) / m - g]
+
+    bottom = lambda t, X: X[1]  # noqa: E731
+    bottom.terminal, bottom.direction = True, 1
+    s1 = solve_ivp(compression, (0, 10), [xi, v_td], method="DOP853", rtol=1e-12, atol=1e-14, events=bottom)
+    y_b = s1.y_events[0][0][0]
+
+    def extension(t, X):
+        F = p["F_max"] if X[1] <= 0 else law(X[0], X[1], 1, p)  # ydot -> 0+: the law saturates
+        return [X[1], (F - k * (X[0] - xi) - c * X[1]) / m - g]
+
+    liftoff = lambda t, X: X[0] - xi  # noqa: E731
+    liftoff.terminal, liftoff.direction = True, 1
+    s2 = solve_ivp(extension, (0, 10), [y_b, 0.0], method="DOP853", rtol=1e-12, atol=1e-14, events=liftoff,
+                   max_step=1e-3)
+    v_lo = s2.y_events[0][0][1]
+    return xi + v_lo ** 2 / (2 * g)
+
+
+def delay_bound(p, apex, h):
+    """Apex error of the one-step coupling delay: the plant receives the controller's F_ext one
+    communication step after the state it was computed from, so the thrust of the last extension
+    sample is held for up to one step after liftoff, adding at most F_max v_lo h of energy
+    (v_lo = sqrt(2 g (apex - x_i)) the liftoff speed): an apex error of F_max v_lo h / (m g).
+    (Settled, unsaturated hops hold only F ~ c v_lo: 2 c (h_target - x_i) h / m.)"""
+    v_lo = math.sqrt(2 * p["g"] * (apex - p["x_i"]))
+    return p["F_max"] * v_lo * h / (p["m"] * p["g"])
+
+
+def test_apex_error_converges_with_the_communication_step():
+    """First apex on the Moon (drop from y_0 = 1.2 m, thrust saturated at F_max) against the
+    continuous-time closed loop (scipy, no coupling delay): within the delay bound, first order."""
+    p = ssv_values("moon")
+    ref = continuous_first_apex(p)
+    errors = {}
+    for h in (1e-2, 1e-3, 1e-4):
+        res = master.simulate(SSP, parameters="moon", stop_time=1.6, step=h)
+        tops = apexes(res, p["g"])
+        assert len(tops) == 1
+        errors[h] = abs(tops[0][1] - ref)
+        assert errors[h] <= delay_bound(p, ref, h), (h, errors, delay_bound(p, ref, h))
+    assert 5 < errors[1e-2] / errors[1e-3] < 20, errors  # first order in h
+    assert 5 < errors[1e-3] / errors[1e-4] < 20, errors
+
+
+@pytest.mark.parametrize("algorithm,lag", [("gauss-seidel", 0), ("jacobi", 1)])
+def test_coupling_delay(algorithm, lag):
+    """Gauss-Seidel (plant, then controller): the force held over [t_k, t_k+1] is the law applied
+    to the plant's state at t_k.  Jacobi (libcosim's scheme): to the state at t_k-1."""
+    p = ssv_values("moon")
+    res = master.simulate(SSP, parameters="moon", stop_time=2.0, step=1e-3, algorithm=algorithm)
+    y, yd, s = res["PogoStick.y"], res["PogoStick.ydot"], res["PogoStick.s"]
+    F_plant, F_ctrl = res["PogoStick.F_ext"], res["HopController.F_ext"]
+    assert np.array_equal(F_plant, F_ctrl)  # the plant gets the controller's latest output
+    expected = np.array([law(y[k - lag], yd[k - lag], s[k - lag], p) for k in range(lag, len(y))])
+    assert np.count_nonzero(expected) > 50  # thrust was actually applied
+    np.testing.assert_allclose(F_ctrl[lag:], expected, rtol=1e-12, atol=1e-12)
+    np.testing.assert_array_equal(res["HopController.y"], y)  # inputs as held over [t_k, t_k+1]
+    if lag == 0:  # and the Jacobi law does not fit the Gauss-Seidel run (the check can fail)
+        shifted = np.array([law(y[k - 1], yd[k - 1], s[k - 1], p) for k in range(1, len(y))])
+        assert np.max(np.abs(F_ctrl[1:] - shifted)) > 0.1
+
+
+# ---------------------------------------------------------------------------------------------
+# libcosimpy runs the same package
+# ---------------------------------------------------------------------------------------------
+
+def run_libcosim_ssp(path, step, times, variables, timeout=300):
+    script = ROOT / "tests" / "_libcosim_ssp_runner.py"
+    payload = json.dumps({"ssp": str(path), "step": step, "times": list(times), "variables": variables})
+    proc = subprocess.run([sys.executable, str(script), payload], capture_output=True, text=True, timeout=timeout)
+    assert proc.returncode == 0, f"libcosimpy failed ({proc.returncode}): {proc.stderr[-2000:]}"
+    out = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert out["ok"]
+    return {k: np.array(v) for k, v in out["samples"].items()}
+
+
+@pytest.mark.parametrize("body", ["earth", "moon"])
+def test_libcosimpy_agrees_with_the_master(body, tmp_path):
+    """libcosim applies the .ssd's first ParameterBinding: the packed .ssp as it is for Earth
+    (its bound set), for the Moon the same package with the binding pointing at moon.ssv.
+    libcosim's fixed-step algorithm is Jacobi: with --algorithm jacobi the two masters agree to
+    round-off on the whole grid; the Gauss-Seidel run differs by the one-step coupling delay, so
+    its apex heights agree within twice the delay bound of the convergence test (libcosim holds
+    the thrust one step longer still)."""
+    p = ssv_values(body)
+    step, stop = 1e-3, 6.0
+    path = SSP if body == "earth" else variant(
+        tmp_path, edit_ssd=lambda t: t.replace("resources/earth.ssv", f"resources/{body}.ssv"))
+    n = int(round(stop / step))
+    times = [round(k * step, 12) for k in range(1, n + 1)]
+    lc = run_libcosim_ssp(path, step, times, {"PogoStick": ["y", "ydot", "s", "E"], "HopController": ["F_ext"]})
+    jac = master.simulate(path, stop_time=stop, step=step, algorithm="jacobi")
+    np.testing.assert_allclose(lc["PogoStick.y"], jac["PogoStick.y"][1:], rtol=0, atol=1e-7)
+    np.testing.assert_allclose(lc["PogoStick.E"], jac["PogoStick.E"][1:], rtol=1e-7, atol=1e-9)
+    np.testing.assert_array_equal(lc["PogoStick.s"], jac["PogoStick.s"][1:])
+    assert np.count_nonzero(lc["HopController.F_ext"]) > 50
+    # Gauss-Seidel: apex heights
+    gs = master.simulate(path, stop_time=stop, step=step)
+    lc_res = {"time": np.array([0.0] + times), "PogoStick.y": np.r_[p["y_0"], lc["PogoStick.y"]],
+              "PogoStick.ydot": np.r_[0.0, lc["PogoStick.ydot"]], "PogoStick.s": np.r_[0, lc["PogoStick.s"]],
+              "PogoStick.F_ext": np.r_[0.0, lc["HopController.F_ext"]]}
+    a, b = apexes(gs, p["g"]), apexes(lc_res, p["g"])
+    assert len(a) == len(b) >= 2
+    for (ta, ha), (tb, hb) in zip(a, b):
+        assert abs(ta - tb) < 0.05
+        assert abs(ha - hb) <= 2 * delay_bound(p, ha, step), (a, b)
+
+
+# ---------------------------------------------------------------------------------------------
+# broken packages are rejected, naming the element
+# ---------------------------------------------------------------------------------------------
+
+BROKEN = {
+    "unknown component": (
+        lambda t: t.replace('startElement="HopController" startConnector="F_ext"',
+                            'startElement="Thruster" startConnector="F_ext"'),
+        ["Connection 4 (Thruster.F_ext -> PogoStick.F_ext)", "unknown component 'Thruster'"]),
+    "dangling connection": (
+        lambda t: t.replace('endElement="HopController" endConnector="ydot"',
+                            'endElement="HopController" endConnector="v"'),
+        ["Connection 2 (PogoStick.ydot -> HopController.v)", "dangling", "no connector 'v'"]),
+    "unit mismatch": (
+        lambda t: t.replace('<ssd:Connector name="y" kind="input"><ssc:Real unit="m"/>',
+                            '<ssd:Connector name="y" kind="input"><ssc:Real unit="m/s"/>'),
+        ["Connection 1 (PogoStick.y -> HopController.y)", "unit mismatch", "'m'", "'m/s'",
+         "Connector HopController.y"]),
+    "missing ssv": (
+        lambda t: t.replace('<ssd:ParameterBinding source="resources/earth.ssv"/>\n        </ssd:ParameterBindings>\n'
+                            '      </ssd:Component>\n      <ssd:Component name="HopController"',
+                            '<ssd:ParameterBinding source="resources/mars.ssv"/>\n        </ssd:ParameterBindings>\n'
+                            '      </ssd:Component>\n      <ssd:Component name="HopController"'),
+        ["Component PogoStick", "resources/mars.ssv", "missing"]),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BROKEN))
+def test_broken_ssd_is_rejected_naming_the_element(case, tmp_path):
+    edit, words = BROKEN[case]
+    pkg = variant(tmp_path, edit_ssd=edit)
+    with pytest.raises(master.SSPError) as exc:
+        master.simulate(pkg, stop_time=0.01, step=1e-3)
+    for w in words:
+        assert w in str(exc.value), str(exc.value)
+    # and on the command line: exit status 1, the message on stderr
+    proc = subprocess.run([sys.executable, "-m", "pogofmu.ssp", "run", str(pkg), "--stop-time", "0.01",
+                           "--out", str(tmp_path / "out")], capture_output=True, text=True)
+    assert proc.returncode == 1 and words[0] in proc.stderr, proc.stderr
+    assert not (tmp_path / "out").exists()
+
+
+def test_unknown_parameter_set_and_stray_parameter_are_rejected(tmp_path):
+    with pytest.raises(master.SSPError, match=r"parameter set 'mars'.*available: ceres, earth, moon"):
+        master.simulate(SSP, parameters="mars", stop_time=0.01)
+    text = (ROOT / "ssp" / "SpaceHopper" / "moon.ssv").read_text()
+    pkg = variant(tmp_path, files={"resources/moon.ssv": text.replace('name="tau_E"', 'name="tau_F"')})
+    with pytest.raises(master.SSPError, match=r"parameter tau_F of resources/moon.ssv: no component"):
+        master.simulate(pkg, parameters="moon", stop_time=0.01)
+
+
+def test_a_failing_fmu_step_ends_the_run_with_its_message(tmp_path):
+    """A leg far too soft for Earth bottoms out: PogoStick's fmi2DoStep is fatal, the master stops
+    with the component, the time and the FMU's own message (no truncated result)."""
+    text = (ROOT / "ssp" / "SpaceHopper" / "earth.ssv").read_text()
+    pkg = variant(tmp_path, files={"resources/earth.ssv": text.replace('name="k"><ssv:Real value="100"',
+                                                                       'name="k"><ssv:Real value="5"')})
+    with pytest.raises(master.SSPError, match=r"(?s)Component PogoStick: fmi2DoStep from t = .*bottomed out"):
+        master.simulate(pkg, stop_time=5.0, step=1e-3, echo_log=False)
+
+
+# ---------------------------------------------------------------------------------------------
+# the command line
+# ---------------------------------------------------------------------------------------------
+
+def test_command_line_run_writes_csv_plot_and_progress(tmp_path):
+    out = tmp_path / "out"
+    proc = subprocess.run([sys.executable, "-m", "pogofmu.ssp", "run", str(SSP), "--parameters", "ceres",
+                           "--stop-time", "2", "--step", "1e-3", "--out", str(out)], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    progress = [line for line in proc.stdout.splitlines() if " %  t = " in line]
+    assert len(progress) == 10 and progress[-1].lstrip("SpaceHopper: ").startswith("100 %"), proc.stdout
+    rows = (out / "ceres.csv").read_text().splitlines()
+    assert rows[0].split(",")[:3] == ["time", "PogoStick.F_ext", "PogoStick.y"]
+    assert len(rows) == 2002 and float(rows[-1].split(",")[0]) == pytest.approx(2.0)
+    assert (out / "ceres.png").read_bytes()[:4] == b"\x89PNG"
