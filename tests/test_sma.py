@@ -218,6 +218,21 @@ def test_random_forcing_makes_inner_loops_inside_the_flag(seed):
     r_sma = np.where(s == 1, r - c * xdot, 0.0)
     lo, hi = band(x)
     assert np.all(r_sma >= lo - 1e-9) and np.all(r_sma <= hi + 1e-9)
+    # every sample lies on the line its latest event put it on: an elastic line starts on the
+    # plateau at the reversal / reload point (x of that event, from the log), plateaus are r_U, r_L
+    events = parse_event_log(inst.messages)
+    assert [e["index"] for e in events] == list(range(1, len(events) + 1))
+    for k in np.flatnonzero(s == 1):
+        e = events[n_ev[k] - 1] if n_ev[k] else {"name": "virgin_line"}  # starts on the virgin line
+        if e["name"] in ("touchdown", "virgin_line"):
+            line = K1 * x[k]
+        elif e["name"] == "reversal":
+            line = r_upper(xev(e)) + K1 * (x[k] - xev(e))
+        elif e["name"] == "reload":
+            line = r_lower(xev(e)) + K1 * (x[k] - xev(e))
+        else:
+            line = r_upper(x[k]) if e["name"] == "upper_plateau" else r_lower(x[k])
+        assert abs(r_sma[k] - line) <= 1e-8, (k, e["name"], r_sma[k], line)
     # slopes: between two samples with no event in between, the branch and anchor are fixed
     same = (np.diff(n_ev) == 0) & (s[1:] == 1) & (s[:-1] == 1)
     slope = np.where(branch[1:] == 0, K1, K2)
@@ -225,7 +240,7 @@ def test_random_forcing_makes_inner_loops_inside_the_flag(seed):
     assert np.all(np.abs(resid[same]) <= 1e-9), np.max(np.abs(resid[same]))
     assert np.sum(same & (branch[1:] == 0) & (np.abs(np.diff(x)) > 1e-4)) > 50
     # non-vacuous: inner loops happened (reloads from the lower plateau, reversals on the upper)
-    names = [e["name"] for e in parse_event_log(inst.messages)]
+    names = [e["name"] for e in events]
     assert names.count("reload") >= 3 and names.count("reversal") >= 5, names
     assert min(x) > -0.6  # stayed well inside the domain (xbar > 0)
     assert np.max(np.abs(E + W - E_0 - Wx)) <= 1e-8 * E_0
