@@ -396,7 +396,7 @@ class Simulator:
             t_new = t + h
             if t_new >= self.t_stop > t:
                 t_new = self.t_stop
-                h = t_new - t
+            h = t_new - t  # the step actually taken: t + h is rounded (found by the benchmark)
             if h <= 10 * EPS * max(abs(t), 1.0):
                 if self.events and self.events[-1].time == t:
                     last = self.events[-1]

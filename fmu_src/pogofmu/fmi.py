@@ -92,15 +92,18 @@ class HybridSlave(Fmi2Slave):
                 getter=(lambda i=i: self._u[i]),
                 setter=(lambda v, i=i, n=var.name: self._set_input(i, n, v))))
         integers = model.all_integer_outputs()
+        self._real_outputs, self._integer_outputs = {}, {}  # value reference -> name
         for var in model.all_outputs():
             if var.name in integers:
-                cls, variability = Integer, Fmi2Variability.discrete
+                cls, variability, table = Integer, Fmi2Variability.discrete, self._integer_outputs
             else:
-                cls, variability = Real, Fmi2Variability.continuous
+                cls, variability, table = Real, Fmi2Variability.continuous, self._real_outputs
+            table[len(self.vars)] = var.name
             self.register_variable(cls(
                 var.name, causality=Fmi2Causality.output, variability=variability,
                 description=var.description,
                 getter=(lambda n=var.name: self._output(n))))
+        self._inputs_changed = True
 
     # ---- variable access ----------------------------------------------------------------------
     def _set_parameter(self, name, value):
@@ -113,6 +116,27 @@ class HybridSlave(Fmi2Slave):
     def _set_input(self, i, name, value):
         # checked in fmi2DoStep, which can refuse the step without destroying the instance
         self._u[i] = float(value)
+        self._inputs_changed = True
+
+    def get_real(self, vrs):
+        # fast path for the common call, a master reading outputs after each step; anything
+        # else (parameters, inputs, a wrong type) goes through pythonfmu's generic getters
+        out, names = self._out, self._real_outputs
+        if out is not None:
+            try:
+                return [float(out[names[vr]]) for vr in vrs]
+            except KeyError:
+                pass
+        return super().get_real(vrs)
+
+    def get_integer(self, vrs):
+        out, names = self._out, self._integer_outputs
+        if out is not None:
+            try:
+                return [int(out[names[vr]]) for vr in vrs]
+            except KeyError:
+                pass
+        return super().get_integer(vrs)
 
     def _output(self, name):
         if self._out is None:
@@ -166,7 +190,9 @@ class HybridSlave(Fmi2Slave):
         sim = self._sim
         n_before = len(sim.events)
         try:
-            sim.set_input(self._u)
+            if self._inputs_changed:
+                sim.set_input(self._u)
+                self._inputs_changed = False
             sim.advance(max(current_time + step_size, sim.t_out))
         except ModelError as exc:
             # the model cannot go on: fmi2Fatal (raise), so that no master mistakes a truncated
@@ -195,9 +221,10 @@ class HybridSlave(Fmi2Slave):
         if abs(current_time - sim.t_out) > 1e-9 * max(1.0, abs(current_time)):
             return (f"currentCommunicationPoint = {current_time!r} violates the rule: it must equal "
                     f"the end of the previous step ({sim.t_out!r})")
-        for var, v in zip(type(self).model.inputs, self._u):
-            if not math.isfinite(v):
-                return f"input {var.name} = {v!r} violates the rule: {var.name} must be a finite number"
+        if self._inputs_changed:
+            for var, v in zip(type(self).model.inputs, self._u):
+                if not math.isfinite(v):
+                    return f"input {var.name} = {v!r} violates the rule: {var.name} must be a finite number"
         return None
 
     def terminate(self):
@@ -215,6 +242,7 @@ class HybridSlave(Fmi2Slave):
     def _set_fmu_state(self, state):
         self._par = dict(state["par"])
         self._u = list(state["u"])
+        self._inputs_changed = True
         self._out = None if state["out"] is None else dict(state["out"])
         self._t_start, self._t_stop = state["t_start"], state["t_stop"]
         if state["sim"] is None:
