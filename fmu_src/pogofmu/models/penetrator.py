@@ -34,19 +34,22 @@ Events, in priority order:
 """
 from __future__ import annotations
 
+import math
+
 from ..engine import solver_parameters
-from ..model import (FALLING, Event, HybridModel, Parameter, ParameterError, Variable, require,
+from ..model import (FALLING, Event, HybridModel, Parameter, Variable, require,
                      require_finite, require_nonnegative, require_positive)
 from ..soil import HuntCrossley
 
 SOIL = HuntCrossley()
 
-I_Y, I_YDOT, I_DELTA, I_WLEG, I_WSOIL, I_WEXT = range(6)
+I_Y, I_YDOT, I_DELTA, I_TAU, I_WLEG, I_WSOIL, I_WEXT = range(7)
 
 STATES = (
     Variable("y", "m", "height of the mass above the soil surface"),
     Variable("ydot", "m/s", "vertical velocity of the mass"),
     Variable("delta", "m", "penetration of the foot into the soil (positive down; 0 in flight)"),
+    Variable("tau", "s", "time since the latest liftoff (flight only; drives the leg's relaxation)"),
     Variable("W_leg", "J", "work absorbed by the leg"),
     Variable("W_soil", "J", "work absorbed by the soil"),
     Variable("W_ext", "J", "work done by F_ext"),
@@ -55,10 +58,12 @@ STATES = (
 OUTPUTS = (
     Variable("y", "m", "height of the mass above the soil surface"),
     Variable("ydot", "m/s", "vertical velocity of the mass"),
-    Variable("delta", "m", "penetration of the foot into the soil (positive down; 0 in flight)"),
+    Variable("delta", "m", "penetration of the foot into the soil, max(0, delta) (positive down; 0 in flight)"),
     Variable("delta_dot", "m/s", "penetration rate of the foot (0 in flight)"),
     Variable("F_soil", "N", "Hunt-Crossley soil force on the foot, positive up (0 in flight); "
              "equals minus the leg force r"),
+    Variable("z", "m", "height of the foot: above the surface in flight (y - x_i - leg deflection), "
+             "-delta in contact"),
     Variable("s", "", "mode: 0 flight (no contact), 1 contact"),
     Variable("delta_max", "m", "largest penetration so far (exact running maximum)"),
     Variable("d0dot_used", "m/s", "reference velocity of the restitution law in the current (or latest) "
@@ -90,9 +95,18 @@ PLOTS = (
 )
 
 
-def _initial_mode(p) -> int:
-    """0 (flight) when the foot starts above the surface or leaves it, else 1 (contact)."""
-    return 0 if (p.y_0 > p.x_i or (p.y_0 == p.x_i and p.ydot_0 > 0)) else 1
+def _initial_mode(p):
+    """``(s, x_lift)`` at t = 0: flight with the leg at its free length when y_0 > x_i; else the
+    foot stands on the surface with the leg compressed by x_i - y_0, in contact if the foot is
+    pushed into the soil (delta'(0) > 0, or = 0 with delta''(0) >= 0 for F_ext = 0), otherwise in
+    flight with that compression relaxing."""
+    if p.y_0 > p.x_i:
+        return 0, 0.0
+    x0 = p.y_0 - p.x_i
+    rate = -(p.k / p.c) * x0 - p.ydot_0  # delta'(0) with P = 0
+    if rate > 0 or (rate == 0 and p.g - (p.k / p.c) * p.ydot_0 >= 0):
+        return 1, 0.0
+    return 0, x0
 
 
 def check(p):
@@ -103,20 +117,13 @@ def check(p):
             "delta' = (...)/(lambda P + c))")
     require(p.g >= 0, "g", p.g, "g >= 0")
     SOIL.check(p)
-    if _initial_mode(p) == 1:
-        # contact at t = 0 with delta = 0: the foot must not be pulled out of the soil at once
-        limit = p.k * (p.x_i - p.y_0) / p.c
-        if not p.ydot_0 <= limit:
-            raise ParameterError(
-                f"parameter ydot_0 = {p.ydot_0!r} violates the rule: with y_0 = {p.y_0!r} <= x_i = {p.x_i!r} "
-                f"the stick starts in contact (delta = 0), which needs ydot_0 <= k (x_i - y_0)/c = {limit!r} "
-                f"(otherwise the foot leaves the soil at once)")
 
 
 def initial(p):
     check(p)
-    X = [float(p.y_0), float(p.ydot_0), 0.0, 0.0, 0.0, 0.0]
-    q = {"s": _initial_mode(p), "d0dot": float(p.d0dot), "delta_max": 0.0}
+    s, x_lift = _initial_mode(p)
+    X = [float(p.y_0), float(p.ydot_0), 0.0, 0.0, 0.0, 0.0, 0.0]
+    q = {"s": s, "d0dot": float(p.d0dot), "delta_max": 0.0, "x_lift": x_lift}
     return X, q
 
 
@@ -127,7 +134,7 @@ def bind(q, u, p):
     if not q["s"]:
         def flight(t, X):
             ydot = X[1]
-            return [ydot, fa, 0.0, 0.0, 0.0, F * ydot]
+            return [ydot, fa, 0.0, 1.0, 0.0, 0.0, F * ydot]
         return flight
     k, c, x_i, inv_m = p.k, p.c, p.x_i, 1.0 / p.m
     rate = SOIL.bind(p, q["d0dot"])[1]
@@ -138,7 +145,7 @@ def bind(q, u, p):
         dd = rate(-k * x - c * ydot, c, d)
         v = ydot + dd  # leg length rate
         r = k * x + c * v  # leg force (compression < 0) = -F_soil
-        return [ydot, fa - r * inv_m, dd, r * v, -r * dd, F * ydot]
+        return [ydot, fa - r * inv_m, dd, 0.0, r * v, -r * dd, F * ydot]
 
     return contact
 
@@ -153,17 +160,31 @@ def _delta_dot(X, q, p):
     return SOIL.rate_of(p, q["d0dot"], -p.k * x - p.c * X[I_YDOT], p.c, X[I_DELTA])
 
 
+def _flight_leg(X, q, p):
+    """Leg deflection in flight: the massless free-ended leg relaxes, k x + c x' = 0, from its
+    deflection at liftoff: x = x_lift exp(-(k/c) tau)."""
+    x_lift = q["x_lift"]
+    return x_lift * math.exp(-(p.k / p.c) * X[I_TAU]) if x_lift else 0.0
+
+
+def _foot_height_flight(X, q, p):
+    return X[I_Y] - p.x_i - _flight_leg(X, q, p)
+
+
 # ---- events ----
 def touchdown_jump(X, q, u, p):
     X = list(X)
     X[I_DELTA] = 0.0
-    return X, dict(q, s=1, d0dot=SOIL.reference_velocity(p, -X[I_YDOT]))
+    # the soil's impact speed is the foot's: -z' = -(ydot - x') = -ydot - (k/c) x
+    impact = -X[I_YDOT] - (p.k / p.c) * _flight_leg(X, q, p)
+    return X, dict(q, s=1, d0dot=SOIL.reference_velocity(p, impact))
 
 
 def liftoff_jump(X, q, u, p):
     X = list(X)
     X[I_DELTA] = 0.0
-    return X, dict(q, s=0)
+    X[I_TAU] = 0.0
+    return X, dict(q, s=0, x_lift=X[I_Y] - p.x_i)
 
 
 def peak_guard(X, q, u, p):
@@ -179,24 +200,23 @@ def _in_contact(q):
 
 
 EVENTS = (
-    Event("touchdown", FALLING, lambda X, q, u, p: X[I_Y] - p.x_i, touchdown_jump, lambda q: q["s"] == 0),
+    Event("touchdown", FALLING, lambda X, q, u, p: _foot_height_flight(X, q, p), touchdown_jump,
+          lambda q: q["s"] == 0),
     Event("liftoff", FALLING, lambda X, q, u, p: X[I_DELTA], liftoff_jump, _in_contact),
     Event("max_penetration", FALLING, peak_guard, peak_jump, _in_contact),
 )
 
 
 def domain(t, X, q, u, p):
-    y, ydot, d = X[I_Y], X[I_YDOT], X[I_DELTA]
+    y, d = X[I_Y], X[I_DELTA]
     if y <= 0:
         return f"mass height y = {y:.6g} m must stay > 0 (the body reached the soil surface)"
     if q["s"]:
         if y + d <= 0:
             return f"leg length y + delta = {y + d:.6g} m must stay > 0 (the leg bottomed out)"
-    elif ydot < 0 and y < p.x_i - 10.0 * (p.rel_tol * p.x_i + p.abs_tol):
-        # (the slack admits the touchdown itself, located a few ulps past y = x_i)
-        return (f"in flight the mass falls (ydot = {ydot:.6g} m/s) with y = {y:.6g} m below the free leg "
-                f"length x_i = {p.x_i:.6g} m: it lifted off too slowly to regain the free length, and the "
-                f"model (the massless leg snaps back to x_i at liftoff) has no touchdown for this")
+        if d < -1e-6 * p.x_i:
+            return (f"penetration delta = {d:.6g} m < 0 in contact: the foot left the soil without a "
+                    f"liftoff event")
     return None
 
 
@@ -206,12 +226,16 @@ def output_fn(t, X, q, u, p):
         dd = _delta_dot(X, q, p)
         F_soil = SOIL.force_of(p, q["d0dot"], d, dd)
         d_max = max(q["delta_max"], d)
+        z = -d if d > 0.0 else 0.0
     else:
         dd = F_soil = 0.0
         d_max = q["delta_max"]
+        z = _foot_height_flight(X, q, p)
     return {
-        "y": y, "ydot": ydot, "delta": d, "delta_dot": dd, "F_soil": F_soil, "s": q["s"],
-        "delta_max": d_max, "d0dot_used": q["d0dot"],
+        # the penetration is max(0, delta), as in the soil law: the state may dip below 0 by the
+        # integration error right before a located liftoff (it is reset to 0 at the event)
+        "y": y, "ydot": ydot, "delta": d if d > 0.0 else 0.0, "delta_dot": dd, "F_soil": F_soil, "s": q["s"],
+        "delta_max": d_max, "d0dot_used": q["d0dot"], "z": z,
         "E": 0.5 * p.m * ydot * ydot + p.m * p.g * y,
         "W_leg": X[I_WLEG], "W_soil": X[I_WSOIL], "W_ext": X[I_WEXT],
     }
