@@ -133,3 +133,16 @@ def test_guard_at_zero_after_a_jump_is_not_detected_again():
     sim.advance(1.0)
     times = [e.time for e in sim.events]
     assert all(b - a > 0.1 for a, b in zip(times, times[1:]))
+
+
+def test_stop_time_a_rounding_error_away_is_not_a_collapsed_step():
+    """Found by the SSP master: an input change at t = 6 - 1e-14 with t_stop = 6 asked for a
+    1e-14 s step to land on t_stop, which the engine took for a collapsed step size."""
+    model = ball(h0=1000.0)  # no bounce before t = 6 s
+    sim = Simulator(model, model.params(), t_stop=6.0)
+    t_close = 6.0 - 1e-14
+    sim.advance(t_close)
+    sim.set_input((1.0,))
+    x, _ = sim.advance(6.0)
+    assert sim.t_out == 6.0
+    assert x[1] == pytest.approx(-G * 6.0, abs=1e-9)

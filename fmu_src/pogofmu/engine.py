@@ -394,8 +394,8 @@ class Simulator:
         rejected = False
         while True:
             t_new = t + h
-            if t_new >= self.t_stop > t:
-                t_new = self.t_stop
+            if t_new >= self.t_stop > t + 10 * EPS * max(abs(t), 1.0):
+                t_new = self.t_stop  # land on the stop time (unless a rounding error away from it)
             h = t_new - t  # the step actually taken: t + h is rounded (found by the benchmark)
             if h <= 10 * EPS * max(abs(t), 1.0):
                 if self.events and self.events[-1].time == t:
