@@ -198,7 +198,8 @@ class HybridSlave(Fmi2Slave):
             # the model cannot go on: fmi2Fatal (raise), so that no master mistakes a truncated
             # run for a result.  Nothing is logged in this call: pythonfmu would drop the message.
             raise FMUError(f"{type(self).model.name}: {exc}") from None
-        self._log_events(n_before)
+        if len(sim.events) != n_before:
+            self._log_events(n_before)
         self._update_outputs()
         return True
 

@@ -209,6 +209,8 @@ def make_stick_model(name: str, description: str, leg: Sequence[Element], plots=
             return f"leg deflection x = {xbar - p.x_i:.6g} m must stay <= 0 (the spring never extends)"
         return None
 
+    reporting = tuple((el, sl, tuple(v.name for v in el.outputs)) for el, sl in parts if el.outputs)
+
     def output_fn(t, X, q, u, p):
         xbar, xdot, y, ydot, z = X[0], X[1], X[2], X[3], X[4]
         x = xbar - p.x_i
@@ -217,8 +219,8 @@ def make_stick_model(name: str, description: str, leg: Sequence[Element], plots=
             "xbar": xbar, "xdot": xdot, "y": y, "ydot": ydot, "z": z, "x": x, "r": r, "s": q["s"],
             "E": 0.5 * p.m * ydot * ydot + p.m * p.g * y, "W_leg": X[I_WLEG], "W_ext": X[I_WEXT],
         }
-        for el, sl in parts:
-            out.update(zip((v.name for v in el.outputs), el.output_values(x, xdot, X[sl], q, p)))
+        for el, sl, names in reporting:
+            out.update(zip(names, el.output_values(x, xdot, X[sl], q, p)))
         return out
 
     return HybridModel(
