@@ -1,0 +1,18 @@
+"""Benchmark case PogoStickMem with a linear law (spring_law 0, gamma 0): the same physics as the
+PogoStick case, through the element composition with the absement state -- the row to hold
+against PogoStick's (issue 3: at most 1.3x its time).  Reference: the closed form, as PogoStick.
+"""
+from __future__ import annotations
+
+from . import SHARED_REFERENCE, Case, csv_reference
+from .pogostick_mem import scipy_loop
+
+CASE = Case(
+    name="PogoStickMem-linear",
+    fmu="PogoStickMem",
+    model="pogofmu.models.pogo_stick_mem:MODEL",
+    params={"spring_law": 0, "gamma": 0.0},
+    scipy_loop=scipy_loop,
+    reference=csv_reference(SHARED_REFERENCE / "pogo_basic_events.csv"),
+    reference_label="closed form (shared/reference/pogo_basic_events.csv, 19 events)",
+)
