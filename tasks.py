@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """The project's two commands (and a few more), runnable on a machine with nothing but Python.
 
-    python3 tasks.py run     # build + validate every FMU, simulate default experiments -> results/
+    python3 tasks.py run     # build + validate every FMU, simulate default experiments -> results/,
+                             # run the SpaceHopper SSP on the Moon
     python3 tasks.py test    # the test suite (what CI runs)
     python3 tasks.py bench   # the benchmarks (benchmarks/)
 
@@ -55,7 +56,15 @@ def main(argv):
         rc = subprocess.call([sys.executable, str(ROOT / "build_fmu.py")], cwd=ROOT)
         if rc:
             return rc
-        return subprocess.call([sys.executable, "-m", "pogofmu.master", *rest], cwd=ROOT)
+        rc = subprocess.call([sys.executable, "-m", "pogofmu.master", *rest], cwd=ROOT)
+        if rc:
+            return rc
+        # the system-level example: the SpaceHopper on the Moon, run by the project's SSP master
+        for body in ("moon",):
+            rc |= subprocess.call([sys.executable, "-m", "pogofmu.ssp", "run", str(ROOT / "dist" / "SpaceHopper.ssp"),
+                                   "--parameters", body, "--stop-time", "30", "--step", "1e-3",
+                                   "--out", str(ROOT / "results" / f"SpaceHopper-{body}")], cwd=ROOT)
+        return rc
     if cmd == "test":
         rc = subprocess.call([sys.executable, "-m", "pytest", *rest], cwd=ROOT)
         return 0 if rc == 5 and os.environ.get("POGOFMU_ALLOW_EMPTY") else rc

@@ -67,4 +67,5 @@ CASE = Case(
     scipy_loop=scipy_loop,
     reference=csv_reference(SHARED_REFERENCE / "pogo_basic_events.csv"),
     reference_label="closed form (shared/reference/pogo_basic_events.csv, 19 events)",
+    targets=True,
 )

@@ -15,4 +15,6 @@ CASE = Case(
     scipy_loop=scipy_loop,
     reference=csv_reference(SHARED_REFERENCE / "pogo_basic_events.csv"),
     reference_label="closed form (shared/reference/pogo_basic_events.csv, 19 events)",
+    compare_to="PogoStick",
+    max_ratio=1.3,
 )
