@@ -175,6 +175,25 @@ class Instance:
             self.fmu.freeInstance()
 
 
+def init_failure_text(name, **params):
+    """Initialize a fresh instance with ``params``; assert it ends in fmi2Fatal (FMI: nothing more
+    may be called on it, so it is left as is) and return the logged messages as one text."""
+    import pytest
+    from fmpy.fmi1 import FMICallException
+
+    inst = Instance(name)
+    with pytest.raises(FMICallException) as exc:
+        inst.init(**params)
+    assert "fatal" in str(exc.value)
+    return "\n".join(m[2] for m in inst.messages)
+
+
+def assert_parameter_rejected(name, params, param, rule):
+    """A bad parameter ends initialization with a message naming it, its value and the rule."""
+    text = init_failure_text(name, **params)
+    assert f"parameter {param} = {params[param]!r}" in text and rule in text, text
+
+
 def run_libcosim(name, stop_time, step, outputs, initial=None, timeout=120):
     """Run one FMU under libcosimpy in a separate process; return {output: final value}."""
     script = ROOT / "tests" / "_libcosim_runner.py"

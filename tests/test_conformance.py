@@ -153,3 +153,22 @@ def test_libcosimpy_agrees_with_fmpy(name):
     assert got.pop("_ok")
     for out in outputs:
         assert got[out] == pytest.approx(float(ref.res[out][-1]), rel=1e-9, abs=1e-12), out
+
+
+@pytest.mark.parametrize("name", FMUS)
+def test_master_script_writes_results_and_every_figure(name, tmp_path):
+    """The fmpy master script: time series, event table and each figure the model asks for
+    (force-deflection loops, time histories), drawn from outputs that exist."""
+    from pogofmu import master
+
+    master.run(DIST, tmp_path, [name])
+    model = master.model_of(DIST / f"{name}.fmu")
+    outputs = {v.name for v in model.all_outputs()}
+    assert all(n in outputs for fig in model.plots for panel in fig for n in panel if n != "vs")
+    out = tmp_path / name
+    assert (out / "timeseries.csv").read_text().count("\n") > 1000
+    pngs = sorted(out.glob("figure*.png"))
+    assert len(pngs) == len(model.plots) and all(p.stat().st_size > 10_000 for p in pngs)
+    rows = (out / "events.csv").read_text().splitlines()
+    run = simulate(name)
+    assert len(rows) - 1 == len({int(n) for n in run["n_events"] if n > 0})
