@@ -172,3 +172,14 @@ def test_master_script_writes_results_and_every_figure(name, tmp_path):
     rows = (out / "events.csv").read_text().splitlines()
     run = simulate(name)
     assert len(rows) - 1 == len({int(n) for n in run["n_events"] if n > 0})
+
+
+# the loops the issues ask for: force-deflection (mem-spring pinched, SMA flag) and the soil's
+# Hunt-Crossley hysteresis
+LOOPS = {"PogoStickMem": ("x", "r"), "PogoStickSMA": ("x", "r"), "Penetrator": ("delta", "F_soil")}
+
+
+@pytest.mark.parametrize("name, loop", sorted(LOOPS.items()))
+def test_loop_figures_asked_for_by_the_issues(name, loop):
+    model = slave_model(name)
+    assert any(panel == ("vs",) + loop for fig in model.plots for panel in fig)

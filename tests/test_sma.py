@@ -283,12 +283,3 @@ def test_fmu_state_restores_the_branch_memory():
         inst.fmu.freeFMUstate(state)
     finally:
         inst.close()
-
-
-def test_figures_include_the_force_deflection_loop():
-    """The master script (drawn for every FMU in test_conformance) plots r against x here."""
-    import build_fmu
-
-    model = next(build_fmu.slave_class(s).model for s in build_fmu.slave_files()
-                 if build_fmu.slave_class(s).__name__ == NAME)
-    assert any(panel == ("vs", "x", "r") for fig in model.plots for panel in fig)
