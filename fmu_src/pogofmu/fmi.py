@@ -1,12 +1,16 @@
 """One adapter from any :class:`~pogofmu.model.HybridModel` to an FMI 2.0 co-simulation slave.
 
-A slave file is two lines::
+A slave file is a few lines (pythonfmu's loader looks for the literal ``class <Name>(Fmi2Slave):``
+and a second instance in one process crashes unless the class body holds a method)::
 
-    from pogofmu.fmi import HybridSlave
+    from pogofmu.fmi import HybridSlave as Fmi2Slave
     from pogofmu.models.pogo_stick import MODEL
 
-    class PogoStick(HybridSlave):
+    class PogoStick(Fmi2Slave):
         model = MODEL
+
+        def __init__(self, **kwargs):
+            super().__init__(**kwargs)
 
 Behaviour (FMI 2.0 co-simulation, on pythonfmu 0.7):
 
@@ -17,8 +21,8 @@ Behaviour (FMI 2.0 co-simulation, on pythonfmu 0.7):
 * errors name the variable, its value and the rule, and never take the host process down:
 
   - a broken parameter rule (checked in ``fmi2ExitInitializationMode``) raises
-    :class:`FMUError`: pythonfmu returns ``fmi2Fatal`` and logs the message (free the instance
-    and make a new one);
+    :class:`FMUError`: pythonfmu returns ``fmi2Fatal`` and logs the message (FMI 2.0: call
+    nothing more on that instance; a new instance works);
   - a non-finite input, a negative step size or a wrong communication point make
     ``fmi2DoStep`` return ``fmi2Discard`` with the reason logged at status ``fmi2Error``: the
     instance stays usable, the master can correct the input and step again;
