@@ -8,7 +8,8 @@ One :class:`Simulator` integrates any :class:`~pogofmu.model.HybridModel`:
   direction is located on the step's continuous extension (dense output) by a safeguarded
   Illinois iteration to a time tolerance of a few ulps of ``t``; the step is then redone exactly
   up to the event (so the state at the event has the full order of the method, not the order of
-  the interpolant), the jump is applied and integration restarts there;
+  the interpolant) and a few secant iterations on such exact steps land that state on the guard;
+  the jump is applied and integration restarts there;
 * the integrator runs *ahead* of the communication points and serves them from the dense output:
   the step sequence, and so every event time, does not depend on the communication grid.  Only a
   change of input forces a restart at the communication point;
@@ -447,14 +448,45 @@ class Simulator:
         te, k = hit
         i, ev = self.active[k]
         if te < t_new:
-            # redo the step exactly up to the event: full-order state at the event
-            y_e, f_e, K_e = pair.step(fun, t, y, f, te - t)
+            te, y_e, f_e, K_e = self._land_on_event(seg, ev, te)
             seg = _Segment(t, te, y, y_e, f, K_e, fun, pair)
         else:
             y_e, f_e = y_new, f_new
         self._check_domain(te, y_e, seg)
         self.seg, self.t, self.x, self.f = seg, te, y_e, f_e
         self.pending = (i, y_e)
+
+    def _land_on_event(self, seg, ev, te):
+        """Redo the step exactly up to the event, so that the state there has the method's full
+        order, and make that state lie on the guard.
+
+        ``te`` comes from the dense output; a step of exactly ``te - t0`` lands a little off the
+        guard (by the interpolant's error: e.g. a penetration of -1e-9 m at a liftoff, or an SMA
+        plateau entered 3e-10 m early).  A few secant iterations on the map
+        ``tau -> guard(step(t0, tau - t0))`` (a polynomial in the step size) move the event to
+        where the integrated solution itself meets the guard.  Returns ``(te, y, f, K)``.
+        """
+        q, u, p, guard = self.q, self.u, self.p, ev.guard
+        t0, t1, y0, f0 = seg.t0, seg.t1, seg.y0, seg.f0
+        step, fun = self.pair.step, seg.fun
+        y_a, f_a, K_a = step(fun, t0, y0, f0, te - t0)
+        g_a = guard(y_a, q, u, p)
+        best = (abs(g_a), te, y_a, f_a, K_a)
+        d = 1e-3 * (te - t0)
+        slope = (guard(seg(te), q, u, p) - guard(seg(te - d), q, u, p)) / d  # from the dense output
+        ta, tb = te, (te - g_a / slope if slope else te)
+        tol = 4 * EPS * max(abs(te), 1.0)
+        for _ in range(8):
+            if g_a == 0.0 or not (t0 < tb < t1) or abs(tb - ta) <= tol:
+                break
+            y_b, f_b, K_b = step(fun, t0, y0, f0, tb - t0)
+            g_b = guard(y_b, q, u, p)
+            if abs(g_b) < best[0]:
+                best = (abs(g_b), tb, y_b, f_b, K_b)
+            if g_b == g_a:
+                break
+            ta, g_a, tb = tb, g_b, tb - g_b * (tb - ta) / (g_b - g_a)
+        return best[1:]
 
     def _locate_from_zero(self, seg, ev, g1):
         """A guard that starts the step exactly at zero (disarmed after a jump) and ends it on the
