@@ -138,17 +138,13 @@ def run(dist: Path, out: Path, names=()):
     summary = []
     for fmu in fmus:
         model = model_of(fmu)
-        if model is None:  # an FMU that is not a HybridModel (e.g. a controller): outputs only
-            res = simulate_default(fmu)
-            d = out / fmu.stem
-            d.mkdir(exist_ok=True)
-            write_csv(d / "timeseries.csv", res)
-            summary.append((fmu.stem, res["time"][-1], "-"))
-            continue
         res = simulate_default(fmu)
         d = out / fmu.stem
         d.mkdir(exist_ok=True)
         write_csv(d / "timeseries.csv", res)
+        if model is None:  # an FMU that is not a HybridModel of this project: outputs only
+            summary.append((fmu.stem, res["time"][-1], "-"))
+            continue
         rows = event_table(res, [ev.name for ev in model.events])
         with (d / "events.csv").open("w", newline="") as f:
             w = csv.DictWriter(f, fieldnames=["index", "time_s", "event", "s_after", "note"])
