@@ -93,13 +93,16 @@ def make_stick_model(name: str, description: str, leg: Sequence[Element], plots=
     outputs = BASE_OUTPUTS + tuple(v for el in leg for v in el.outputs)
     parts = tuple(zip(leg, slices))
 
+    # built once: each element's force (with the slice of its own states, None if it has none)
+    # and, for elements with states, their rates
+    forces = tuple((el.force, sl if sl.start != sl.stop else None) for el, sl in parts)
+    rates = tuple((el.rates, sl) for el, sl in parts if sl.start != sl.stop)
+
     def leg_force(x, xdot, X, q, p):
         r = 0.0
-        for el, sl in parts:
-            r += el.force(x, xdot, X[sl], q, p)
+        for force, sl in forces:
+            r += force(x, xdot, () if sl is None else X[sl], q, p)
         return r
-
-    sized = tuple((el, sl) for el, sl in parts if sl.start != sl.stop)
 
     def flow(t, X, q, u, p):
         return bind(q, u, p)(t, X)
@@ -109,7 +112,6 @@ def make_stick_model(name: str, description: str, leg: Sequence[Element], plots=
         7-13 times per step, so attribute and dict lookups are hoisted out of it."""
         F, m, g, x_i = u[0], p.m, p.g, p.x_i
         fa = F / m - g
-        rates = tuple((el.rates, sl) for el, sl in sized)
         if not q["s"]:
             def flight(t, X):
                 xdot, ydot = X[1], X[3]
@@ -120,14 +122,13 @@ def make_stick_model(name: str, description: str, leg: Sequence[Element], plots=
                 dX.append(F * ydot)
                 return dX
             return flight
-        forces = tuple((el.force, sl if sl.start != sl.stop else None) for el, sl in parts)
         inv_m = 1.0 / m
 
         def contact(t, X):
             xdot, ydot = X[1], X[3]
             x = X[0] - x_i
             r = 0.0
-            for force, sl in forces:
+            for force, sl in forces:  # leg_force inlined: this is the hot loop
                 r += force(x, xdot, () if sl is None else X[sl], q, p)
             acc = fa - r * inv_m
             dX = [xdot, acc, ydot, acc, 0.0]
