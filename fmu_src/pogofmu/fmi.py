@@ -123,24 +123,22 @@ class HybridSlave(Fmi2Slave):
         self._inputs_changed = True
 
     def get_real(self, vrs):
-        # fast path for the common call, a master reading outputs after each step; anything
-        # else (parameters, inputs, a wrong type) goes through pythonfmu's generic getters
-        out, names = self._out, self._real_outputs
-        if out is not None:
-            try:
-                return [float(out[names[vr]]) for vr in vrs]
-            except KeyError:
-                pass
-        return super().get_real(vrs)
+        return self._read_outputs(vrs, self._real_outputs, float) or super().get_real(vrs)
 
     def get_integer(self, vrs):
-        out, names = self._out, self._integer_outputs
-        if out is not None:
-            try:
-                return [int(out[names[vr]]) for vr in vrs]
-            except KeyError:
-                pass
-        return super().get_integer(vrs)
+        return self._read_outputs(vrs, self._integer_outputs, int) or super().get_integer(vrs)
+
+    def _read_outputs(self, vrs, names, convert):
+        """Fast path for the common call, a master reading outputs after each step: the values
+        from the cached outputs, or None (parameters, inputs, a wrong type, an empty request, no
+        outputs yet) for pythonfmu's generic getters."""
+        out = self._out
+        if out is None or not vrs:
+            return None
+        try:
+            return [convert(out[names[vr]]) for vr in vrs]
+        except KeyError:
+            return None
 
     def _output(self, name):
         if self._out is None:
