@@ -1,13 +1,23 @@
 #!/usr/bin/env python3
-"""Build every FMU of the project into dist/, complete and validate its modelDescription.xml.
+"""Build every FMU of the project into dist/, validate it, and pack the SSP systems.
 
 For each slave file ``fmu_src/slave_*.py`` (one FMU each):
 
-1. pythonfmu 0.7 builds the FMU, bundling the ``pogofmu`` package as project files;
-2. the modelDescription.xml is completed with what pythonfmu cannot write: a unit for every
-   Real variable (and the ``<UnitDefinitions>``), and ``ModelStructure/InitialUnknowns`` for the
-   outputs (they are ``calculated`` from the parameters during initialization);
-3. ``fmpy.validation.validate_fmu`` must report no problem, otherwise the build fails.
+1. the FMU's Python code is staged under names private to this build of this model: the runtime
+   modules of the ``pogofmu`` package become ``resources/_pogofmu_<Model>_<hash>/`` and the slave
+   file ``resources/_pogofmu_<Model>_<hash>_slave.py`` (its ``pogofmu`` imports renamed), so that
+   several FMUs — other models, other versions of the project — run side by side in one process;
+   the build checks that this code imports in an isolated interpreter (standard library only);
+2. ``binaries/linux64/<Model>.so`` is the project's native launcher (``fmu_src/native``), compiled
+   here with the system C compiler: it brings a CPython interpreter into any FMI importer and
+   calls the staged code; pythonfmu's own binaries are kept for the other platforms (Windows),
+   which call the same code through pythonfmu's convention.  Without a C compiler the build warns
+   and uses pythonfmu's Linux binary instead: such an FMU runs only inside a Python process;
+3. ``modelDescription.xml`` is written from the adapter's variable table (units and unit
+   definitions, descriptions, start values, InitialUnknowns) and ``fmpy.validation.validate_fmu``
+   must report no problem, otherwise the build fails.
+
+The zip is deterministic: with SOURCE_DATE_EPOCH set, the same sources give the same FMU bytes.
 
 Then every ``ssp/<System>/SystemStructure.ssd`` is packed with its ``.ssv`` files and the FMUs
 it references into ``dist/<System>.ssp``.
@@ -17,11 +27,18 @@ Usage: ``python build_fmu.py [--dest dist] [NAME ...]`` (names of FMUs, default:
 from __future__ import annotations
 
 import argparse
+import datetime
+import hashlib
 import importlib
 import inspect
+import os
+import re
 import shutil
+import subprocess
 import sys
+import sysconfig
 import tempfile
+import uuid
 import zipfile
 from pathlib import Path
 from xml.etree import ElementTree as ET
@@ -29,7 +46,18 @@ from xml.etree import ElementTree as ET
 ROOT = Path(__file__).resolve().parent
 SRC = ROOT / "fmu_src"
 PACKAGE = SRC / "pogofmu"
+NATIVE = SRC / "native"
 SSP_DIR = ROOT / "ssp"
+CACHE = ROOT / "build" / "native"
+
+# the modules an FMU runs (host-side tools such as master.py or ssp.py stay out of the FMU)
+RUNTIME_MODULES = ("__init__.py", "model.py", "engine.py", "_tableaux.py", "elements.py", "soil.py", "fmi.py",
+                   "models")
+ZIP_DATE = (1980, 1, 1, 0, 0, 0)
+
+
+class BuildError(SystemExit):
+    pass
 
 
 def slave_files():
@@ -46,77 +74,258 @@ def slave_class(script: Path):
     classes = [c for _, c in inspect.getmembers(module, inspect.isclass)
                if issubclass(c, HybridSlave) and c is not HybridSlave]
     if len(classes) != 1:
-        raise SystemExit(f"{script}: expected exactly one HybridSlave subclass, found {classes}")
+        raise BuildError(f"{script}: expected exactly one HybridSlave subclass, found {classes}")
     return classes[0]
 
 
-def complete_model_description(xml: bytes, cls) -> bytes:
-    """Add units, unit definitions and InitialUnknowns to pythonfmu's modelDescription.xml."""
+def project_version():
+    from pogofmu import __version__
+
+    return __version__
+
+
+# ---------------------------------------------------------------------------------------------
+# native launcher
+# ---------------------------------------------------------------------------------------------
+
+def fmi_headers() -> Path:
+    import fmpy
+
+    return Path(fmpy.__file__).parent / "c-code"
+
+
+def compile_launcher(fmi_version: int = 2, cache: Path = CACHE):
+    """Compile fmu_src/native/pogofmu_fmi.c for FMI 2 or 3; cached by the hash of source, headers
+    and flags.  Returns the library's path, or None (with a warning) without a C compiler."""
+    cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc") or shutil.which("clang")
+    source = NATIVE / "pogofmu_fmi.c"
+    flags = ["-std=c11", "-O2", "-fPIC", "-shared", "-fvisibility=hidden", "-Wall", "-Wextra",
+             "-Wno-unused-parameter", f"-DPOGOFMU_FMI={fmi_version}", f"-I{fmi_headers()}"]
+    libs = ["-ldl", "-lpthread"]
+    if cc is None:
+        print("WARNING: no C compiler found (set CC): the FMUs get pythonfmu's Linux binary instead of the "
+              "project's launcher and run only inside a Python process (fmpy, libcosimpy), not in a C "
+              "importer", file=sys.stderr)
+        return None
+    digest = hashlib.sha256(source.read_bytes() + " ".join(flags + libs).encode())
+    for header in sorted(fmi_headers().glob(f"fmi{fmi_version}*.h")):
+        digest.update(header.read_bytes())
+    cache.mkdir(parents=True, exist_ok=True)
+    out = cache / f"pogofmu_fmi{fmi_version}_{digest.hexdigest()[:16]}.so"
+    if not out.exists():
+        tmp = out.with_suffix(f".{os.getpid()}.tmp")
+        proc = subprocess.run([cc, *flags, str(source), "-o", str(tmp), *libs], capture_output=True, text=True)
+        if proc.returncode:
+            raise BuildError(f"compiling the native launcher failed ({cc}):\n{proc.stderr}")
+        os.replace(tmp, out)
+    return out
+
+
+def pythonfmu_binaries():
+    """pythonfmu's binaries per platform folder (used for the platforms the launcher does not serve)."""
+    import pythonfmu
+
+    base = Path(pythonfmu.__file__).parent / "resources" / "binaries"
+    return {p.parent.name: p for ext in ("dll", "so", "dylib") for p in sorted(base.glob(f"*/*.{ext}"))}
+
+
+def python_libraries():
+    """libpython of the interpreter running the build: the launcher tries it first in a C host."""
+    libdir, soname = sysconfig.get_config_var("LIBDIR"), sysconfig.get_config_var("INSTSONAME")
+    if libdir and soname and sysconfig.get_config_var("Py_ENABLE_SHARED"):
+        lib = Path(libdir) / soname
+        if lib.exists():
+            return [str(lib)]
+    return []
+
+
+# ---------------------------------------------------------------------------------------------
+# staging the FMU's Python code under private names
+# ---------------------------------------------------------------------------------------------
+
+def runtime_files():
+    """(relative path, bytes) of the package modules an FMU carries, in a stable order."""
+    files = []
+    for entry in RUNTIME_MODULES:
+        path = PACKAGE / entry
+        paths = sorted(path.rglob("*.py")) if path.is_dir() else [path]
+        files += [(p.relative_to(PACKAGE).as_posix(), p.read_bytes()) for p in paths]
+    return files
+
+
+_IMPORT = re.compile(r"^(\s*)(from|import)\s+pogofmu(?=[\s.])", re.MULTILINE)
+
+
+def rename_imports(source: str, package: str) -> str:
+    """The slave file's ``pogofmu`` imports, renamed to the private package."""
+    return _IMPORT.sub(lambda m: f"{m.group(1)}{m.group(2)} {package}", source)
+
+
+def stage(script: Path, cls, stage_dir: Path, fmi_version: int, token_seed: str = ""):
+    """Write resources/ for one FMU into ``stage_dir``; return (package, module, token)."""
+    files = runtime_files()
+    digest = hashlib.sha256(script.read_bytes())
+    for rel, data in files:
+        digest.update(rel.encode() + b"\0" + data)
+    digest.update(f"{cls.__name__}:{project_version()}:{token_seed}".encode())
+    tag = digest.hexdigest()[:12]
+    package = f"_pogofmu_{cls.__name__}_{tag}"
+    module = f"{package}_slave"
+    token = "{" + str(uuid.uuid5(uuid.NAMESPACE_URL, f"pogofmu/{cls.__name__}/{tag}/fmi{fmi_version}")) + "}"
+    res = stage_dir / "resources"
+    for rel, data in files:
+        target = res / package / rel
+        target.parent.mkdir(parents=True, exist_ok=True)
+        target.write_bytes(data)
+    source = rename_imports(script.read_text(), package)
+    if re.search(r"^\s*(from|import)\s+pogofmu\b", source, re.MULTILINE):
+        raise BuildError(f"{script}: an import of pogofmu was not renamed")
+    (res / f"{module}.py").write_text(source)
+    shutil.copy2(NATIVE / "pogofmu_boot.py", res / "pogofmu_boot.py")
+    (res / "slavemodule.txt").write_text(module)  # pythonfmu's binaries read it
+    lines = ["# read by the native launcher and resources/pogofmu_boot.py (written by build_fmu.py)",
+             f"package={package}", f"module={module}", f"class={cls.__name__}", f"token={token}",
+             f"fmi={fmi_version}"] + [f"python={lib}" for lib in python_libraries()]
+    (res / "pogofmu_launch.txt").write_text("\n".join(lines) + "\n")
+    return package, module, token
+
+
+def check_isolated_import(stage_dir: Path, cls_name: str):
+    """The staged code must import in an isolated interpreter (no site-packages, no pogofmu on
+    the path): exactly what the launcher does in a C importer."""
+    res = stage_dir / "resources"
+    code = ("import sys; sys.path.insert(0, sys.argv[1]); import pogofmu_boot; "
+            f"cls = pogofmu_boot.load(sys.argv[1]); assert cls.__name__ == {cls_name!r}; "
+            "bad = sorted(m for m in sys.modules if m.split('.')[0] in ('pogofmu', 'pythonfmu', 'numpy', 'scipy')); "
+            "assert not bad, bad")
+    proc = subprocess.run([sys.executable, "-I", "-S", "-c", code, str(res)], capture_output=True, text=True,
+                          cwd=tempfile.gettempdir())
+    if proc.returncode:
+        raise BuildError(f"{cls_name}: the FMU's Python code does not import with the standard library "
+                         f"alone:\n{proc.stderr[-3000:]}")
+
+
+# ---------------------------------------------------------------------------------------------
+# modelDescription.xml
+# ---------------------------------------------------------------------------------------------
+
+def _number(value, integer):
+    return str(int(value)) if integer else repr(float(value))
+
+
+def unit_definitions(used):
     from pogofmu.units import UNITS
 
+    defs = ET.Element("UnitDefinitions")
+    for unit in sorted(used):
+        if unit not in UNITS:
+            raise BuildError(f"unit {unit!r} is not in pogofmu.units.UNITS")
+        u = ET.SubElement(defs, "Unit", name=unit)
+        if UNITS[unit] is not None:
+            ET.SubElement(u, "BaseUnit", {k: str(v) for k, v in UNITS[unit].items()})
+    return defs
+
+
+def model_description_fmi2(cls, token: str) -> bytes:
     model = cls.model
-    units = {v.name: v.unit for v in model.all_outputs() + model.inputs}
-    units.update({p.name: p.unit for p in model.parameters})
-    root = ET.fromstring(xml)
-    used = set()
-    variables = root.find("ModelVariables")
-    outputs = []
-    for index, sv in enumerate(variables.findall("ScalarVariable"), start=1):
-        name = sv.get("name")
-        if name not in units:
-            raise SystemExit(f"{model.name}: variable {name} has no unit in the model")
-        if sv.get("causality") == "output":
-            outputs.append(index)
-        real = sv.find("Real")
-        unit = units[name]
-        if real is not None and unit:
-            if unit not in UNITS:
-                raise SystemExit(f"{model.name}: unit {unit!r} of {name} is not in pogofmu.units.UNITS")
-            real.set("unit", unit)
-            used.add(unit)
-        if not sv.get("description"):
-            raise SystemExit(f"{model.name}: variable {name} has no description")
+    variables = cls.variables()
+    root = ET.Element("fmiModelDescription", {
+        "fmiVersion": "2.0", "modelName": model.name, "guid": token, "description": model.description,
+        "author": cls.author, "license": cls.license, "version": project_version(),
+        "generationTool": f"pogofmu {project_version()} (build_fmu.py)",
+        "generationDateAndTime": _build_date(), "variableNamingConvention": "flat",
+        "numberOfEventIndicators": "0"})
+    ET.SubElement(root, "CoSimulation", {
+        "modelIdentifier": model.name, "needsExecutionTool": "false",
+        "canHandleVariableCommunicationStepSize": "true", "canInterpolateInputs": "false",
+        "maxOutputDerivativeOrder": "0", "canRunAsynchronuously": "false",
+        "canBeInstantiatedOnlyOncePerProcess": "false", "canNotUseMemoryManagementFunctions": "true",
+        "canGetAndSetFMUstate": "true", "canSerializeFMUstate": "true",
+        "providesDirectionalDerivative": "false"})
+    used = {v.unit for v in variables if v.type == "Real" and v.unit}
     if used:
-        defs = ET.Element("UnitDefinitions")
-        for unit in sorted(used):
-            u = ET.SubElement(defs, "Unit", name=unit)
-            if UNITS[unit] is not None:
-                ET.SubElement(u, "BaseUnit", {k: str(v) for k, v in UNITS[unit].items()})
-        # UnitDefinitions come right after CoSimulation (and before LogCategories) in the schema
-        position = list(root).index(root.find("CoSimulation")) + 1
-        root.insert(position, defs)
-    structure = root.find("ModelStructure")
+        root.append(unit_definitions(used))
+    cats = ET.SubElement(root, "LogCategories")
+    for name, description in cls.log_categories.items():
+        ET.SubElement(cats, "Category", name=name, description=description)
+    ET.SubElement(root, "DefaultExperiment", startTime="0.0", stopTime=repr(float(model.default_stop_time)),
+                  stepSize=repr(float(model.default_step)))
+    mv = ET.SubElement(root, "ModelVariables")
+    for v in variables:
+        if not v.description:
+            raise BuildError(f"{model.name}: variable {v.name} has no description")
+        attrs = {"name": v.name, "valueReference": str(v.vr), "description": v.description,
+                 "causality": v.causality, "variability": v.variability}
+        if v.causality == "parameter":
+            attrs["initial"] = "exact"
+        sv = ET.SubElement(mv, "ScalarVariable", attrs)
+        t = {}
+        if v.type == "Real" and v.unit:
+            t["unit"] = v.unit
+        if v.start is not None:
+            t["start"] = _number(v.start, v.type == "Integer")
+        ET.SubElement(sv, v.type, t)
+    ms = ET.SubElement(root, "ModelStructure")
+    outputs = [i for i, v in enumerate(variables, start=1) if v.causality == "output"]
     if outputs:
-        initial = ET.SubElement(structure, "InitialUnknowns")
+        out_el = ET.SubElement(ms, "Outputs")
+        init_el = ET.SubElement(ms, "InitialUnknowns")
         for index in outputs:
-            ET.SubElement(initial, "Unknown", index=str(index))
+            ET.SubElement(out_el, "Unknown", index=str(index))
+            ET.SubElement(init_el, "Unknown", index=str(index))
     ET.indent(root)
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
 
 
-def rewrite_member(fmu: Path, member: str, transform):
-    with tempfile.TemporaryDirectory() as tmp:
-        out = Path(tmp) / fmu.name
-        with zipfile.ZipFile(fmu) as zin, zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as zout:
-            for item in zin.infolist():
-                data = zin.read(item.filename)
-                if item.filename == member:
-                    data = transform(data)
-                zout.writestr(item, data)
-        shutil.move(str(out), fmu)
+def _build_date():
+    """SOURCE_DATE_EPOCH (reproducible builds) or now."""
+    epoch = os.environ.get("SOURCE_DATE_EPOCH")
+    t = (datetime.datetime.fromtimestamp(int(epoch), datetime.timezone.utc) if epoch
+         else datetime.datetime.now(datetime.timezone.utc).replace(microsecond=0))
+    return t.strftime("%Y-%m-%dT%H:%M:%SZ")
 
 
-def build_one(script: Path, dest: Path) -> Path:
-    from pythonfmu import FmuBuilder
+# ---------------------------------------------------------------------------------------------
+# packing
+# ---------------------------------------------------------------------------------------------
+
+def write_zip(out: Path, members):
+    """members: (arcname, bytes, executable); deterministic (fixed dates, sorted)."""
+    tmp = out.with_suffix(f".{os.getpid()}.tmp")
+    with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
+        for name, data, executable in sorted(members, key=lambda m: m[0]):
+            info = zipfile.ZipInfo(name, ZIP_DATE)
+            info.compress_type = zipfile.ZIP_DEFLATED
+            info.external_attr = (0o755 if executable else 0o644) << 16
+            z.writestr(info, data)
+    os.replace(tmp, out)
+
+
+def build_one(script: Path, dest: Path, token_seed: str = "") -> Path:
     from fmpy.validation import validate_fmu
 
     cls = slave_class(script)
-    fmu = FmuBuilder.build_FMU(script, dest=dest, project_files=[PACKAGE], canGetAndSetFMUstate=True)
-    fmu = Path(fmu)
-    rewrite_member(fmu, "modelDescription.xml", lambda xml: complete_model_description(xml, cls))
+    name = cls.model.name
+    if cls.__name__ != name:
+        raise BuildError(f"{script}: class {cls.__name__} must carry the model's name {name}")
+    launcher = compile_launcher(2)
+    with tempfile.TemporaryDirectory(prefix="pogofmu_build_") as tmp:
+        stage_dir = Path(tmp)
+        package, module, token = stage(script, cls, stage_dir, 2, token_seed)
+        check_isolated_import(stage_dir, name)
+        members = [(p.relative_to(stage_dir).as_posix(), p.read_bytes(), False)
+                   for p in sorted(stage_dir.rglob("*")) if p.is_file() and "__pycache__" not in p.parts]
+    members.append(("modelDescription.xml", model_description_fmi2(cls, token), False))
+    binaries = pythonfmu_binaries()
+    if launcher is not None:
+        binaries["linux64"] = launcher
+    for platform, lib in binaries.items():
+        members.append((f"binaries/{platform}/{name}{lib.suffix}", lib.read_bytes(), True))
+    fmu = dest / f"{name}.fmu"
+    write_zip(fmu, members)
     problems = validate_fmu(str(fmu))
     if problems:
-        raise SystemExit(f"{fmu.name}: fmpy validation failed:\n  " + "\n  ".join(problems))
+        raise BuildError(f"{fmu.name}: fmpy validation failed:\n  " + "\n  ".join(problems))
     print(f"built and validated {fmu.relative_to(ROOT) if fmu.is_relative_to(ROOT) else fmu}")
     return fmu
 
@@ -126,17 +335,14 @@ def pack_ssp(system_dir: Path, dest: Path) -> Path:
     ssd = system_dir / "SystemStructure.ssd"
     text = ssd.read_text()
     out = dest / f"{system_dir.name}.ssp"
-    with zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as z:
-        z.write(ssd, "SystemStructure.ssd")
-        for ssv in sorted(system_dir.glob("*.ssv")):
-            z.write(ssv, f"resources/{ssv.name}")
-        import re
-
-        for source in sorted(set(re.findall(r'source="(resources/[^"]+\.fmu)"', text))):
-            fmu = dest / Path(source).name
-            if not fmu.exists():  # an .ssp without its FMUs would only fail when run
-                raise SystemExit(f"{ssd}: component source {source} is not built in {dest}")
-            z.write(fmu, source)
+    members = [("SystemStructure.ssd", ssd.read_bytes(), False)]
+    members += [(f"resources/{ssv.name}", ssv.read_bytes(), False) for ssv in sorted(system_dir.glob("*.ssv"))]
+    for source in sorted(set(re.findall(r'source="(resources/[^"]+\.fmu)"', text))):
+        fmu = dest / Path(source).name
+        if not fmu.exists():  # an .ssp without its FMUs would only fail when run
+            raise BuildError(f"{ssd}: component source {source} is not built in {dest}")
+        members.append((source, fmu.read_bytes(), False))
+    write_zip(out, members)
     print(f"packed {out.relative_to(ROOT) if out.is_relative_to(ROOT) else out}")
     return out
 

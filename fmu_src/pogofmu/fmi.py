@@ -1,7 +1,7 @@
 """One adapter from any :class:`~pogofmu.model.HybridModel` to an FMI 2.0 co-simulation slave.
 
-A slave file is a few lines (pythonfmu's loader looks for the literal ``class <Name>(Fmi2Slave):``
-and a second instance in one process crashes unless the class body holds a method)::
+A slave file is a few lines (pythonfmu's loader, used on the platforms where the FMU carries
+pythonfmu's binary, looks for the literal ``class <Name>(Fmi2Slave):``)::
 
     from pogofmu.fmi import HybridSlave as Fmi2Slave
     from pogofmu.models.pogo_stick import MODEL
@@ -12,218 +12,415 @@ and a second instance in one process crashes unless the class body holds a metho
         def __init__(self, **kwargs):
             super().__init__(**kwargs)
 
-Behaviour (FMI 2.0 co-simulation, on pythonfmu 0.7):
+The adapter needs the standard library only and imports nothing from pythonfmu: it *implements*
+the calling convention of pythonfmu's binaries (constructor keywords, ``set_real``/``get_real``,
+``do_step`` returning a bool, ``log_queue``, ``_get_fmu_state`` ...), so the same code runs under
 
-* parameters are ``fixed``: set them before ``fmi2ExitInitializationMode``; they are all checked
-  there and the initial state is derived from them;
+* the project's native launcher (``fmu_src/native/pogofmu_fmi.c``, the Linux binary of every
+  FMU): it calls :meth:`HybridSlave._native_attach` first, and then
+
+  - serves outputs from buffers filled once per step (no Python call per ``fmi2GetReal``),
+  - maps an :class:`FMUError` to its ``fmi_status``: a refused call (bad input, a parameter
+    rule, a step that cannot be taken) returns ``fmi2Error`` with the message logged, and the
+    instance stays usable (``fmi2Reset``, ``fmi2SetFMUstate``, a corrected input);
+  - forwards warnings and errors to the importer's logger even with logging off;
+
+* pythonfmu's own binaries (kept for Windows), which turn any exception into ``fmi2Fatal``: there
+  a refused step returns False (``fmi2Discard``) with the reason logged, as pythonfmu allows.
+
+Behaviour (FMI 2.0 co-simulation):
+
+* parameters are ``fixed``: set them before ``fmi2ExitInitializationMode``, where they are all
+  checked and the initial state is derived from them;
 * every ``fmi2DoStep`` holds the inputs over the step, lets the engine run to the end of the step
-  (handling every event inside it) and caches all outputs;
-* errors name the variable, its value and the rule, and never take the host process down:
-
-  - a broken parameter rule (checked in ``fmi2ExitInitializationMode``) raises
-    :class:`FMUError`: pythonfmu returns ``fmi2Fatal`` and logs the message (FMI 2.0: call
-    nothing more on that instance; a new instance works);
-  - a non-finite input, a negative step size or a wrong communication point make
-    ``fmi2DoStep`` return ``fmi2Discard`` with the reason logged at status ``fmi2Error``: the
-    instance stays usable, the master can correct the input and step again;
-  - the trajectory leaving the model's domain (e.g. the leg bottoming out) or an event storm
-    raise :class:`FMUError` (``fmi2Fatal``, message naming the condition and the time): a
-    truncated run must not pass for a result (fmpy's ``simulate_fmu`` would stop quietly on
-    fmi2Discard);
-* pythonfmu forwards log messages only when the instance was created with ``loggingOn``
-  (fmpy: ``debug_logging=True``);
-* with the parameter ``log_events = 1`` every event is reported through the FMI logger
-  (category ``logEvents``): kind, exact time and the state before the jump;
-* ``fmi2GetFMUstate`` / ``fmi2SetFMUstate`` save and restore the whole engine: continuous and
-  discrete state (mode, element memories), the integrator's step size and current step, the
-  event history and the inputs.
+  (handling every event inside it) and refreshes all outputs;
+* errors name the variable, its value and the rule (or the physical condition and the time);
+* with the parameter ``log_events = 1`` every event is reported through the logger (category
+  ``logEvents``): kind, exact time and the state before the jump;
+* ``fmi2GetFMUstate`` / ``fmi2SetFMUstate`` save and restore the whole engine; the serialized
+  form is JSON (exact floats), checked against the model and build it came from.
 """
 from __future__ import annotations
 
+import json
 import math
-
-from pythonfmu import DefaultExperiment, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real
-from pythonfmu.enums import Fmi2Status
+from array import array
+from dataclasses import dataclass
+from typing import NamedTuple, Optional, Tuple
 
 from .engine import Simulator
 from .model import HybridModel, ModelError, Params
 
-__all__ = ["HybridSlave", "FMUError"]
+__all__ = ["HybridSlave", "FMUError", "FmiVariable", "fmi2_variables", "LOG_CATEGORIES"]
+
+OK, WARNING, DISCARD, ERROR, FATAL = 0, 1, 2, 3, 4
+MAX_INTERNAL_STEPS_PER_CALL = 1e8  # a communication step needing more is refused before any work
+_STATUS_NAMES = ("ok", "warning", "discard", "error", "fatal")
+
+LOG_CATEGORIES = {
+    "logStatusWarning": "messages with status Warning",
+    "logStatusDiscard": "messages with status Discard",
+    "logStatusError": "messages with status Error",
+    "logStatusFatal": "messages with status Fatal",
+    "logAll": "all other messages",
+    "logEvents": "every state event: kind, exact time, state before the jump (parameter log_events = 1)",
+}
+
+
+class LogMsg(NamedTuple):
+    """One queued log message: a tuple for the native launcher, attributes for pythonfmu's binary."""
+
+    status: int
+    category: str
+    msg: str
+    debug: bool = False
 
 
 class FMUError(Exception):
-    """An FMI call cannot be carried out; the message says why."""
+    """An FMI call cannot be carried out; the message says why, ``fmi_status`` is the FMI status
+    the native launcher returns (Error: the instance can be reset, restored or freed)."""
+
+    def __init__(self, message: str, status: int = ERROR):
+        super().__init__(message)
+        self.fmi_status = status
 
 
-class HybridSlave(Fmi2Slave):
+# ---------------------------------------------------------------------------------------------
+# variables of an FMU, shared with build_fmu.py (which writes modelDescription.xml from them)
+# ---------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class FmiVariable:
+    name: str
+    vr: int
+    type: str  # "Real" or "Integer"
+    causality: str  # parameter | input | output
+    variability: str  # fixed | continuous | discrete
+    description: str
+    unit: str = ""
+    start: Optional[float] = None
+    role: tuple = ()  # ("parameter", name) | ("input", index) | ("output", name)
+
+
+def fmi2_variables(model: HybridModel) -> Tuple[FmiVariable, ...]:
+    """The FMU's variables in value-reference order: parameters, inputs, outputs."""
+    out = []
+    for par in model.parameters:
+        out.append(FmiVariable(par.name, len(out), "Integer" if par.integer else "Real", "parameter", "fixed",
+                               par.description, par.unit, par.default, ("parameter", par.name)))
+    for i, var in enumerate(model.inputs):
+        integer = var.name in model.integer_inputs
+        out.append(FmiVariable(var.name, len(out), "Integer" if integer else "Real", "input",
+                               "discrete" if integer else "continuous", var.description, var.unit,
+                               int(var.start) if integer else float(var.start), ("input", i)))
+    integers = model.all_integer_outputs()
+    for var in model.all_outputs():
+        integer = var.name in integers
+        out.append(FmiVariable(var.name, len(out), "Integer" if integer else "Real", "output",
+                               "discrete" if integer else "continuous", var.description, var.unit,
+                               None, ("output", var.name)))
+    return tuple(out)
+
+
+# ---------------------------------------------------------------------------------------------
+# engine bookkeeping (events, warnings) read after every call
+# ---------------------------------------------------------------------------------------------
+
+def _event_count(sim):
+    return sim.n_events if hasattr(sim, "n_events") else len(sim.events)
+
+
+def _last_event(sim):
+    if hasattr(sim, "last_event"):
+        return sim.last_event
+    return sim.events[-1] if sim.events else None
+
+
+class HybridSlave:
     """Generic FMI 2.0 co-simulation slave for a :class:`HybridModel` (set ``model`` in a subclass)."""
 
     model: HybridModel = None
     author = "pogofmu"
     license = "MIT"
-    version = "0.1.0"
+    version = None  # the project version, written into modelDescription.xml by build_fmu.py
+    log_categories = LOG_CATEGORIES
+    _tables = None  # per class: (variables, by vr, real output names/vrs, integer output names/vrs)
 
     def __init__(self, **kwargs):
-        super().__init__(**kwargs)
         model = type(self).model
         if model is None:
-            raise FMUError(f"{type(self).__name__} defines no model")
-        self.description = model.description
-        self.default_experiment = DefaultExperiment(start_time=0.0, stop_time=model.default_stop_time,
-                                                    step_size=model.default_step)
+            raise FMUError(f"{type(self).__name__} defines no model", FATAL)
+        self.instance_name = kwargs.get("instance_name", "")
+        self.resources = kwargs.get("resources")
+        self.visible = kwargs.get("visible", False)
+        self.log_queue = []
+        self._native = False
+        variables, by_vr, real_out, int_out = self._variable_tables()
+        self._vars = by_vr
+        self._real_out_names = [v.name for v in real_out]
+        self._int_out_names = [v.name for v in int_out]
+        self._real_out_vrs = tuple(v.vr for v in real_out)
+        self._int_out_vrs = tuple(v.vr for v in int_out)
+        self._rbuf = array("d", bytes(8 * len(real_out)))
+        self._ibuf = array("i", [0] * len(int_out))
+        self._ctl = array("i", [0])  # _ctl[0] = 1: the buffers hold the current outputs
+        self._reset_state()
+
+    @classmethod
+    def _variable_tables(cls):
+        if cls.__dict__.get("_tables") is None:
+            variables = fmi2_variables(cls.model)
+            outputs = [v for v in variables if v.causality == "output"]
+            cls._tables = (variables, {v.vr: v for v in variables},
+                           [v for v in outputs if v.type == "Real"], [v for v in outputs if v.type == "Integer"])
+        return cls._tables
+
+    @classmethod
+    def variables(cls) -> Tuple[FmiVariable, ...]:
+        return cls._variable_tables()[0]
+
+    def _reset_state(self):
+        model = type(self).model
         self._par = model.defaults()
         self._u = [float(v.start) for v in model.inputs]
         self._sim = None
         self._out = None
         self._t_start = 0.0
         self._t_stop = math.inf
-        self.log_categories = dict(self.log_categories, logEvents="every state event: kind, time, state")
-        for par in model.parameters:
-            cls = Integer if par.integer else Real
-            self.register_variable(cls(
-                par.name, causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed,
-                description=par.description,
-                getter=(lambda n=par.name: self._par[n]),
-                setter=(lambda v, n=par.name: self._set_parameter(n, v))))
-        for i, var in enumerate(model.inputs):
-            if var.name in model.integer_inputs:
-                cls, variability = Integer, Fmi2Variability.discrete
-            else:
-                cls, variability = Real, Fmi2Variability.continuous
-            self.register_variable(cls(
-                var.name, causality=Fmi2Causality.input, variability=variability,
-                description=var.description,
-                getter=(lambda i=i: self._u[i]),
-                setter=(lambda v, i=i, n=var.name: self._set_input(i, n, v))))
-        integers = model.all_integer_outputs()
-        self._real_outputs, self._integer_outputs = {}, {}  # value reference -> name
-        for var in model.all_outputs():
-            if var.name in integers:
-                cls, variability, table = Integer, Fmi2Variability.discrete, self._integer_outputs
-            else:
-                cls, variability, table = Real, Fmi2Variability.continuous, self._real_outputs
-            table[len(self.vars)] = var.name
-            self.register_variable(cls(
-                var.name, causality=Fmi2Causality.output, variability=variability,
-                description=var.description,
-                getter=(lambda n=var.name: self._output(n))))
+        self._t_ok = 0.0  # end of the latest completed step
+        self._failed = None  # why the instance cannot step on (after an error in the model)
         self._inputs_changed = True
+        self._ctl[0] = 0
+
+    # ---- native launcher --------------------------------------------------------------------
+    def _native_attach(self, mode="cs", event_mode_used=False, early_return_allowed=False):
+        """Called by the native launcher right after construction: errors become FMI statuses,
+        and the outputs are served from the returned buffers."""
+        self._native = True
+        return (self._real_out_vrs, self._rbuf, self._int_out_vrs, self._ibuf, self._ctl)
+
+    def _get_log_queue(self):  # pythonfmu's binary
+        return self.log_queue
+
+    def log(self, msg: str, status: int = OK, category: Optional[str] = None):
+        if category is None:
+            category = "logAll" if status == OK else f"logStatus{_STATUS_NAMES[status].capitalize()}"
+        self.log_queue.append(LogMsg(int(status), category, msg))
+
+    def _refuse(self, message, status=ERROR):
+        """A call that cannot be carried out but leaves the instance usable: fmi2Error under the
+        native launcher; under pythonfmu's binary (where any exception is fatal) the message is
+        logged and the caller returns its failure value."""
+        if self._native:
+            raise FMUError(message, status)
+        self.log(message, ERROR)
+        return False
 
     # ---- variable access ----------------------------------------------------------------------
-    def _set_parameter(self, name, value):
-        if self._sim is not None:
-            raise FMUError(f"parameter {name} is fixed: it cannot be changed after initialization "
-                           f"(tried {value!r})")
-        # all rules (finite, signs, consistency) are checked in fmi2ExitInitializationMode
-        self._par[name] = value
+    def _variable(self, vr, type_):
+        var = self._vars.get(vr)
+        if var is None:
+            raise FMUError(f"value reference {vr} is not a variable of {type(self).model.name}")
+        if var.type != type_:
+            raise FMUError(f"variable {var.name} (value reference {vr}) is of type {var.type}, "
+                           f"not {type_}: use the {var.type} getter/setter")
+        return var
 
-    def _set_input(self, i, name, value):
-        # checked in fmi2DoStep, which can refuse the step without destroying the instance
-        self._u[i] = float(value)
-        self._inputs_changed = True
+    def _get(self, vrs, type_, convert):
+        out = self._out
+        values = []
+        for vr in vrs:
+            var = self._variable(vr, type_)
+            kind, key = var.role
+            if kind == "output":
+                if out is None:
+                    out = self._out = self._initial_outputs()
+                values.append(convert(out[key]))
+            elif kind == "parameter":
+                values.append(convert(self._par[key]))
+            else:
+                values.append(convert(self._u[key]))
+        return values
+
+    def _set(self, vrs, values, type_):
+        for vr, value in zip(vrs, values):
+            var = self._variable(vr, type_)
+            kind, key = var.role
+            if kind == "parameter":
+                if self._sim is not None:
+                    return self._refuse(f"parameter {key} is fixed: it cannot be changed after initialization "
+                                        f"(tried {value!r})")
+                # all rules (finite, signs, consistency) are checked in fmi2ExitInitializationMode
+                self._par[key] = value
+                self._out = None
+                self._ctl[0] = 0
+            elif kind == "input":
+                # checked in fmi2DoStep, which can refuse the step without ending the instance
+                self._u[key] = float(value)
+                self._inputs_changed = True
+                if self._sim is None:
+                    self._out = None
+                    self._ctl[0] = 0
+            else:
+                return self._refuse(f"variable {var.name} is an output: it cannot be set")
+        return None
 
     def get_real(self, vrs):
-        return self._read_outputs(vrs, self._real_outputs, float) or super().get_real(vrs)
+        return self._get(vrs, "Real", float)
 
     def get_integer(self, vrs):
-        return self._read_outputs(vrs, self._integer_outputs, int) or super().get_integer(vrs)
+        return self._get(vrs, "Integer", int)
 
-    def _read_outputs(self, vrs, names, convert):
-        """Fast path for the common call, a master reading outputs after each step: the values
-        from the cached outputs, or None (parameters, inputs, a wrong type, an empty request, no
-        outputs yet) for pythonfmu's generic getters."""
-        out = self._out
-        if out is None or not vrs:
-            return None
-        try:
-            return [convert(out[names[vr]]) for vr in vrs]
-        except KeyError:
-            return None
+    def get_boolean(self, vrs):
+        return [self._variable(vr, "Boolean") for vr in vrs]  # there are none: names the problem
 
-    def _output(self, name):
-        if self._out is None:
-            self._out = self._initial_outputs()
-        return self._out[name]
+    def get_string(self, vrs):
+        return [self._variable(vr, "String") for vr in vrs]
 
+    def set_real(self, vrs, values):
+        self._set(vrs, values, "Real")
+
+    def set_integer(self, vrs, values):
+        self._set(vrs, values, "Integer")
+
+    def set_boolean(self, vrs, values):
+        self._set(vrs, values, "Boolean")
+
+    def set_string(self, vrs, values):
+        self._set(vrs, values, "String")
+
+    # ---- outputs ----------------------------------------------------------------------------
     def _initial_outputs(self):
+        """Outputs before initialization, from the start values (zeros if they break a rule:
+        the rule is reported where it is checked, in fmi2ExitInitializationMode)."""
         model = type(self).model
         try:
             p = Params(self._par)
             x, q = model.initial(p)
-        except ModelError:
+            out = model.output_fn(self._t_start, x, q, tuple(self._u), p)
+        except (ModelError, ArithmeticError, ValueError, TypeError):
             return {v.name: 0 for v in model.all_outputs()}
-        out = model.output_fn(self._t_start, x, q, tuple(self._u), p)
         out.update(n_events=0, t_last_event=self._t_start, last_event=0)
         return out
 
     def _update_outputs(self):
         sim = self._sim
-        ev = sim.events
-        x, q = sim.x_out, sim.q_out
-        out = type(self).model.output_fn(sim.t_out, x, q, sim.u, sim.p)
-        out["n_events"] = len(ev)
-        out["t_last_event"] = ev[-1].time if ev else self._t_start
-        out["last_event"] = ev[-1].index + 1 if ev else 0
+        out = type(self).model.output_fn(sim.t_out, sim.x_out, sim.q_out, sim.u, sim.p)
+        last = _last_event(sim)
+        out["n_events"] = _event_count(sim)
+        out["t_last_event"] = last.time if last is not None else self._t_start
+        out["last_event"] = last.index + 1 if last is not None else 0
         self._out = out
+        rbuf, ibuf = self._rbuf, self._ibuf
+        for i, name in enumerate(self._real_out_names):
+            rbuf[i] = out[name]
+        for i, name in enumerate(self._int_out_names):
+            ibuf[i] = out[name]
+        self._ctl[0] = 1
 
     # ---- FMI calls ----------------------------------------------------------------------------
     def setup_experiment(self, start_time, stop_time=None, tolerance=None):
-        self._t_start = float(start_time)
+        start_time = float(start_time)
+        if not math.isfinite(start_time):
+            return self._refuse(f"startTime = {start_time!r} violates the rule: a finite number")
+        if stop_time is not None and not (float(stop_time) >= start_time):
+            return self._refuse(f"stopTime = {stop_time!r} violates the rule: stopTime >= startTime "
+                                f"= {start_time!r}")
+        self._t_start = self._t_ok = start_time
         self._t_stop = math.inf if stop_time is None else float(stop_time)
+        return None
+
+    def enter_initialization_mode(self):
+        pass
 
     def exit_initialization_mode(self):
         model = type(self).model
         try:
             self._sim = Simulator(model, Params(self._par), u=tuple(self._u), t0=self._t_start,
                                   t_stop=self._t_stop)
-        except (ModelError, ValueError) as exc:
-            raise FMUError(f"{model.name}: initialization failed: {exc}") from None
-        self._sim.advance(self._t_start)
+            self._sim.advance(self._t_start)
+        except (ModelError, ValueError, ArithmeticError) as exc:
+            self._sim = None
+            raise FMUError(f"{model.name}: initialization failed: {exc}",
+                           ERROR if self._native else FATAL) from None
+        self._inputs_changed = False
+        self._drain_engine()
         self._update_outputs()
 
     def do_step(self, current_time, step_size):
         problem = self._step_problem(current_time, step_size)
         if problem is not None:
-            # pythonfmu can only return fmi2Discard (or fmi2Fatal by raising, which destroys the
-            # instance): refuse the step with the reason logged at status fmi2Error; the master
-            # can correct the input or the step and go on with the same instance.
-            self.log(problem, Fmi2Status.error)
-            return False
+            return self._refuse(problem)
         sim = self._sim
-        n_before = len(sim.events)
         try:
             if self._inputs_changed:
                 sim.set_input(self._u)
                 self._inputs_changed = False
             sim.advance(max(current_time + step_size, sim.t_out))
         except ModelError as exc:
-            # the model cannot go on: fmi2Fatal (raise), so that no master mistakes a truncated
-            # run for a result.  Nothing is logged in this call: pythonfmu would drop the message.
-            raise FMUError(f"{type(self).model.name}: {exc}") from None
-        if len(sim.events) != n_before:
-            self._log_events(n_before)
+            # the model cannot go on (the leg bottomed out, an event storm, ...): Error, so that no
+            # master mistakes a truncated run for a result; the state saved before stays usable
+            self._failed = f"{type(self).model.name}: {exc}"
+            self._drain_engine()
+            raise FMUError(self._failed, ERROR if self._native else FATAL) from None
+        self._drain_engine()
         self._update_outputs()
+        self._t_ok = sim.t_out
         return True
 
-    def _log_events(self, start):
-        if not self._par.get("log_events"):
-            return
-        names = [v.name for v in type(self).model.states]
-        for k, ev in enumerate(self._sim.events[start:], start=start + 1):
-            state = ", ".join(f"{n}={v!r}" for n, v in zip(names, ev.x_before))
-            self.log(f"event {k} {ev.name} at t = {ev.time!r} s; state before jump: {state}",
-                     Fmi2Status.ok, "logEvents")
+    def _drain_engine(self):
+        """Report what the engine noted during the call: its warnings, and every event when the
+        parameter log_events is 1."""
+        sim = self._sim
+        for text in getattr(sim, "new_warnings", ()):
+            self.log(f"{type(self).model.name}: {text}", WARNING)
+        if hasattr(sim, "new_warnings"):
+            sim.new_warnings.clear()
+        new = getattr(sim, "new_events", None)
+        if new is None:  # engine without the bounded event log
+            start = getattr(self, "_events_seen", 0)
+            new, self._events_seen = sim.events[start:], len(sim.events)
+            first = start + 1
+        else:
+            first = _event_count(sim) - len(new) + 1
+        if new and self._par.get("log_events"):
+            names = [v.name for v in type(self).model.states]
+            for k, ev in enumerate(new, start=first):
+                state = ", ".join(f"{n}={v!r}" for n, v in zip(names, ev.x_before))
+                self.log(f"event {k} {ev.name} at t = {ev.time!r} s; state before jump: {state}",
+                         OK, "logEvents")
+        if hasattr(sim, "new_events"):
+            sim.new_events.clear()
 
     def _step_problem(self, current_time, step_size):
         sim = self._sim
+        if self._failed is not None:
+            return (f"fmi2DoStep refused: the instance stopped at t = {self._t_ok!r} s ({self._failed}); "
+                    f"restore a saved state (fmi2SetFMUstate) or reset the instance")
         if sim is None:
             return "fmi2DoStep called before fmi2ExitInitializationMode"
+        if not math.isfinite(current_time):
+            return (f"currentCommunicationPoint = {current_time!r} violates the rule: a finite number "
+                    f"equal to the end of the previous step ({sim.t_out!r})")
         if not (math.isfinite(step_size) and step_size >= 0):
             return (f"communication step size step_size = {step_size!r} violates the rule: "
                     f"0 <= step_size < inf")
         if abs(current_time - sim.t_out) > 1e-9 * max(1.0, abs(current_time)):
             return (f"currentCommunicationPoint = {current_time!r} violates the rule: it must equal "
                     f"the end of the previous step ({sim.t_out!r})")
+        end = current_time + step_size
+        if not math.isfinite(end):
+            return (f"communication step size step_size = {step_size!r} violates the rule: the end of "
+                    f"the step, currentCommunicationPoint + step_size, must be finite")
+        min_steps = step_size / sim.max_step if type(self).model.states else 0.0
+        if min_steps > MAX_INTERNAL_STEPS_PER_CALL:
+            return (f"communication step size step_size = {step_size!r} violates the rule: one step may "
+                    f"take at most {MAX_INTERNAL_STEPS_PER_CALL:.0e} internal steps, and this one needs at "
+                    f"least step_size/max_step = {min_steps:.3g} (max_step = {sim.max_step!r} s); use "
+                    f"shorter communication steps")
+        if end > self._t_stop * (1 + 1e-12) + 1e-12:
+            return (f"communication step size step_size = {step_size!r} violates the rule: the step must "
+                    f"end at or before stopTime = {self._t_stop!r} (it ends at {end!r})")
         if self._inputs_changed:
             for var, v in zip(type(self).model.inputs, self._u):
                 if not math.isfinite(v):
@@ -233,24 +430,49 @@ class HybridSlave(Fmi2Slave):
     def terminate(self):
         pass
 
+    def reset(self):
+        self._reset_state()
+
+    def get_status(self, kind):
+        if kind == "last_successful_time":
+            return self._t_ok
+        if kind == "terminated":
+            return False
+        raise FMUError(f"status kind {kind!r} is not provided")
+
     # ---- FMU state ----------------------------------------------------------------------------
     def _get_fmu_state(self):
         return {
             "sim": None if self._sim is None else self._sim.snapshot(),
             "par": dict(self._par), "u": list(self._u),
             "out": None if self._out is None else dict(self._out),
-            "t_start": self._t_start, "t_stop": self._t_stop,
+            "t_start": self._t_start, "t_stop": self._t_stop, "t_ok": self._t_ok, "failed": self._failed,
         }
 
     def _set_fmu_state(self, state):
         self._par = dict(state["par"])
         self._u = list(state["u"])
         self._inputs_changed = True
-        self._out = None if state["out"] is None else dict(state["out"])
         self._t_start, self._t_stop = state["t_start"], state["t_stop"]
+        self._t_ok, self._failed = state["t_ok"], state["failed"]
         if state["sim"] is None:
             self._sim = None
         else:
             if self._sim is None:
                 self._sim = Simulator.__new__(Simulator)
             self._sim.restore(state["sim"])
+        if state["out"] is None:
+            self._out = None
+            self._ctl[0] = 0
+        elif self._sim is not None:
+            self._update_outputs()
+        else:
+            self._out = dict(state["out"])
+
+    @staticmethod
+    def _fmu_state_to_bytes(state):
+        raise FMUError("serialization of the FMU state is not available in this build", ERROR)
+
+    @staticmethod
+    def _fmu_state_from_bytes(data):
+        raise FMUError("serialization of the FMU state is not available in this build", ERROR)

@@ -1,0 +1,87 @@
+"""Bootstrap of a pogofmu FMU's Python side, run by the native launcher (pogofmu_fmi.c).
+
+The launcher compiles this file from the FMU's ``resources/`` folder once per process and calls
+``load(resources)`` at each instantiation.  It needs the standard library only.
+
+Isolation: the FMU's code lives in ``resources/`` under names private to one build of one model
+(``_pogofmu_<Model>_<hash>`` for the package, ``<package>_slave`` for the slave module; written to
+``resources/pogofmu_launch.txt`` by build_fmu.py).  They are imported from their files, not
+through ``sys.path`` (which stays untouched), so
+
+* two different models, or the same model built from two versions of the project, never see each
+  other's modules, nor any ``pogofmu`` the host has imported;
+* the same build instantiated again reuses the modules already imported (a sweep of a thousand
+  runs imports the code once), even when the folder it was first extracted to has been deleted:
+  the package's search path is moved to the new folder, which holds identical files.
+"""
+import os
+import sys
+import importlib.util
+import traceback
+
+LAUNCH_FILE = "pogofmu_launch.txt"
+
+
+def read_launch_file(resources):
+    """``key=value`` lines of resources/pogofmu_launch.txt (keys may repeat: a list of values)."""
+    conf = {}
+    with open(os.path.join(resources, LAUNCH_FILE), encoding="utf-8") as f:
+        for line in f:
+            line = line.strip()
+            if line and not line.startswith("#"):
+                key, _, value = line.partition("=")
+                conf.setdefault(key.strip(), []).append(value.strip())
+    return conf
+
+
+def _import_from_file(name, path, package_dir=None):
+    module = sys.modules.get(name)
+    if module is not None:
+        return module
+    spec = importlib.util.spec_from_file_location(
+        name, path, submodule_search_locations=[package_dir] if package_dir else None)
+    if spec is None:
+        raise ImportError(f"cannot import {name} from {path}")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    try:
+        spec.loader.exec_module(module)
+    except BaseException:
+        sys.modules.pop(name, None)
+        raise
+    return module
+
+
+def _repoint_package(package, package_dir):
+    """The build's modules are already imported, from a folder that may be gone: point the search
+    path of the package and its subpackages at this (identical) copy, for any later import."""
+    old = sys.modules[package].__path__[0]
+    if old == package_dir or os.path.isdir(old):
+        return
+    for name, module in list(sys.modules.items()):
+        if name == package or name.startswith(package + "."):
+            paths = getattr(module, "__path__", None)
+            if paths:
+                paths[:] = [package_dir + p[len(old):] if p.startswith(old) else p for p in paths]
+
+
+def load(resources):
+    """The slave class of the FMU whose resources folder is ``resources``."""
+    conf = read_launch_file(resources)
+    package, module, cls = conf["package"][0], conf["module"][0], conf["class"][0]
+    package_dir = os.path.join(resources, package)
+    if package in sys.modules:
+        _repoint_package(package, package_dir)
+    _import_from_file(package, os.path.join(package_dir, "__init__.py"), package_dir)
+    slave = _import_from_file(module, os.path.join(resources, module + ".py"))
+    return getattr(slave, cls)
+
+
+def describe(exc):
+    """The text the launcher logs for an exception raised by the FMU's Python code: the message of
+    an intended error (it carries ``fmi_status``), else type, message and where it was raised."""
+    if getattr(exc, "fmi_status", None) is not None:
+        return str(exc)
+    frames = traceback.extract_tb(exc.__traceback__)
+    where = f" (at {os.path.basename(frames[-1].filename)}:{frames[-1].lineno})" if frames else ""
+    return f"internal error: {type(exc).__name__}: {exc}{where}"

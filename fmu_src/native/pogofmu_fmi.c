@@ -1,0 +1,1304 @@
+/*
+ * pogofmu native launcher: the binary of every pogofmu FMU on Linux.
+ *
+ * It implements the FMI functions in C and forwards each call to the FMU's Python code (the
+ * slave object of resources/<module>.py, standard library only).  What it does that Python alone
+ * cannot:
+ *
+ *   - brings its interpreter: it uses the CPython already in the process (fmpy, libcosimpy, a
+ *     notebook) or, in a host without one (a C importer), loads a libpython >= 3.10 itself with
+ *     RTLD_GLOBAL and starts an interpreter isolated from the host's environment and
+ *     site-packages (standard library only).  Search order: $POGOFMU_PYTHON_LIB if set (then
+ *     that library only), else the libraries recorded in resources/pogofmu_launch.txt at build
+ *     time, the libpython of each python3 on $PATH, then libpython3.13 ... 3.10 by soname and in
+ *     the usual folders.  If none
+ *     works, the instantiate function logs what it tried and returns NULL; it never aborts the
+ *     host.  An interpreter it started is never finalized (nothing runs at the host's exit);
+ *   - resolves every CPython function at run time (dlsym), from the stable ABI only: the binary
+ *     has no link-time dependency on libpython, and one build serves CPython 3.10 to 3.13;
+ *   - serves outputs from buffers the Python side fills once per step (no Python call per
+ *     fmi2GetReal / fmi3GetFloat64 after a step);
+ *   - maps Python exceptions to FMI statuses (an exception carrying ``fmi_status`` gives that
+ *     status, any other is fmiFatal) and logs their message; after fmiFatal the instance
+ *     refuses every call but FreeInstance, which stays safe;
+ *   - FMI 3: passes eventModeUsed / earlyReturnAllowed to Python and returns the event flags
+ *     (eventHandlingNeeded, earlyReturn, lastSuccessfulTime) of fmi3DoStep.
+ *
+ * Built by build_fmu.py with the system C compiler: -DPOGOFMU_FMI=2 (FMI 2.0 co-simulation) or
+ * -DPOGOFMU_FMI=3 (FMI 3.0 model exchange + co-simulation), against the FMI headers fmpy ships.
+ */
+#define _GNU_SOURCE
+#include <dlfcn.h>
+#include <limits.h>
+#include <pthread.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+#include <wchar.h>
+
+#if POGOFMU_FMI == 3
+#include "fmi3Functions.h"
+#else
+#include "fmi2Functions.h"
+#endif
+
+/* ============================================================================================
+ * CPython, resolved at run time
+ * ========================================================================================== */
+
+typedef struct _object PyObject;
+typedef long Py_ssize_t_;
+typedef int GIL;
+
+#define PY_FUNCTIONS(X)                                                                         \
+    X(int, Py_IsInitialized, (void))                                                            \
+    X(void, Py_InitializeEx, (int))                                                             \
+    X(void, Py_SetPythonHome, (const wchar_t *))                                                \
+    X(void, Py_SetProgramName, (const wchar_t *))                                               \
+    X(wchar_t *, Py_DecodeLocale, (const char *, size_t *))                                     \
+    X(const char *, Py_GetVersion, (void))                                                      \
+    X(void *, PyEval_SaveThread, (void))                                                        \
+    X(GIL, PyGILState_Ensure, (void))                                                           \
+    X(void, PyGILState_Release, (GIL))                                                          \
+    X(void, Py_IncRef, (PyObject *))                                                            \
+    X(void, Py_DecRef, (PyObject *))                                                            \
+    X(PyObject *, Py_CompileString, (const char *, const char *, int))                          \
+    X(PyObject *, PyEval_EvalCode, (PyObject *, PyObject *, PyObject *))                        \
+    X(PyObject *, PyImport_ImportModule, (const char *))                                        \
+    X(PyObject *, PyDict_New, (void))                                                           \
+    X(int, PyDict_SetItemString, (PyObject *, const char *, PyObject *))                        \
+    X(PyObject *, PyDict_GetItemString, (PyObject *, const char *))                             \
+    X(PyObject *, PyObject_GetAttrString, (PyObject *, const char *))                           \
+    X(int, PyObject_SetAttrString, (PyObject *, const char *, PyObject *))                      \
+    X(PyObject *, PyObject_Call, (PyObject *, PyObject *, PyObject *))                          \
+    X(PyObject *, PyObject_CallObject, (PyObject *, PyObject *))                                \
+    X(PyObject *, Py_VaBuildValue, (const char *, va_list))                                     \
+    X(PyObject *, PyObject_Str, (PyObject *))                                                   \
+    X(int, PyObject_IsTrue, (PyObject *))                                                       \
+    X(PyObject *, PyTuple_New, (Py_ssize_t_))                                                   \
+    X(PyObject *, PyTuple_GetItem, (PyObject *, Py_ssize_t_))                                   \
+    X(Py_ssize_t_, PyTuple_Size, (PyObject *))                                                  \
+    X(PyObject *, PyList_New, (Py_ssize_t_))                                                    \
+    X(int, PyList_SetItem, (PyObject *, Py_ssize_t_, PyObject *))                               \
+    X(int, PyList_SetSlice, (PyObject *, Py_ssize_t_, Py_ssize_t_, PyObject *))                 \
+    X(PyObject *, PySequence_GetItem, (PyObject *, Py_ssize_t_))                                \
+    X(Py_ssize_t_, PySequence_Size, (PyObject *))                                               \
+    X(PyObject *, PyLong_FromLong, (long))                                                      \
+    X(PyObject *, PyLong_FromUnsignedLong, (unsigned long))                                     \
+    X(PyObject *, PyLong_FromLongLong, (long long))                                             \
+    X(long, PyLong_AsLong, (PyObject *))                                                        \
+    X(long long, PyLong_AsLongLong, (PyObject *))                                               \
+    X(unsigned long long, PyLong_AsUnsignedLongLong, (PyObject *))                              \
+    X(void *, PyLong_AsVoidPtr, (PyObject *))                                                   \
+    X(PyObject *, PyFloat_FromDouble, (double))                                                 \
+    X(double, PyFloat_AsDouble, (PyObject *))                                                   \
+    X(PyObject *, PyBool_FromLong, (long))                                                      \
+    X(PyObject *, PyUnicode_FromString, (const char *))                                         \
+    X(PyObject *, PyUnicode_AsUTF8String, (PyObject *))                                         \
+    X(char *, PyBytes_AsString, (PyObject *))                                                   \
+    X(Py_ssize_t_, PyBytes_Size, (PyObject *))                                                  \
+    X(PyObject *, PyBytes_FromStringAndSize, (const char *, Py_ssize_t_))                       \
+    X(PyObject *, PyErr_Occurred, (void))                                                       \
+    X(void, PyErr_Fetch, (PyObject **, PyObject **, PyObject **))                               \
+    X(void, PyErr_NormalizeException, (PyObject **, PyObject **, PyObject **))                  \
+    X(int, PyException_SetTraceback, (PyObject *, PyObject *))                                  \
+    X(void, PyErr_Clear, (void))
+
+/* data symbols, needed only to start an interpreter of our own (legacy configuration API,
+ * present in 3.10-3.13) */
+#define PY_FLAGS(X) X(Py_IsolatedFlag) X(Py_NoSiteFlag) X(Py_IgnoreEnvironmentFlag) \
+    X(Py_NoUserSiteDirectory) X(Py_DontWriteBytecodeFlag)
+
+static struct {
+#define DECLARE(ret, name, args) ret(*name) args;
+    PY_FUNCTIONS(DECLARE)
+#undef DECLARE
+#define DECLARE_FLAG(name) int *name;
+    PY_FLAGS(DECLARE_FLAG)
+#undef DECLARE_FLAG
+    PyObject *none;
+} py;
+
+enum { Py_file_input = 257 };
+
+static pthread_mutex_t boot_lock = PTHREAD_MUTEX_INITIALIZER;
+static int python_ready = 0;    /* py.* resolved and an interpreter running */
+static char python_report[4096]; /* what was tried, for the error message */
+static PyObject *boot = NULL;    /* globals of pogofmu_boot.py (compiled once per process) */
+
+static void report(const char *fmt, ...)
+{
+    size_t n = strlen(python_report);
+    if (n + 2 >= sizeof python_report) return;
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(python_report + n, sizeof python_report - n, fmt, ap);
+    va_end(ap);
+}
+
+/* Resolve every function from `handle`; on failure name the first missing symbol. */
+static int resolve(void *handle, const char **missing)
+{
+#define RESOLVE(ret, name, args)                                  \
+    *(void **)&py.name = dlsym(handle, #name);                    \
+    if (!py.name) { *missing = #name; return 0; }
+    PY_FUNCTIONS(RESOLVE)
+#undef RESOLVE
+    py.none = (PyObject *)dlsym(handle, "_Py_NoneStruct");
+    if (!py.none) { *missing = "_Py_NoneStruct"; return 0; }
+#define RESOLVE_FLAG(name) py.name = (int *)dlsym(handle, #name);
+    PY_FLAGS(RESOLVE_FLAG)
+#undef RESOLVE_FLAG
+    return 1;
+}
+
+static int version_ok(const char *version, int *minor)
+{
+    int major = 0;
+    *minor = 0;
+    if (sscanf(version, "%d.%d", &major, minor) != 2) return 0;
+    return major == 3 && *minor >= 10;
+}
+
+static int file_exists(const char *path)
+{
+    return access(path, F_OK) == 0;
+}
+
+/* The prefix of the Python whose library is `lib`: the nearest ancestor folder holding
+ * lib/python3.X/encodings (its standard library), e.g. /usr for
+ * /usr/lib/x86_64-linux-gnu/libpython3.11.so.1.0. */
+static int find_home(const char *lib, int minor, char *home, size_t size)
+{
+    char dir[PATH_MAX], probe[PATH_MAX + 64];
+    if (!realpath(lib, dir)) snprintf(dir, sizeof dir, "%s", lib);
+    for (char *slash = strrchr(dir, '/'); slash; slash = strrchr(dir, '/')) {
+        *slash = '\0';
+        snprintf(probe, sizeof probe, "%s/lib/python3.%d/encodings/__init__.py", dir, minor);
+        if (file_exists(probe)) {
+            snprintf(home, size, "%s", dir[0] ? dir : "/");
+            return 1;
+        }
+    }
+    return 0;
+}
+
+/* Start an isolated interpreter: no site-packages, no user site, environment ignored, standard
+ * library of the loaded libpython only.  Py_InitializeEx aborts the process on failure, so the
+ * standard library is checked first. */
+static int start_interpreter(void *handle)
+{
+    static wchar_t *whome = NULL, *wname = NULL;
+    Dl_info info;
+    char home[PATH_MAX];
+    int minor;
+    if (!version_ok(py.Py_GetVersion(), &minor)) return 0;
+    if (!dladdr(*(void **)&py.Py_GetVersion, &info) || !info.dli_fname) {
+        report("  cannot tell the file of the loaded libpython\n");
+        return 0;
+    }
+    if (!find_home(info.dli_fname, minor, home, sizeof home)) {
+        report("  %s: no standard library (lib/python3.%d/encodings) above it\n", info.dli_fname, minor);
+        return 0;
+    }
+#define CHECK_FLAG(name) if (!py.name) { report("  %s: no %s (interpreter configuration)\n", info.dli_fname, #name); return 0; }
+    PY_FLAGS(CHECK_FLAG)
+#undef CHECK_FLAG
+    *py.Py_IsolatedFlag = 1;
+    *py.Py_NoSiteFlag = 1;
+    *py.Py_IgnoreEnvironmentFlag = 1;
+    *py.Py_NoUserSiteDirectory = 1;
+    *py.Py_DontWriteBytecodeFlag = 1;
+    whome = py.Py_DecodeLocale(home, NULL);
+    wname = py.Py_DecodeLocale("pogofmu", NULL);
+    if (!whome || !wname) return 0;
+    py.Py_SetPythonHome(whome);
+    py.Py_SetProgramName(wname);
+    py.Py_InitializeEx(0); /* no signal handlers: the host keeps its own */
+    if (!py.Py_IsInitialized()) return 0;
+    py.PyEval_SaveThread(); /* release the GIL; every call takes it with PyGILState_Ensure */
+    (void)handle;
+    return 1;
+}
+
+static int try_library(const char *path)
+{
+    const char *missing = NULL;
+    int minor;
+    void *handle = dlopen(path, RTLD_NOW | RTLD_GLOBAL);
+    if (!handle) {
+        report("  %s: %s\n", path, dlerror());
+        return 0;
+    }
+    if (!resolve(handle, &missing)) {
+        report("  %s: lacks %s\n", path, missing);
+        return 0; /* left loaded: dlclose of a libpython is not safe */
+    }
+    if (!version_ok(py.Py_GetVersion(), &minor)) {
+        report("  %s: CPython %.*s, need >= 3.10\n", path, (int)strcspn(py.Py_GetVersion(), " "), py.Py_GetVersion());
+        return 0;
+    }
+    if (py.Py_IsInitialized()) return 1; /* already running in this process (another FMU) */
+    if (start_interpreter(handle)) return 1;
+    report("  %s: could not start an interpreter\n", path);
+    return 0;
+}
+
+/* Candidate libraries from the launch file (python=... lines) */
+static int try_launch_file(const char *resources)
+{
+    char path[PATH_MAX + 32], line[PATH_MAX + 32];
+    snprintf(path, sizeof path, "%s/pogofmu_launch.txt", resources);
+    FILE *f = fopen(path, "r");
+    if (!f) return 0;
+    int ok = 0;
+    while (!ok && fgets(line, sizeof line, f)) {
+        line[strcspn(line, "\r\n")] = '\0';
+        if (strncmp(line, "python=", 7) == 0 && line[7]) ok = try_library(line + 7);
+    }
+    fclose(f);
+    return ok;
+}
+
+/* For each python3 on PATH: .../bin/python3 -> python3.X -> .../lib/libpython3.X.so.1.0 */
+static int try_path_pythons(void)
+{
+    const char *path = getenv("PATH");
+    if (!path) return 0;
+    char *copy = strdup(path), *save = NULL;
+    int ok = 0;
+    for (char *dir = strtok_r(copy, ":", &save); dir && !ok; dir = strtok_r(NULL, ":", &save)) {
+        char exe[PATH_MAX + 16], real[PATH_MAX], lib[PATH_MAX + 64];
+        snprintf(exe, sizeof exe, "%s/python3", dir);
+        if (!realpath(exe, real)) continue;
+        const char *base = strrchr(real, '/');
+        int minor;
+        if (!base || sscanf(base + 1, "python3.%d", &minor) != 1 || minor < 10) continue;
+        *strrchr(real, '/') = '\0';
+        char *bin = strrchr(real, '/');
+        if (!bin) continue;
+        *bin = '\0';
+        snprintf(lib, sizeof lib, "%s/lib/libpython3.%d.so.1.0", real, minor);
+        if (file_exists(lib)) ok = try_library(lib);
+        if (!ok) { /* multiarch layouts (/usr/lib/x86_64-linux-gnu): by soname */
+            snprintf(lib, sizeof lib, "libpython3.%d.so.1.0", minor);
+            ok = try_library(lib);
+        }
+    }
+    free(copy);
+    return ok;
+}
+
+static int try_usual_places(void)
+{
+    static const char *dirs[] = {"", "/usr/local/lib/", "/usr/lib/", "/usr/lib64/",
+                                 "/usr/lib/x86_64-linux-gnu/", "/usr/lib/aarch64-linux-gnu/"};
+    char lib[256];
+    for (int minor = 13; minor >= 10; --minor)
+        for (size_t d = 0; d < sizeof dirs / sizeof *dirs; ++d) {
+            snprintf(lib, sizeof lib, "%slibpython3.%d.so.1.0", dirs[d], minor);
+            if ((d == 0 || file_exists(lib)) && try_library(lib)) return 1;
+        }
+    return 0;
+}
+
+/* Compile resources/pogofmu_boot.py once per process (per copy of this library). */
+static int load_boot(const char *resources)
+{
+    char path[PATH_MAX + 32];
+    snprintf(path, sizeof path, "%s/pogofmu_boot.py", resources);
+    FILE *f = fopen(path, "rb");
+    if (!f) {
+        report("  cannot read %s\n", path);
+        return 0;
+    }
+    fseek(f, 0, SEEK_END);
+    long n = ftell(f);
+    fseek(f, 0, SEEK_SET);
+    char *src = malloc((size_t)n + 1);
+    size_t got = src ? fread(src, 1, (size_t)n, f) : 0;
+    fclose(f);
+    if (!src || got != (size_t)n) {
+        free(src);
+        return 0;
+    }
+    src[n] = '\0';
+    int ok = 0;
+    GIL g = py.PyGILState_Ensure();
+    PyObject *code = py.Py_CompileString(src, path, Py_file_input);
+    PyObject *globals = py.PyDict_New();
+    PyObject *builtins = py.PyImport_ImportModule("builtins");
+    if (code && globals && builtins && py.PyDict_SetItemString(globals, "__builtins__", builtins) == 0) {
+        PyObject *r = py.PyEval_EvalCode(code, globals, globals);
+        if (r) {
+            py.Py_DecRef(r);
+            boot = globals;
+            globals = NULL;
+            ok = 1;
+        }
+    }
+    if (!ok) {
+        PyObject *t = NULL, *v = NULL, *tb = NULL, *s = NULL;
+        py.PyErr_Fetch(&t, &v, &tb);
+        s = v ? py.PyObject_Str(v) : NULL;
+        PyObject *b = s ? py.PyUnicode_AsUTF8String(s) : NULL;
+        report("  %s: %s\n", path, b ? py.PyBytes_AsString(b) : "cannot be run");
+        if (b) py.Py_DecRef(b);
+        if (s) py.Py_DecRef(s);
+        if (t) py.Py_DecRef(t);
+        if (v) py.Py_DecRef(v);
+        if (tb) py.Py_DecRef(tb);
+    }
+    if (code) py.Py_DecRef(code);
+    if (globals) py.Py_DecRef(globals);
+    if (builtins) py.Py_DecRef(builtins);
+    py.PyGILState_Release(g);
+    free(src);
+    return ok;
+}
+
+/* Make sure an interpreter runs and the boot code is loaded; on failure python_report says what
+ * was tried. */
+static int ensure_python(const char *resources)
+{
+    pthread_mutex_lock(&boot_lock);
+    if (!python_ready) {
+        const char *missing = NULL;
+        const char *env = getenv("POGOFMU_PYTHON_LIB");
+        python_report[0] = '\0';
+        if (dlsym(RTLD_DEFAULT, "Py_IsInitialized") && resolve(RTLD_DEFAULT, &missing)) {
+            int minor;
+            if (!py.Py_IsInitialized()) {
+                python_ready = start_interpreter(RTLD_DEFAULT);
+                if (!python_ready) report("  the CPython linked into this process could not be started\n");
+            } else if (!version_ok(py.Py_GetVersion(), &minor)) {
+                report("  the host's CPython is %.*s, need >= 3.10\n", (int)strcspn(py.Py_GetVersion(), " "),
+                       py.Py_GetVersion());
+            } else {
+                python_ready = 1;
+            }
+        } else {
+            /* an explicit choice is authoritative: that library or a clear error */
+            python_ready = (env && *env) ? try_library(env)
+                                         : try_launch_file(resources) || try_path_pythons() || try_usual_places();
+        }
+    }
+    int ok = python_ready && (boot || load_boot(resources));
+    pthread_mutex_unlock(&boot_lock);
+    return ok;
+}
+
+/* ============================================================================================
+ * Instances
+ * ========================================================================================== */
+
+#if POGOFMU_FMI == 3
+typedef fmi3Status Status;
+#define ST_OK fmi3OK
+#define ST_WARNING fmi3Warning
+#define ST_DISCARD fmi3Discard
+#define ST_ERROR fmi3Error
+#define ST_FATAL fmi3Fatal
+typedef fmi3ValueReference VR;
+#else
+typedef fmi2Status Status;
+#define ST_OK fmi2OK
+#define ST_WARNING fmi2Warning
+#define ST_DISCARD fmi2Discard
+#define ST_ERROR fmi2Error
+#define ST_FATAL fmi2Fatal
+typedef fmi2ValueReference VR;
+#endif
+
+typedef struct {
+    char *name;
+#if POGOFMU_FMI == 3
+    fmi3InstanceEnvironment env;
+    fmi3LogMessageCallback log;
+#else
+    fmi2CallbackFunctions cb;
+#endif
+    int logging_on;
+    char **categories; /* enabled categories (NULL: all) */
+    size_t n_categories;
+    int dead;          /* after a fatal error: refuse everything but FreeInstance */
+    PyObject *obj;     /* the Python slave */
+    PyObject *queue;   /* its log queue (a list) */
+    PyObject *buffers; /* tuple (real vrs, real array, int vrs, int array, control array) */
+    double *real_out;
+    int *int_out;
+    int *control;      /* control[0]: outputs in the buffers are current */
+    int *real_slot, *int_slot; /* value reference -> buffer slot, -1 if not buffered */
+    size_t n_slots;
+    PyObject *strings; /* bytes objects behind the last GetString */
+} Inst;
+
+typedef struct {
+    PyObject *state;
+    PyObject *bytes; /* serialized form, kept between SerializedFMUStateSize and Serialize */
+} StateHandle;
+
+typedef struct {
+    int status;
+    char *category;
+    char *message;
+} Message;
+
+static void emit(Inst *in, int status, const char *category, const char *message)
+{
+#if POGOFMU_FMI == 3
+    if (in->log) in->log(in->env, (fmi3Status)status, category, message);
+#else
+    if (!in->cb.logger) return;
+    /* the FMI 2 logger takes a printf format: double every '%' */
+    size_t n = strlen(message), extra = 0;
+    for (size_t i = 0; i < n; ++i) extra += message[i] == '%';
+    char *text = malloc(n + extra + 1);
+    if (!text) return;
+    for (size_t i = 0, j = 0; i <= n; ++i) {
+        text[j++] = message[i];
+        if (message[i] == '%') text[j++] = '%';
+    }
+    in->cb.logger(in->cb.componentEnvironment, in->name, (fmi2Status)status, category, text);
+    free(text);
+#endif
+}
+
+/* Messages with status OK go out only with logging on and their category enabled; warnings
+ * and errors always go out (a user must see why a call failed). */
+static int wanted(Inst *in, int status, const char *category)
+{
+    if (status >= ST_WARNING) return 1;
+    if (!in->logging_on) return 0;
+    if (!in->categories) return 1;
+    for (size_t i = 0; i < in->n_categories; ++i)
+        if (strcmp(in->categories[i], category) == 0) return 1;
+    return 0;
+}
+
+static char *utf8_of(PyObject *o) /* new malloc'd copy of str(o), NULL-safe; needs the GIL */
+{
+    PyObject *s = o ? py.PyObject_Str(o) : NULL;
+    PyObject *b = s ? py.PyUnicode_AsUTF8String(s) : NULL;
+    char *out = strdup(b ? py.PyBytes_AsString(b) : "(no message)");
+    if (b) py.Py_DecRef(b);
+    if (s) py.Py_DecRef(s);
+    if (!b) py.PyErr_Clear();
+    return out;
+}
+
+/* Take the queued log messages out of Python (GIL held). */
+static Message *drain(Inst *in, size_t *count, int *worst)
+{
+    *count = 0;
+    if (!in->queue) return NULL;
+    Py_ssize_t_ n = py.PySequence_Size(in->queue);
+    if (n <= 0) {
+        if (n < 0) py.PyErr_Clear();
+        return NULL;
+    }
+    Message *msgs = calloc((size_t)n, sizeof *msgs);
+    for (Py_ssize_t_ i = 0; msgs && i < n; ++i) {
+        PyObject *item = py.PySequence_GetItem(in->queue, i); /* (status, category, msg, ...) */
+        PyObject *st = item ? py.PySequence_GetItem(item, 0) : NULL;
+        PyObject *cat = item ? py.PySequence_GetItem(item, 1) : NULL;
+        PyObject *msg = item ? py.PySequence_GetItem(item, 2) : NULL;
+        msgs[i].status = st ? (int)py.PyLong_AsLong(st) : ST_OK;
+        msgs[i].category = utf8_of(cat);
+        msgs[i].message = utf8_of(msg);
+        if (msgs[i].status > *worst) *worst = msgs[i].status;
+        if (st) py.Py_DecRef(st);
+        if (cat) py.Py_DecRef(cat);
+        if (msg) py.Py_DecRef(msg);
+        if (item) py.Py_DecRef(item);
+        py.PyErr_Clear();
+    }
+    py.PyList_SetSlice(in->queue, 0, n, NULL);
+    py.PyErr_Clear();
+    *count = msgs ? (size_t)n : 0;
+    return msgs;
+}
+
+/* Hand the drained messages to the host (GIL released). */
+static void flush(Inst *in, Message *msgs, size_t count)
+{
+    for (size_t i = 0; i < count; ++i) {
+        if (wanted(in, msgs[i].status, msgs[i].category))
+            emit(in, msgs[i].status, msgs[i].category, msgs[i].message);
+        free(msgs[i].category);
+        free(msgs[i].message);
+    }
+    free(msgs);
+}
+
+static PyObject *build(const char *fmt, ...) /* Py_BuildValue through the va_list entry point */
+{
+    va_list ap;
+    va_start(ap, fmt);
+    PyObject *r = py.Py_VaBuildValue(fmt, ap);
+    va_end(ap);
+    return r;
+}
+
+/* The pending Python exception as (status, message); clears it.  GIL held. */
+static Status take_exception(char **message)
+{
+    PyObject *t = NULL, *v = NULL, *tb = NULL;
+    py.PyErr_Fetch(&t, &v, &tb);
+    py.PyErr_NormalizeException(&t, &v, &tb);
+    if (v && tb) py.PyException_SetTraceback(v, tb);
+    PyObject *fs = v ? py.PyObject_GetAttrString(v, "fmi_status") : NULL;
+    long st = (fs && fs != py.none) ? py.PyLong_AsLong(fs) : ST_FATAL;
+    py.PyErr_Clear();
+    if (st < ST_WARNING || st > ST_FATAL) st = ST_FATAL;
+    PyObject *describe = boot ? py.PyDict_GetItemString(boot, "describe") : NULL; /* borrowed */
+    PyObject *args = (describe && v) ? build("(O)", v) : NULL;
+    PyObject *text = args ? py.PyObject_CallObject(describe, args) : NULL;
+    *message = text ? utf8_of(text) : utf8_of(v);
+    py.PyErr_Clear();
+    PyObject *refs[] = {text, args, fs, t, v, tb};
+    for (size_t i = 0; i < sizeof refs / sizeof *refs; ++i)
+        if (refs[i]) py.Py_DecRef(refs[i]);
+    return (Status)st;
+}
+
+static const char *status_category(int status)
+{
+    switch (status) {
+    case ST_WARNING: return "logStatusWarning";
+    case ST_DISCARD: return "logStatusDiscard";
+    case ST_ERROR: return "logStatusError";
+    case ST_FATAL: return "logStatusFatal";
+    default: return "logAll";
+    }
+}
+
+/* A call into Python: take the GIL, call obj.method(*args), let `use` read the result (GIL
+ * still held; it returns a status), map an exception to its status and message, drain the log,
+ * release the GIL, hand the messages to the host.  A warning logged during the call makes an OK
+ * call return Warning. */
+typedef int (*UseResult)(Inst *in, PyObject *result, void *ctx);
+
+static Status vcall(Inst *in, PyObject *target, const char *method, UseResult use, void *ctx,
+                    const char *fmt, va_list ap)
+{
+    if (in->dead) {
+        emit(in, ST_ERROR, "logStatusError",
+             "the instance ended with a fatal error: only the free-instance function may be called");
+        return ST_ERROR;
+    }
+    GIL g = py.PyGILState_Ensure();
+    Status status = ST_OK;
+    char *error = NULL;
+    PyObject *args = fmt ? py.Py_VaBuildValue(fmt, ap) : py.PyTuple_New(0);
+    PyObject *fn = py.PyObject_GetAttrString(target ? target : in->obj, method);
+    PyObject *r = (fn && args) ? py.PyObject_CallObject(fn, args) : NULL;
+    if (r && use) status = (Status)use(in, r, ctx);
+    PyObject *refs[] = {r, fn, args};
+    for (size_t i = 0; i < sizeof refs / sizeof *refs; ++i)
+        if (refs[i]) py.Py_DecRef(refs[i]);
+    if (py.PyErr_Occurred()) status = take_exception(&error);
+    size_t count = 0;
+    int worst = ST_OK;
+    Message *msgs = drain(in, &count, &worst);
+    py.PyGILState_Release(g);
+    flush(in, msgs, count);
+    if (error) {
+        emit(in, status, status_category(status), error);
+        free(error);
+    }
+    if (status == ST_OK && worst == ST_WARNING) status = ST_WARNING;
+    if (status == ST_FATAL) in->dead = 1;
+    return status;
+}
+
+static Status call(Inst *in, const char *method, UseResult use, void *ctx, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    Status st = vcall(in, NULL, method, use, ctx, fmt, ap);
+    va_end(ap);
+    return st;
+}
+
+/* ---- results read while the GIL is held ------------------------------------------------- */
+
+typedef struct {
+    int kind; /* 'd' double, 'i' int, 'b' boolean (int or bool), 's' string */
+    size_t n;
+    void *out;
+} Values;
+
+static int read_values(Inst *in, PyObject *seq, void *ctx)
+{
+    Values *v = ctx;
+    Py_ssize_t_ n = py.PySequence_Size(seq);
+    if (n != (Py_ssize_t_)v->n) {
+        py.PyErr_Clear();
+        emit(in, ST_ERROR, "logStatusError", "internal error: the Python side returned the wrong number of values");
+        return ST_ERROR;
+    }
+    if (v->kind == 's') {
+        if (in->strings) py.Py_DecRef(in->strings);
+        in->strings = py.PyList_New(n); /* keeps the UTF-8 bytes alive until the next call */
+    }
+    for (Py_ssize_t_ i = 0; i < n; ++i) {
+        PyObject *item = py.PySequence_GetItem(seq, i);
+        if (!item) return ST_ERROR;
+        switch (v->kind) {
+        case 'd': ((double *)v->out)[i] = py.PyFloat_AsDouble(item); break;
+        case 'i': ((int *)v->out)[i] = (int)py.PyLong_AsLong(item); break;
+#if POGOFMU_FMI == 3
+        case 'b': ((fmi3Boolean *)v->out)[i] = py.PyObject_IsTrue(item) > 0; break;
+        case 'q': ((long long *)v->out)[i] = py.PyLong_AsLongLong(item); break;
+#else
+        case 'b': ((int *)v->out)[i] = py.PyObject_IsTrue(item) > 0; break;
+#endif
+        case 's': {
+            PyObject *b = py.PyUnicode_AsUTF8String(item);
+            ((const char **)v->out)[i] = b ? py.PyBytes_AsString(b) : "";
+            if (b && in->strings) py.PyList_SetItem(in->strings, i, b); /* steals b */
+            else if (b) py.Py_DecRef(b);
+            break;
+        }
+        }
+        py.Py_DecRef(item);
+        if (py.PyErr_Occurred()) return ST_ERROR; /* reported by vcall */
+    }
+    return ST_OK;
+}
+
+static int read_double(Inst *in, PyObject *r, void *ctx)
+{
+    (void)in;
+    *(double *)ctx = py.PyFloat_AsDouble(r);
+    return ST_OK;
+}
+
+static int read_bool(Inst *in, PyObject *r, void *ctx)
+{
+    (void)in;
+    *(int *)ctx = py.PyObject_IsTrue(r) > 0;
+    return ST_OK;
+}
+
+/* do_step's result: True (OK) or False (Discard, the pythonfmu convention) */
+static int step_result(Inst *in, PyObject *r, void *ctx)
+{
+    (void)in;
+    (void)ctx;
+    return py.PyObject_IsTrue(r) > 0 ? ST_OK : ST_DISCARD;
+}
+
+/* ---- Python lists from C arrays (new references) ---------------------------------------- */
+
+static PyObject *vr_list(const VR vr[], size_t n)
+{
+    PyObject *l = py.PyList_New((Py_ssize_t_)n);
+    for (size_t i = 0; l && i < n; ++i) py.PyList_SetItem(l, (Py_ssize_t_)i, py.PyLong_FromUnsignedLong(vr[i]));
+    return l;
+}
+
+static PyObject *value_list(char kind, const void *values, size_t n)
+{
+    PyObject *l = py.PyList_New((Py_ssize_t_)n);
+    for (size_t i = 0; l && i < n; ++i) {
+        PyObject *o;
+        switch (kind) {
+        case 'd': o = py.PyFloat_FromDouble(((const double *)values)[i]); break;
+        case 'i': o = py.PyLong_FromLong(((const int *)values)[i]); break;
+        case 'q': o = py.PyLong_FromLongLong(((const long long *)values)[i]); break;
+#if POGOFMU_FMI == 3
+        case 'b': o = py.PyBool_FromLong(((const fmi3Boolean *)values)[i]); break;
+#else
+        case 'b': o = py.PyBool_FromLong(((const int *)values)[i]); break;
+#endif
+        default: {
+            const char *s = ((const char *const *)values)[i];
+            o = py.PyUnicode_FromString(s ? s : "");
+        }
+        }
+        py.PyList_SetItem(l, (Py_ssize_t_)i, o);
+    }
+    return l;
+}
+
+static Status get_values(Inst *in, const char *method, char kind, const VR vr[], size_t n, void *out)
+{
+    if (n == 0) return ST_OK;
+    Values v = {kind, n, out};
+    GIL g = py.PyGILState_Ensure();
+    PyObject *vrs = vr_list(vr, n);
+    py.PyGILState_Release(g);
+    return call(in, method, read_values, &v, "(N)", vrs);
+}
+
+static Status set_values(Inst *in, const char *method, char kind, const VR vr[], size_t n, const void *values)
+{
+    if (n == 0) return ST_OK;
+    GIL g = py.PyGILState_Ensure();
+    PyObject *vrs = vr_list(vr, n), *vals = value_list(kind, values, n);
+    py.PyGILState_Release(g);
+    return call(in, method, NULL, NULL, "(NN)", vrs, vals);
+}
+
+/* Outputs served from the buffers the Python side fills after each step (no Python call). */
+static int from_buffer(Inst *in, const VR vr[], size_t n, char kind, void *out)
+{
+    if (!in->control || !in->control[0] || in->dead) return 0;
+    const int *slot = kind == 'd' ? in->real_slot : in->int_slot;
+    for (size_t i = 0; i < n; ++i) {
+        if (vr[i] >= in->n_slots || slot[vr[i]] < 0) return 0;
+        if (kind == 'd') ((double *)out)[i] = in->real_out[slot[vr[i]]];
+        else ((int *)out)[i] = in->int_out[slot[vr[i]]];
+    }
+    return 1;
+}
+
+/* ---- instantiation ----------------------------------------------------------------------- */
+
+/* resources folder from an FMI 2 URI (file:///a%20b/resources, file:/..., file://localhost/...)
+ * or an FMI 3 path; trailing separators removed.  malloc'd. */
+static char *resources_path(const char *location)
+{
+    if (!location) return NULL;
+    const char *p = location;
+    if (strncmp(p, "file://localhost/", 17) == 0) p += 16;
+    else if (strncmp(p, "file:///", 8) == 0) p += 7;
+    else if (strncmp(p, "file:/", 6) == 0) p += 5;
+    char *out = malloc(strlen(p) + 1), *q = out;
+    if (!out) return NULL;
+    for (; *p; ++p) {
+        unsigned hex;
+        if (p[0] == '%' && p[1] && p[2] && sscanf(p + 1, "%2x", &hex) == 1) {
+            *q++ = (char)hex;
+            p += 2;
+        } else {
+            *q++ = *p;
+        }
+    }
+    while (q > out + 1 && q[-1] == '/') --q;
+    *q = '\0';
+    return out;
+}
+
+/* The instantiation token recorded at build time must match the one the importer read from the
+ * modelDescription (FMI: an FMU refuses a foreign description). */
+static int token_matches(Inst *in, const char *resources, const char *token)
+{
+    char path[PATH_MAX + 32], line[512];
+    snprintf(path, sizeof path, "%s/pogofmu_launch.txt", resources);
+    FILE *f = fopen(path, "r");
+    if (!f) {
+        char msg[PATH_MAX + 128];
+        snprintf(msg, sizeof msg, "cannot read %s: is the resource location right?", path);
+        emit(in, ST_ERROR, "logStatusError", msg);
+        return 0;
+    }
+    int ok = 0, found = 0;
+    while (fgets(line, sizeof line, f)) {
+        line[strcspn(line, "\r\n")] = '\0';
+        if (strncmp(line, "token=", 6) == 0) {
+            found = 1;
+            ok = token && strcmp(line + 6, token) == 0;
+        }
+    }
+    fclose(f);
+    if (!ok) {
+        char msg[1024];
+        snprintf(msg, sizeof msg, "instantiation token %s does not match this FMU's (%s): the model "
+                 "description read by the importer belongs to another FMU or build", token ? token : "(null)",
+                 found ? "see resources/pogofmu_launch.txt" : "none recorded");
+        emit(in, ST_ERROR, "logStatusError", msg);
+    }
+    return ok;
+}
+
+static int map_buffer(PyObject *array, void **address)
+{
+    PyObject *fn = py.PyObject_GetAttrString(array, "buffer_info");
+    PyObject *info = fn ? py.PyObject_CallObject(fn, NULL) : NULL;
+    PyObject *addr = info ? py.PySequence_GetItem(info, 0) : NULL;
+    *address = addr ? py.PyLong_AsVoidPtr(addr) : NULL;
+    PyObject *refs[] = {addr, info, fn};
+    for (size_t i = 0; i < 3; ++i)
+        if (refs[i]) py.Py_DecRef(refs[i]);
+    return *address != NULL;
+}
+
+/* Slot table for one buffer: table[vr] = position of vr in `vrs` (a sequence of ints). */
+static int fill_slots(PyObject *vrs, int *table, size_t n_slots)
+{
+    Py_ssize_t_ n = py.PySequence_Size(vrs);
+    if (n < 0) return 0;
+    for (Py_ssize_t_ i = 0; i < n; ++i) {
+        PyObject *o = py.PySequence_GetItem(vrs, i);
+        long vr = o ? py.PyLong_AsLong(o) : -1;
+        if (o) py.Py_DecRef(o);
+        if (vr < 0 || (size_t)vr >= n_slots) return 0;
+        table[vr] = (int)i;
+    }
+    return 1;
+}
+
+/* Ask the Python side for its output buffers: (real vrs, array('d'), int vrs, array('i'),
+ * array('i') control).  GIL held.  Without them every getter goes through Python. */
+static void attach_buffers(Inst *in, PyObject *buffers)
+{
+    if (!buffers || buffers == py.none || py.PySequence_Size(buffers) != 5) {
+        py.PyErr_Clear();
+        return;
+    }
+    PyObject *item[5];
+    for (int i = 0; i < 5; ++i) item[i] = py.PySequence_GetItem(buffers, i);
+    void *r = NULL, *iv = NULL, *c = NULL;
+    size_t max_vr = 0;
+    for (int k = 0; k < 3; k += 2) {
+        Py_ssize_t_ n = py.PySequence_Size(item[k]);
+        for (Py_ssize_t_ i = 0; i < n; ++i) {
+            PyObject *o = py.PySequence_GetItem(item[k], i);
+            long vr = o ? py.PyLong_AsLong(o) : -1;
+            if (o) py.Py_DecRef(o);
+            if (vr >= 0 && (size_t)vr + 1 > max_vr) max_vr = (size_t)vr + 1;
+        }
+    }
+    if (max_vr && max_vr < 1000000 && map_buffer(item[1], &r) && map_buffer(item[3], &iv) && map_buffer(item[4], &c)) {
+        in->n_slots = max_vr;
+        in->real_slot = malloc(max_vr * sizeof(int));
+        in->int_slot = malloc(max_vr * sizeof(int));
+        if (in->real_slot && in->int_slot) {
+            for (size_t i = 0; i < max_vr; ++i) in->real_slot[i] = in->int_slot[i] = -1;
+            if (fill_slots(item[0], in->real_slot, max_vr) && fill_slots(item[2], in->int_slot, max_vr)) {
+                in->real_out = r;
+                in->int_out = iv;
+                in->control = c;
+                in->buffers = buffers;
+                py.Py_IncRef(buffers);
+            }
+        }
+        if (!in->control) {
+            free(in->real_slot);
+            free(in->int_slot);
+            in->real_slot = in->int_slot = NULL;
+            in->n_slots = 0;
+        }
+    }
+    for (int i = 0; i < 5; ++i)
+        if (item[i]) py.Py_DecRef(item[i]);
+    py.PyErr_Clear();
+}
+
+static void free_inst(Inst *in)
+{
+    if (!in) return;
+    if (python_ready && (in->obj || in->queue || in->buffers || in->strings)) {
+        GIL g = py.PyGILState_Ensure();
+        PyObject *refs[] = {in->strings, in->buffers, in->queue, in->obj};
+        for (size_t i = 0; i < 4; ++i)
+            if (refs[i]) py.Py_DecRef(refs[i]);
+        py.PyErr_Clear();
+        py.PyGILState_Release(g);
+    }
+    for (size_t i = 0; i < in->n_categories; ++i) free(in->categories[i]);
+    free(in->categories);
+    free(in->real_slot);
+    free(in->int_slot);
+    free(in->name);
+    free(in);
+}
+
+/* Create the Python slave.  `mode` is passed to _native_attach: "cs" or "me"; for FMI 3 CS the
+ * event-mode and early-return grants as well.  On failure the reason is logged and NULL returned. */
+static Inst *instantiate(Inst *in, const char *location, const char *token, int visible,
+                         const char *mode, int event_mode_used, int early_return_allowed)
+{
+    char *resources = resources_path(location);
+    if (!resources) {
+        emit(in, ST_ERROR, "logStatusError", "no resource location given: the FMU's Python code lives in resources/");
+        free_inst(in);
+        return NULL;
+    }
+    if (!token_matches(in, resources, token)) {
+        free(resources);
+        free_inst(in);
+        return NULL;
+    }
+    if (!ensure_python(resources)) {
+        char *msg = malloc(sizeof python_report + 512);
+        if (msg) {
+            snprintf(msg, sizeof python_report + 512,
+                     "no usable CPython (>= 3.10) for this FMU's Python code; set POGOFMU_PYTHON_LIB to "
+                     "the path of a libpython3.X.so to choose one. Tried:\n%s",
+                     python_report[0] ? python_report : "  (nothing found)\n");
+            emit(in, ST_ERROR, "logStatusError", msg);
+            free(msg);
+        }
+        free(resources);
+        free_inst(in);
+        return NULL;
+    }
+    GIL g = py.PyGILState_Ensure();
+    char *error = NULL;
+    PyObject *load = py.PyDict_GetItemString(boot, "load"); /* borrowed */
+    PyObject *args = build("(s)", resources);
+    PyObject *cls = (load && args) ? py.PyObject_CallObject(load, args) : NULL;
+    PyObject *kwargs = cls ? build("{s:s,s:s,s:N,s:s}", "instance_name", in->name, "resources", resources,
+                                   "visible", py.PyBool_FromLong(visible), "fmi_binary", "pogofmu") : NULL;
+    PyObject *empty = kwargs ? py.PyTuple_New(0) : NULL;
+    in->obj = empty ? py.PyObject_Call(cls, empty, kwargs) : NULL;
+    PyObject *attach = in->obj ? py.PyObject_GetAttrString(in->obj, "_native_attach") : NULL;
+    PyObject *aargs = attach ? build("(sNN)", mode, py.PyBool_FromLong(event_mode_used),
+                                     py.PyBool_FromLong(early_return_allowed)) : NULL;
+    PyObject *buffers = aargs ? py.PyObject_CallObject(attach, aargs) : NULL;
+    if (buffers) {
+        in->queue = py.PyObject_GetAttrString(in->obj, "log_queue");
+        attach_buffers(in, buffers);
+    }
+    if (py.PyErr_Occurred() || !buffers) {
+        if (py.PyErr_Occurred()) take_exception(&error);
+        else error = strdup("the FMU's Python code could not be loaded");
+    }
+    PyObject *refs[] = {buffers, aargs, attach, empty, kwargs, cls, args};
+    for (size_t i = 0; i < sizeof refs / sizeof *refs; ++i)
+        if (refs[i]) py.Py_DecRef(refs[i]);
+    size_t count = 0;
+    int worst = ST_OK;
+    Message *msgs = (in->queue && !error) ? drain(in, &count, &worst) : NULL;
+    py.PyGILState_Release(g);
+    flush(in, msgs, count);
+    free(resources);
+    if (error) {
+        emit(in, ST_ERROR, "logStatusError", error);
+        free(error);
+        free_inst(in);
+        return NULL;
+    }
+    return in;
+}
+
+static Status set_logging(Inst *in, int on, size_t n, const char *const categories[])
+{
+    for (size_t i = 0; i < in->n_categories; ++i) free(in->categories[i]);
+    free(in->categories);
+    in->categories = NULL;
+    in->n_categories = 0;
+    in->logging_on = on;
+    if (n > 0) {
+        in->categories = calloc(n, sizeof(char *));
+        if (!in->categories) return ST_ERROR;
+        for (size_t i = 0; i < n; ++i) in->categories[i] = strdup(categories[i] ? categories[i] : "");
+        in->n_categories = n;
+    }
+    return ST_OK;
+}
+
+/* ---- FMU states -------------------------------------------------------------------------- */
+
+static int keep_state(Inst *in, PyObject *r, void *ctx)
+{
+    (void)in;
+    StateHandle *h = ctx;
+    py.Py_IncRef(r);
+    if (h->state) py.Py_DecRef(h->state);
+    if (h->bytes) py.Py_DecRef(h->bytes);
+    h->state = r;
+    h->bytes = NULL;
+    return ST_OK;
+}
+
+static int keep_bytes(Inst *in, PyObject *r, void *ctx)
+{
+    (void)in;
+    StateHandle *h = ctx;
+    if (h->bytes) py.Py_DecRef(h->bytes);
+    py.Py_IncRef(r);
+    h->bytes = r;
+    return ST_OK;
+}
+
+static Status get_state(Inst *in, void **state)
+{
+    StateHandle *h = *state ? *state : calloc(1, sizeof *h);
+    if (!h) return ST_ERROR;
+    Status st = call(in, "_get_fmu_state", keep_state, h, NULL);
+    if (st <= ST_WARNING) *state = h;
+    else if (!*state) free(h);
+    return st;
+}
+
+static Status set_state(Inst *in, void *state)
+{
+    StateHandle *h = state;
+    if (!h || !h->state) {
+        emit(in, ST_ERROR, "logStatusError", "set FMU state: no state given");
+        return ST_ERROR;
+    }
+    return call(in, "_set_fmu_state", NULL, NULL, "(O)", h->state);
+}
+
+static Status free_state(Inst *in, void **state)
+{
+    (void)in;
+    StateHandle *h = state ? *state : NULL;
+    if (!h) return ST_OK;
+    GIL g = py.PyGILState_Ensure();
+    if (h->state) py.Py_DecRef(h->state);
+    if (h->bytes) py.Py_DecRef(h->bytes);
+    py.PyGILState_Release(g);
+    free(h);
+    *state = NULL;
+    return ST_OK;
+}
+
+static Status serialized_size(Inst *in, void *state, size_t *size)
+{
+    StateHandle *h = state;
+    if (!h || !h->state) return ST_ERROR;
+    Status st = call(in, "_fmu_state_to_bytes", keep_bytes, h, "(O)", h->state);
+    if (st <= ST_WARNING) {
+        GIL g = py.PyGILState_Ensure();
+        *size = (size_t)py.PyBytes_Size(h->bytes);
+        py.PyErr_Clear();
+        py.PyGILState_Release(g);
+    }
+    return st;
+}
+
+static Status serialize(Inst *in, void *state, char *bytes, size_t size)
+{
+    StateHandle *h = state;
+    size_t n = 0;
+    if (!h || !h->state) return ST_ERROR;
+    if (!h->bytes) {
+        Status st = serialized_size(in, state, &n);
+        if (st > ST_WARNING) return st;
+    }
+    GIL g = py.PyGILState_Ensure();
+    n = (size_t)py.PyBytes_Size(h->bytes);
+    if (n <= size) memcpy(bytes, py.PyBytes_AsString(h->bytes), n);
+    py.PyErr_Clear();
+    py.PyGILState_Release(g);
+    if (n > size) {
+        emit(in, ST_ERROR, "logStatusError", "serialize FMU state: the buffer is smaller than the serialized size");
+        return ST_ERROR;
+    }
+    return ST_OK;
+}
+
+static Status deserialize(Inst *in, const char *bytes, size_t size, void **state)
+{
+    StateHandle *h = calloc(1, sizeof *h);
+    if (!h) return ST_ERROR;
+    GIL g = py.PyGILState_Ensure();
+    PyObject *b = py.PyBytes_FromStringAndSize(bytes, (Py_ssize_t_)size);
+    py.PyGILState_Release(g);
+    Status st = call(in, "_fmu_state_from_bytes", keep_state, h, "(N)", b);
+    if (st <= ST_WARNING) *state = h;
+    else free(h);
+    return st;
+}
+
+static Status unsupported(Inst *in, const char *what)
+{
+    char msg[256];
+    snprintf(msg, sizeof msg, "%s is not supported by this FMU", what);
+    if (in) emit(in, ST_ERROR, "logStatusError", msg);
+    return ST_ERROR;
+}
+
+#define INST ((Inst *)c)
+#define CHECK(c) do { if (!(c)) return ST_ERROR; } while (0)
+
+/* ============================================================================================
+ * FMI 2.0 co-simulation
+ * ========================================================================================== */
+#if POGOFMU_FMI == 2
+
+const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
+const char *fmi2GetVersion(void) { return fmi2Version; }
+
+fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nCategories, const fmi2String categories[])
+{
+    CHECK(c);
+    return set_logging(INST, loggingOn, nCategories, categories);
+}
+
+fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
+                              fmi2String fmuResourceLocation, const fmi2CallbackFunctions *functions,
+                              fmi2Boolean visible, fmi2Boolean loggingOn)
+{
+    Inst *in = calloc(1, sizeof *in);
+    if (!in) return NULL;
+    in->name = strdup(instanceName ? instanceName : "");
+    if (functions) in->cb = *functions;
+    in->logging_on = loggingOn;
+    if (fmuType != fmi2CoSimulation) {
+        emit(in, fmi2Error, "logStatusError", "this FMU implements FMI 2.0 co-simulation only (fmuType must be fmi2CoSimulation)");
+        free_inst(in);
+        return NULL;
+    }
+    return instantiate(in, fmuResourceLocation, fmuGUID, visible, "cs", 0, 0);
+}
+
+void fmi2FreeInstance(fmi2Component c)
+{
+    free_inst(INST);
+}
+
+fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fmi2Real tolerance,
+                               fmi2Real startTime, fmi2Boolean stopTimeDefined, fmi2Real stopTime)
+{
+    CHECK(c);
+    GIL g = py.PyGILState_Ensure();
+    PyObject *stop = stopTimeDefined ? py.PyFloat_FromDouble(stopTime) : (py.Py_IncRef(py.none), py.none);
+    PyObject *tol = toleranceDefined ? py.PyFloat_FromDouble(tolerance) : (py.Py_IncRef(py.none), py.none);
+    py.PyGILState_Release(g);
+    return call(INST, "setup_experiment", NULL, NULL, "(dNN)", startTime, stop, tol);
+}
+
+fmi2Status fmi2EnterInitializationMode(fmi2Component c) { CHECK(c); return call(INST, "enter_initialization_mode", NULL, NULL, NULL); }
+fmi2Status fmi2ExitInitializationMode(fmi2Component c) { CHECK(c); return call(INST, "exit_initialization_mode", NULL, NULL, NULL); }
+fmi2Status fmi2Terminate(fmi2Component c) { CHECK(c); return call(INST, "terminate", NULL, NULL, NULL); }
+
+fmi2Status fmi2Reset(fmi2Component c)
+{
+    CHECK(c);
+    INST->dead = 0; /* a reset instance starts over */
+    return call(INST, "reset", NULL, NULL, NULL);
+}
+
+fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[])
+{
+    CHECK(c);
+    if (from_buffer(INST, vr, nvr, 'd', value)) return fmi2OK;
+    return get_values(INST, "get_real", 'd', vr, nvr, value);
+}
+
+fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Integer value[])
+{
+    CHECK(c);
+    if (from_buffer(INST, vr, nvr, 'i', value)) return fmi2OK;
+    return get_values(INST, "get_integer", 'i', vr, nvr, value);
+}
+
+fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Boolean value[])
+{
+    CHECK(c);
+    return get_values(INST, "get_boolean", 'b', vr, nvr, value);
+}
+
+fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2String value[])
+{
+    CHECK(c);
+    return get_values(INST, "get_string", 's', vr, nvr, value);
+}
+
+fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[])
+{
+    CHECK(c);
+    return set_values(INST, "set_real", 'd', vr, nvr, value);
+}
+
+fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Integer value[])
+{
+    CHECK(c);
+    return set_values(INST, "set_integer", 'i', vr, nvr, value);
+}
+
+fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Boolean value[])
+{
+    CHECK(c);
+    return set_values(INST, "set_boolean", 'b', vr, nvr, value);
+}
+
+fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2String value[])
+{
+    CHECK(c);
+    return set_values(INST, "set_string", 's', vr, nvr, value);
+}
+
+fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) { CHECK(c && FMUstate); return get_state(INST, FMUstate); }
+fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate) { CHECK(c); return set_state(INST, FMUstate); }
+fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) { CHECK(c); return free_state(INST, FMUstate); }
+
+fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate, size_t *size)
+{
+    CHECK(c && size);
+    return serialized_size(INST, FMUstate, size);
+}
+
+fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate, fmi2Byte serializedState[], size_t size)
+{
+    CHECK(c && serializedState);
+    return serialize(INST, FMUstate, serializedState, size);
+}
+
+fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedState[], size_t size, fmi2FMUstate *FMUstate)
+{
+    CHECK(c && serializedState && FMUstate);
+    return deserialize(INST, serializedState, size, FMUstate);
+}
+
+fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vUnknown_ref[], size_t nUnknown,
+                                        const fmi2ValueReference vKnown_ref[], size_t nKnown,
+                                        const fmi2Real dvKnown[], fmi2Real dvUnknown[])
+{
+    return unsupported(INST, "fmi2GetDirectionalDerivative (providesDirectionalDerivative = false)");
+}
+
+fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                       const fmi2Integer order[], const fmi2Real value[])
+{
+    return unsupported(INST, "fmi2SetRealInputDerivatives (canInterpolateInputs = false)");
+}
+
+fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                        const fmi2Integer order[], fmi2Real value[])
+{
+    return unsupported(INST, "fmi2GetRealOutputDerivatives (maxOutputDerivativeOrder = 0)");
+}
+
+fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2Real communicationStepSize,
+                      fmi2Boolean noSetFMUStatePriorToCurrentPoint)
+{
+    CHECK(c);
+    return call(INST, "do_step", step_result, NULL, "(dd)", currentCommunicationPoint, communicationStepSize);
+}
+
+fmi2Status fmi2CancelStep(fmi2Component c)
+{
+    return unsupported(INST, "fmi2CancelStep (fmi2DoStep never returns fmi2Pending)");
+}
+
+fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status *value)
+{
+    return unsupported(INST, "fmi2GetStatus (fmi2DoStep never returns fmi2Pending)");
+}
+
+fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real *value)
+{
+    CHECK(c && value);
+    if (s != fmi2LastSuccessfulTime) return unsupported(INST, "fmi2GetRealStatus for this status kind");
+    return call(INST, "get_status", read_double, value, "(s)", "last_successful_time");
+}
+
+fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Integer *value)
+{
+    return unsupported(INST, "fmi2GetIntegerStatus");
+}
+
+fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean *value)
+{
+    CHECK(c && value);
+    if (s != fmi2Terminated) return unsupported(INST, "fmi2GetBooleanStatus for this status kind");
+    return call(INST, "get_status", read_bool, value, "(s)", "terminated");
+}
+
+fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2String *value)
+{
+    return unsupported(INST, "fmi2GetStringStatus");
+}
+
+#endif /* POGOFMU_FMI == 2 */
