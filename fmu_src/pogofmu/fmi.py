@@ -45,6 +45,7 @@ from __future__ import annotations
 import json
 import math
 from array import array
+from operator import itemgetter
 from dataclasses import dataclass
 from typing import NamedTuple, Optional, Tuple
 
@@ -126,12 +127,15 @@ def fmi2_variables(model: HybridModel) -> Tuple[FmiVariable, ...]:
 # engine bookkeeping (events, warnings) read after every call
 # ---------------------------------------------------------------------------------------------
 
+_BOUNDED_LOG = hasattr(Simulator, "apply_pending_event")  # engine with n_events / new_events
+
+
 def _event_count(sim):
-    return sim.n_events if hasattr(sim, "n_events") else len(sim.events)
+    return sim.n_events if _BOUNDED_LOG else len(sim.events)
 
 
 def _last_event(sim):
-    if hasattr(sim, "last_event"):
+    if _BOUNDED_LOG:
         return sim.last_event
     return sim.events[-1] if sim.events else None
 
@@ -159,6 +163,8 @@ class HybridSlave:
         self._vars = by_vr
         self._real_out_names = [v.name for v in real_out]
         self._int_out_names = [v.name for v in int_out]
+        self._real_values = itemgetter(*self._real_out_names) if real_out else (lambda out: ())
+        self._int_values = itemgetter(*self._int_out_names) if int_out else (lambda out: ())
         self._real_out_vrs = tuple(v.vr for v in real_out)
         self._int_out_vrs = tuple(v.vr for v in int_out)
         self._rbuf = array("d", bytes(8 * len(real_out)))
@@ -190,6 +196,8 @@ class HybridSlave:
         self._t_ok = 0.0  # end of the latest completed step
         self._failed = None  # why the instance cannot step on (after an error in the model)
         self._inputs_changed = True
+        self._events_seen = 0
+        self._h_fast = -1.0  # steps up to this size need no detailed check (set at initialization)
         self._ctl[0] = 0
 
     # ---- native launcher --------------------------------------------------------------------
@@ -308,14 +316,20 @@ class HybridSlave:
         out = type(self).model.output_fn(sim.t_out, sim.x_out, sim.q_out, sim.u, sim.p)
         last = _last_event(sim)
         out["n_events"] = _event_count(sim)
-        out["t_last_event"] = last.time if last is not None else self._t_start
-        out["last_event"] = last.index + 1 if last is not None else 0
+        if last is None:
+            out["t_last_event"], out["last_event"] = self._t_start, 0
+        else:
+            out["t_last_event"], out["last_event"] = last.time, last.index + 1
         self._out = out
         rbuf, ibuf = self._rbuf, self._ibuf
-        for i, name in enumerate(self._real_out_names):
-            rbuf[i] = out[name]
-        for i, name in enumerate(self._int_out_names):
-            ibuf[i] = out[name]
+        if len(rbuf) > 1:
+            rbuf[:] = array("d", self._real_values(out))
+        elif rbuf:
+            rbuf[0] = self._real_values(out)
+        if len(ibuf) > 1:
+            ibuf[:] = array("i", self._int_values(out))
+        elif ibuf:
+            ibuf[0] = self._int_values(out)
         self._ctl[0] = 1
 
     # ---- FMI calls ----------------------------------------------------------------------------
@@ -344,14 +358,20 @@ class HybridSlave:
             raise FMUError(f"{model.name}: initialization failed: {exc}",
                            ERROR if self._native else FATAL) from None
         self._inputs_changed = False
+        self._h_fast = self._fast_step_limit()
         self._drain_engine()
         self._update_outputs()
 
     def do_step(self, current_time, step_size):
-        problem = self._step_problem(current_time, step_size)
-        if problem is not None:
-            return self._refuse(problem)
         sim = self._sim
+        # fast path, the common call: the next step of a healthy instance with unchanged inputs
+        # (NaN fails every comparison and takes the detailed path)
+        if not (self._failed is None and sim is not None and not self._inputs_changed
+                and current_time == sim.t_out and 0.0 <= step_size <= self._h_fast < math.inf
+                and current_time + step_size <= self._t_stop):
+            problem = self._step_problem(current_time, step_size)
+            if problem is not None:
+                return self._refuse(problem)
         try:
             if self._inputs_changed:
                 sim.set_input(self._u)
@@ -363,34 +383,42 @@ class HybridSlave:
             self._failed = f"{type(self).model.name}: {exc}"
             self._drain_engine()
             raise FMUError(self._failed, ERROR if self._native else FATAL) from None
-        self._drain_engine()
+        if sim.new_events if _BOUNDED_LOG else len(sim.events) != self._events_seen:
+            self._drain_engine()
+        elif _BOUNDED_LOG and sim.new_warnings:
+            self._drain_engine()
         self._update_outputs()
         self._t_ok = sim.t_out
         return True
+
+    def _fast_step_limit(self):
+        """Largest step the fast path of do_step takes without the detailed checks: one that surely
+        needs no more than MAX_INTERNAL_STEPS_PER_CALL internal steps (and is finite)."""
+        if type(self).model.states:
+            return MAX_INTERNAL_STEPS_PER_CALL * self._sim.max_step  # inf for an unbounded max_step
+        return 1e300
 
     def _drain_engine(self):
         """Report what the engine noted during the call: its warnings, and every event when the
         parameter log_events is 1."""
         sim = self._sim
-        for text in getattr(sim, "new_warnings", ()):
-            self.log(f"{type(self).model.name}: {text}", WARNING)
-        if hasattr(sim, "new_warnings"):
+        if _BOUNDED_LOG:
+            for text in sim.new_warnings:
+                self.log(f"{type(self).model.name}: {text}", WARNING)
             sim.new_warnings.clear()
-        new = getattr(sim, "new_events", None)
-        if new is None:  # engine without the bounded event log
-            start = getattr(self, "_events_seen", 0)
-            new, self._events_seen = sim.events[start:], len(sim.events)
-            first = start + 1
+            new = list(sim.new_events)
+            sim.new_events.clear()
+            first = sim.n_events - len(new) + 1
         else:
-            first = _event_count(sim) - len(new) + 1
+            first = self._events_seen + 1
+            new = sim.events[self._events_seen:]
+            self._events_seen = len(sim.events)
         if new and self._par.get("log_events"):
             names = [v.name for v in type(self).model.states]
             for k, ev in enumerate(new, start=first):
                 state = ", ".join(f"{n}={v!r}" for n, v in zip(names, ev.x_before))
                 self.log(f"event {k} {ev.name} at t = {ev.time!r} s; state before jump: {state}",
                          OK, "logEvents")
-        if hasattr(sim, "new_events"):
-            sim.new_events.clear()
 
     def _step_problem(self, current_time, step_size):
         sim = self._sim
@@ -461,6 +489,8 @@ class HybridSlave:
             if self._sim is None:
                 self._sim = Simulator.__new__(Simulator)
             self._sim.restore(state["sim"])
+            self._events_seen = _event_count(self._sim)
+            self._h_fast = self._fast_step_limit()
         if state["out"] is None:
             self._out = None
             self._ctl[0] = 0
