@@ -52,7 +52,7 @@ CACHE = ROOT / "build" / "native"
 
 # the modules an FMU runs (host-side tools such as master.py or ssp.py stay out of the FMU)
 RUNTIME_MODULES = ("__init__.py", "model.py", "engine.py", "_tableaux.py", "elements.py", "soil.py", "fmi.py",
-                   "models")
+                   "fmi3.py", "models")
 ZIP_DATE = (1980, 1, 1, 0, 0, 0)
 
 
@@ -277,6 +277,70 @@ def model_description_fmi2(cls, token: str) -> bytes:
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
 
 
+def model_description_fmi3(cls, token: str) -> bytes:
+    """FMI 3.0: model exchange and co-simulation in one description (pogofmu.fmi3 for the extra
+    variables: state locals, derivatives, event indicators, and the independent variable time)."""
+    from pogofmu.fmi3 import check_state_outputs, fmi3_class, indicator_name
+
+    problem = check_state_outputs(cls.model)
+    if problem:
+        raise BuildError(problem)
+    cls3 = fmi3_class(cls)
+    model = cls.model
+    variables = cls3.variables()
+    by_name = {v.name: v for v in variables}
+    root = ET.Element("fmiModelDescription", {
+        "fmiVersion": "3.0", "modelName": model.name, "instantiationToken": token,
+        "description": model.description, "author": cls.author, "license": cls.license,
+        "version": project_version(), "generationTool": f"pogofmu {project_version()} (build_fmu.py)",
+        "generationDateAndTime": _build_date(), "variableNamingConvention": "flat"})
+    common = {"modelIdentifier": model.name, "canGetAndSetFMUState": "true", "canSerializeFMUState": "false",
+              "providesDirectionalDerivatives": "false", "providesAdjointDerivatives": "false",
+              "canBeInstantiatedOnlyOncePerProcess": "false"}
+    ET.SubElement(root, "ModelExchange", dict(common, needsCompletedIntegratorStep="true"))
+    ET.SubElement(root, "CoSimulation", dict(common, canHandleVariableCommunicationStepSize="true",
+                                             hasEventMode="true", canReturnEarlyAfterIntermediateUpdate="false",
+                                             providesIntermediateUpdate="false", maxOutputDerivativeOrder="0"))
+    used = {v.unit for v in variables if v.type == "Real" and v.unit}
+    if used:
+        root.append(unit_definitions(used))
+    cats = ET.SubElement(root, "LogCategories")
+    for name, description in cls.log_categories.items():
+        ET.SubElement(cats, "Category", name=name, description=description)
+    ET.SubElement(root, "DefaultExperiment", startTime="0.0", stopTime=repr(float(model.default_stop_time)),
+                  stepSize=repr(float(model.default_step)))
+    mv = ET.SubElement(root, "ModelVariables")
+    for v in variables:
+        if not v.description:
+            raise BuildError(f"{model.name}: variable {v.name} has no description")
+        attrs = {"name": v.name, "valueReference": str(v.vr), "description": v.description,
+                 "causality": v.causality, "variability": v.variability}
+        if v.causality == "parameter":
+            attrs["initial"] = "exact"
+        if v.type == "Real" and v.unit:
+            attrs["unit"] = v.unit
+        if v.start is not None:
+            attrs["start"] = _number(v.start, v.type == "Integer")
+        if v.name.startswith("der(") and v.name[4:-1] in by_name:
+            attrs["derivative"] = str(by_name[v.name[4:-1]].vr)
+        ET.SubElement(mv, "Float64" if v.type == "Real" else "Int32", attrs)
+    ms = ET.SubElement(root, "ModelStructure")
+    states = [by_name[s.name] for s in model.states]
+    derivatives = [by_name[f"der({s.name})"] for s in model.states]
+    for v in variables:
+        if v.causality == "output":
+            ET.SubElement(ms, "Output", valueReference=str(v.vr))
+    for v in derivatives:
+        ET.SubElement(ms, "ContinuousStateDerivative", valueReference=str(v.vr))
+    initial = {v.vr for v in variables if v.causality == "output"} | {v.vr for v in states + derivatives}
+    for vr in sorted(initial):
+        ET.SubElement(ms, "InitialUnknown", valueReference=str(vr))
+    for ev in model.events:
+        ET.SubElement(ms, "EventIndicator", valueReference=str(by_name[indicator_name(ev)].vr))
+    ET.indent(root)
+    return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+
+
 def _build_date():
     """SOURCE_DATE_EPOCH (reproducible builds) or now."""
     epoch = os.environ.get("SOURCE_DATE_EPOCH")
@@ -301,31 +365,42 @@ def write_zip(out: Path, members):
     os.replace(tmp, out)
 
 
-def build_one(script: Path, dest: Path, token_seed: str = "") -> Path:
+def build_one(script: Path, dest: Path, token_seed: str = "", fmi_version: int = 2) -> Path:
+    """Build and validate one FMU: FMI 2.0 into ``dest/<Model>.fmu``, FMI 3.0 (model exchange and
+    co-simulation) into ``dest/fmi3/<Model>.fmu``; both from the same slave file."""
     from fmpy.validation import validate_fmu
 
     cls = slave_class(script)
     name = cls.model.name
     if cls.__name__ != name:
         raise BuildError(f"{script}: class {cls.__name__} must carry the model's name {name}")
-    launcher = compile_launcher(2)
+    launcher = compile_launcher(fmi_version)
+    if launcher is None and fmi_version == 3:
+        raise BuildError(f"{name}: an FMI 3.0 FMU needs the native launcher, and no C compiler was found (set CC)")
     with tempfile.TemporaryDirectory(prefix="pogofmu_build_") as tmp:
         stage_dir = Path(tmp)
-        package, module, token = stage(script, cls, stage_dir, 2, token_seed)
+        package, module, token = stage(script, cls, stage_dir, fmi_version, token_seed)
         check_isolated_import(stage_dir, name)
         members = [(p.relative_to(stage_dir).as_posix(), p.read_bytes(), False)
                    for p in sorted(stage_dir.rglob("*")) if p.is_file() and "__pycache__" not in p.parts]
-    members.append(("modelDescription.xml", model_description_fmi2(cls, token), False))
-    binaries = pythonfmu_binaries()
-    if launcher is not None:
-        binaries["linux64"] = launcher
+    if fmi_version == 2:
+        members.append(("modelDescription.xml", model_description_fmi2(cls, token), False))
+        binaries = pythonfmu_binaries()
+        if launcher is not None:
+            binaries["linux64"] = launcher
+    else:
+        # the launcher only: pythonfmu's Windows binaries speak FMI 2.0 (no FMI 3.0 Windows binary)
+        members.append(("modelDescription.xml", model_description_fmi3(cls, token), False))
+        binaries = {"x86_64-linux": launcher}
+        dest = dest / "fmi3"
+        dest.mkdir(parents=True, exist_ok=True)
     for platform, lib in binaries.items():
         members.append((f"binaries/{platform}/{name}{lib.suffix}", lib.read_bytes(), True))
     fmu = dest / f"{name}.fmu"
     write_zip(fmu, members)
     problems = validate_fmu(str(fmu))
     if problems:
-        raise BuildError(f"{fmu.name}: fmpy validation failed:\n  " + "\n  ".join(problems))
+        raise BuildError(f"{fmu.name} (FMI {fmi_version}): fmpy validation failed:\n  " + "\n  ".join(problems))
     print(f"built and validated {fmu.relative_to(ROOT) if fmu.is_relative_to(ROOT) else fmu}")
     return fmu
 
@@ -360,6 +435,7 @@ def main(argv=None):
         if args.names and name not in args.names:
             continue
         built.append(build_one(script, dest))
+        built.append(build_one(script, dest, fmi_version=3))
     if not args.names:
         for ssd in sorted(SSP_DIR.glob("*/SystemStructure.ssd")):
             pack_ssp(ssd.parent, dest)

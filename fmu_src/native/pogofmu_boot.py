@@ -16,6 +16,7 @@ through ``sys.path`` (which stays untouched), so
 """
 import os
 import sys
+import importlib
 import importlib.util
 import traceback
 
@@ -74,7 +75,11 @@ def load(resources):
         _repoint_package(package, package_dir)
     _import_from_file(package, os.path.join(package_dir, "__init__.py"), package_dir)
     slave = _import_from_file(module, os.path.join(resources, module + ".py"))
-    return getattr(slave, cls)
+    cls = getattr(slave, cls)
+    if conf.get("fmi", ["2"])[0] == "3":  # the same slave file, behind the FMI 3.0 adapter
+        fmi3 = importlib.import_module(package + ".fmi3")
+        cls = fmi3.fmi3_class(cls)
+    return cls
 
 
 def describe(exc):

@@ -670,6 +670,7 @@ static int read_values(Inst *in, PyObject *seq, void *ctx)
     return ST_OK;
 }
 
+#if POGOFMU_FMI == 2 /* FMI 2 status getters and fmi2DoStep */
 static int read_double(Inst *in, PyObject *r, void *ctx)
 {
     (void)in;
@@ -691,6 +692,7 @@ static int step_result(Inst *in, PyObject *r, void *ctx)
     (void)ctx;
     return py.PyObject_IsTrue(r) > 0 ? ST_OK : ST_DISCARD;
 }
+#endif
 
 /* ---- Python lists from C arrays (new references) ---------------------------------------- */
 
@@ -1302,3 +1304,423 @@ fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2Stri
 }
 
 #endif /* POGOFMU_FMI == 2 */
+
+/* ============================================================================================
+ * FMI 3.0 model exchange and co-simulation
+ * ========================================================================================== */
+#if POGOFMU_FMI == 3
+
+/* A tuple of flags (and a trailing double) returned by the Python side: fmi3DoStep,
+ * fmi3UpdateDiscreteStates, fmi3CompletedIntegratorStep.  NULL pointers are skipped. */
+typedef struct {
+    int nb;
+    fmi3Boolean *b[5];
+    double *d;
+} Flags;
+
+static int read_flags(Inst *in, PyObject *r, void *ctx)
+{
+    Flags *f = ctx;
+    Py_ssize_t_ want = f->nb + (f->d ? 1 : 0);
+    if (py.PySequence_Size(r) != want) {
+        py.PyErr_Clear();
+        emit(in, ST_ERROR, "logStatusError", "internal error: the Python side returned the wrong number of flags");
+        return ST_ERROR;
+    }
+    for (int i = 0; i < want; ++i) {
+        PyObject *item = py.PySequence_GetItem(r, i);
+        if (!item) return ST_ERROR;
+        if (i < f->nb) {
+            if (f->b[i]) *f->b[i] = py.PyObject_IsTrue(item) > 0;
+        } else if (f->d) {
+            *f->d = py.PyFloat_AsDouble(item);
+        }
+        py.Py_DecRef(item);
+        if (py.PyErr_Occurred()) return ST_ERROR;
+    }
+    return ST_OK;
+}
+
+static Status get_array(Inst *in, const char *method, double out[], size_t n)
+{
+    Values v = {'d', n, out};
+    return call(in, method, read_values, &v, NULL);
+}
+
+static Status no_type(Inst *in, const char *function, const char *type, size_t nvr, const VR vr[])
+{
+    if (nvr == 0) return ST_OK;
+    char msg[256];
+    snprintf(msg, sizeof msg, "%s: value reference %u is not a variable of type %s (this FMU has Float64 and "
+             "Int32 variables only)", function, (unsigned)vr[0], type);
+    if (in) emit(in, ST_ERROR, "logStatusError", msg);
+    return ST_ERROR;
+}
+
+const char *fmi3GetVersion(void) { return fmi3Version; }
+
+fmi3Status fmi3SetDebugLogging(fmi3Instance c, fmi3Boolean loggingOn, size_t nCategories, const fmi3String categories[])
+{
+    CHECK(c);
+    return set_logging(INST, loggingOn, nCategories, categories);
+}
+
+static Inst *new_inst(fmi3String instanceName, fmi3Boolean loggingOn, fmi3InstanceEnvironment env,
+                      fmi3LogMessageCallback log)
+{
+    Inst *in = calloc(1, sizeof *in);
+    if (!in) return NULL;
+    in->name = strdup(instanceName ? instanceName : "");
+    in->env = env;
+    in->log = log;
+    in->logging_on = loggingOn;
+    return in;
+}
+
+fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String instantiationToken,
+                                          fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
+                                          fmi3InstanceEnvironment instanceEnvironment,
+                                          fmi3LogMessageCallback logMessage)
+{
+    Inst *in = new_inst(instanceName, loggingOn, instanceEnvironment, logMessage);
+    if (!in) return NULL;
+    return instantiate(in, resourcePath, instantiationToken, visible, "me", 0, 0);
+}
+
+fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String instantiationToken,
+                                         fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
+                                         fmi3Boolean eventModeUsed, fmi3Boolean earlyReturnAllowed,
+                                         const fmi3ValueReference requiredIntermediateVariables[],
+                                         size_t nRequiredIntermediateVariables,
+                                         fmi3InstanceEnvironment instanceEnvironment,
+                                         fmi3LogMessageCallback logMessage,
+                                         fmi3IntermediateUpdateCallback intermediateUpdate)
+{
+    Inst *in = new_inst(instanceName, loggingOn, instanceEnvironment, logMessage);
+    if (!in) return NULL;
+    if (nRequiredIntermediateVariables > 0) {
+        emit(in, ST_ERROR, "logStatusError", "fmi3InstantiateCoSimulation: intermediate variable access is not "
+             "supported (nRequiredIntermediateVariables must be 0)");
+        free_inst(in);
+        return NULL;
+    }
+    return instantiate(in, resourcePath, instantiationToken, visible, "cs", eventModeUsed, earlyReturnAllowed);
+}
+
+fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3String instantiationToken,
+                                               fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
+                                               fmi3InstanceEnvironment instanceEnvironment,
+                                               fmi3LogMessageCallback logMessage, fmi3ClockUpdateCallback clockUpdate,
+                                               fmi3LockPreemptionCallback lockPreemption,
+                                               fmi3UnlockPreemptionCallback unlockPreemption)
+{
+    if (logMessage)
+        logMessage(instanceEnvironment, fmi3Error, "logStatusError",
+                   "fmi3InstantiateScheduledExecution is not supported by this FMU (model exchange and "
+                   "co-simulation only)");
+    return NULL;
+}
+
+void fmi3FreeInstance(fmi3Instance c) { free_inst(INST); }
+
+fmi3Status fmi3EnterInitializationMode(fmi3Instance c, fmi3Boolean toleranceDefined, fmi3Float64 tolerance,
+                                       fmi3Float64 startTime, fmi3Boolean stopTimeDefined, fmi3Float64 stopTime)
+{
+    CHECK(c);
+    GIL g = py.PyGILState_Ensure();
+    PyObject *stop = stopTimeDefined ? py.PyFloat_FromDouble(stopTime) : (py.Py_IncRef(py.none), py.none);
+    PyObject *tol = toleranceDefined ? py.PyFloat_FromDouble(tolerance) : (py.Py_IncRef(py.none), py.none);
+    py.PyGILState_Release(g);
+    Status st = call(INST, "setup_experiment", NULL, NULL, "(dNN)", startTime, stop, tol);
+    if (st > ST_WARNING) return st;
+    Status st2 = call(INST, "enter_initialization_mode", NULL, NULL, NULL);
+    return st2 > st ? st2 : st;
+}
+
+fmi3Status fmi3ExitInitializationMode(fmi3Instance c) { CHECK(c); return call(INST, "exit_initialization_mode", NULL, NULL, NULL); }
+fmi3Status fmi3EnterEventMode(fmi3Instance c) { CHECK(c); return call(INST, "enter_event_mode", NULL, NULL, NULL); }
+fmi3Status fmi3Terminate(fmi3Instance c) { CHECK(c); return call(INST, "terminate", NULL, NULL, NULL); }
+
+fmi3Status fmi3Reset(fmi3Instance c)
+{
+    CHECK(c);
+    INST->dead = 0; /* a reset instance starts over */
+    return call(INST, "reset", NULL, NULL, NULL);
+}
+
+/* ---- variables --------------------------------------------------------------------------- */
+
+fmi3Status fmi3GetFloat64(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, fmi3Float64 values[], size_t nValues)
+{
+    CHECK(c);
+    if (nValues != nvr) return unsupported(INST, "fmi3GetFloat64 with nValues != nValueReferences (arrays)");
+    if (from_buffer(INST, vr, nvr, 'd', values)) return ST_OK;
+    return get_values(INST, "get_real", 'd', vr, nvr, values);
+}
+
+fmi3Status fmi3GetInt32(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, fmi3Int32 values[], size_t nValues)
+{
+    CHECK(c);
+    if (nValues != nvr) return unsupported(INST, "fmi3GetInt32 with nValues != nValueReferences (arrays)");
+    if (from_buffer(INST, vr, nvr, 'i', values)) return ST_OK;
+    return get_values(INST, "get_integer", 'i', vr, nvr, values);
+}
+
+fmi3Status fmi3GetBoolean(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, fmi3Boolean values[], size_t nValues)
+{
+    CHECK(c);
+    return get_values(INST, "get_boolean", 'b', vr, nvr, values);
+}
+
+fmi3Status fmi3GetString(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, fmi3String values[], size_t nValues)
+{
+    CHECK(c);
+    return get_values(INST, "get_string", 's', vr, nvr, values);
+}
+
+fmi3Status fmi3SetFloat64(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, const fmi3Float64 values[], size_t nValues)
+{
+    CHECK(c);
+    if (nValues != nvr) return unsupported(INST, "fmi3SetFloat64 with nValues != nValueReferences (arrays)");
+    return set_values(INST, "set_real", 'd', vr, nvr, values);
+}
+
+fmi3Status fmi3SetInt32(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, const fmi3Int32 values[], size_t nValues)
+{
+    CHECK(c);
+    if (nValues != nvr) return unsupported(INST, "fmi3SetInt32 with nValues != nValueReferences (arrays)");
+    return set_values(INST, "set_integer", 'i', vr, nvr, values);
+}
+
+fmi3Status fmi3SetBoolean(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, const fmi3Boolean values[], size_t nValues)
+{
+    CHECK(c);
+    return set_values(INST, "set_boolean", 'b', vr, nvr, values);
+}
+
+fmi3Status fmi3SetString(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, const fmi3String values[], size_t nValues)
+{
+    CHECK(c);
+    return set_values(INST, "set_string", 's', vr, nvr, values);
+}
+
+/* types this FMU has no variables of: an error naming the function and the value reference */
+#define NO_TYPE_GET(T, CT)                                                                            \
+    fmi3Status fmi3Get##T(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, CT values[], size_t nValues) \
+    { return no_type(INST, "fmi3Get" #T, #T, nvr, vr); }
+#define NO_TYPE_SET(T, CT)                                                                            \
+    fmi3Status fmi3Set##T(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, const CT values[], size_t nValues) \
+    { return no_type(INST, "fmi3Set" #T, #T, nvr, vr); }
+#define NO_TYPE(T, CT) NO_TYPE_GET(T, CT) NO_TYPE_SET(T, CT)
+NO_TYPE(Float32, fmi3Float32)
+NO_TYPE(Int8, fmi3Int8)
+NO_TYPE(UInt8, fmi3UInt8)
+NO_TYPE(Int16, fmi3Int16)
+NO_TYPE(UInt16, fmi3UInt16)
+NO_TYPE(UInt32, fmi3UInt32)
+NO_TYPE(Int64, fmi3Int64)
+NO_TYPE(UInt64, fmi3UInt64)
+
+fmi3Status fmi3GetBinary(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, size_t valueSizes[],
+                         fmi3Binary values[], size_t nValues)
+{
+    return no_type(INST, "fmi3GetBinary", "Binary", nvr, vr);
+}
+
+fmi3Status fmi3SetBinary(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, const size_t valueSizes[],
+                         const fmi3Binary values[], size_t nValues)
+{
+    return no_type(INST, "fmi3SetBinary", "Binary", nvr, vr);
+}
+
+fmi3Status fmi3GetClock(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, fmi3Clock values[])
+{
+    return no_type(INST, "fmi3GetClock", "Clock", nvr, vr);
+}
+
+fmi3Status fmi3SetClock(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, const fmi3Clock values[])
+{
+    return no_type(INST, "fmi3SetClock", "Clock", nvr, vr);
+}
+
+fmi3Status fmi3GetNumberOfVariableDependencies(fmi3Instance c, fmi3ValueReference valueReference, size_t *nDependencies)
+{
+    return unsupported(INST, "fmi3GetNumberOfVariableDependencies (the model description lists the dependencies)");
+}
+
+fmi3Status fmi3GetVariableDependencies(fmi3Instance c, fmi3ValueReference dependent, size_t elementIndicesOfDependent[],
+                                       fmi3ValueReference independents[], size_t elementIndicesOfIndependents[],
+                                       fmi3DependencyKind dependencyKinds[], size_t nDependencies)
+{
+    return unsupported(INST, "fmi3GetVariableDependencies (the model description lists the dependencies)");
+}
+
+/* ---- FMU states -------------------------------------------------------------------------- */
+
+fmi3Status fmi3GetFMUState(fmi3Instance c, fmi3FMUState *FMUState) { CHECK(c && FMUState); return get_state(INST, FMUState); }
+fmi3Status fmi3SetFMUState(fmi3Instance c, fmi3FMUState FMUState) { CHECK(c); return set_state(INST, FMUState); }
+fmi3Status fmi3FreeFMUState(fmi3Instance c, fmi3FMUState *FMUState) { CHECK(c); return free_state(INST, FMUState); }
+
+fmi3Status fmi3SerializedFMUStateSize(fmi3Instance c, fmi3FMUState FMUState, size_t *size)
+{
+    CHECK(c && size);
+    return serialized_size(INST, FMUState, size);
+}
+
+fmi3Status fmi3SerializeFMUState(fmi3Instance c, fmi3FMUState FMUState, fmi3Byte serializedState[], size_t size)
+{
+    CHECK(c && serializedState);
+    return serialize(INST, FMUState, (char *)serializedState, size);
+}
+
+fmi3Status fmi3DeserializeFMUState(fmi3Instance c, const fmi3Byte serializedState[], size_t size, fmi3FMUState *FMUState)
+{
+    CHECK(c && serializedState && FMUState);
+    return deserialize(INST, (const char *)serializedState, size, FMUState);
+}
+
+/* ---- not provided ------------------------------------------------------------------------ */
+
+fmi3Status fmi3GetDirectionalDerivative(fmi3Instance c, const fmi3ValueReference unknowns[], size_t nUnknowns,
+                                        const fmi3ValueReference knowns[], size_t nKnowns, const fmi3Float64 seed[],
+                                        size_t nSeed, fmi3Float64 sensitivity[], size_t nSensitivity)
+{
+    return unsupported(INST, "fmi3GetDirectionalDerivative (providesDirectionalDerivative = false)");
+}
+
+fmi3Status fmi3GetAdjointDerivative(fmi3Instance c, const fmi3ValueReference unknowns[], size_t nUnknowns,
+                                    const fmi3ValueReference knowns[], size_t nKnowns, const fmi3Float64 seed[],
+                                    size_t nSeed, fmi3Float64 sensitivity[], size_t nSensitivity)
+{
+    return unsupported(INST, "fmi3GetAdjointDerivative (providesAdjointDerivatives = false)");
+}
+
+fmi3Status fmi3EnterConfigurationMode(fmi3Instance c)
+{
+    return unsupported(INST, "fmi3EnterConfigurationMode (this FMU has no structural parameters)");
+}
+
+fmi3Status fmi3ExitConfigurationMode(fmi3Instance c)
+{
+    return unsupported(INST, "fmi3ExitConfigurationMode (this FMU has no structural parameters)");
+}
+
+#define NO_CLOCKS(call_) return unsupported(INST, call_ " (this FMU has no clocks)")
+fmi3Status fmi3GetIntervalDecimal(fmi3Instance c, const fmi3ValueReference vr[], size_t n, fmi3Float64 intervals[],
+                                  fmi3IntervalQualifier qualifiers[]) { NO_CLOCKS("fmi3GetIntervalDecimal"); }
+fmi3Status fmi3GetIntervalFraction(fmi3Instance c, const fmi3ValueReference vr[], size_t n, fmi3UInt64 counters[],
+                                   fmi3UInt64 resolutions[], fmi3IntervalQualifier qualifiers[]) { NO_CLOCKS("fmi3GetIntervalFraction"); }
+fmi3Status fmi3GetShiftDecimal(fmi3Instance c, const fmi3ValueReference vr[], size_t n, fmi3Float64 shifts[]) { NO_CLOCKS("fmi3GetShiftDecimal"); }
+fmi3Status fmi3GetShiftFraction(fmi3Instance c, const fmi3ValueReference vr[], size_t n, fmi3UInt64 counters[],
+                                fmi3UInt64 resolutions[]) { NO_CLOCKS("fmi3GetShiftFraction"); }
+fmi3Status fmi3SetIntervalDecimal(fmi3Instance c, const fmi3ValueReference vr[], size_t n, const fmi3Float64 intervals[]) { NO_CLOCKS("fmi3SetIntervalDecimal"); }
+fmi3Status fmi3SetIntervalFraction(fmi3Instance c, const fmi3ValueReference vr[], size_t n, const fmi3UInt64 counters[],
+                                   const fmi3UInt64 resolutions[]) { NO_CLOCKS("fmi3SetIntervalFraction"); }
+fmi3Status fmi3SetShiftDecimal(fmi3Instance c, const fmi3ValueReference vr[], size_t n, const fmi3Float64 shifts[]) { NO_CLOCKS("fmi3SetShiftDecimal"); }
+fmi3Status fmi3SetShiftFraction(fmi3Instance c, const fmi3ValueReference vr[], size_t n, const fmi3UInt64 counters[],
+                                const fmi3UInt64 resolutions[]) { NO_CLOCKS("fmi3SetShiftFraction"); }
+fmi3Status fmi3EvaluateDiscreteStates(fmi3Instance c) { NO_CLOCKS("fmi3EvaluateDiscreteStates"); }
+fmi3Status fmi3ActivateModelPartition(fmi3Instance c, fmi3ValueReference clockReference, fmi3Float64 activationTime)
+{
+    return unsupported(INST, "fmi3ActivateModelPartition (scheduled execution is not supported)");
+}
+
+fmi3Status fmi3GetOutputDerivatives(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, const fmi3Int32 orders[],
+                                    fmi3Float64 values[], size_t nValues)
+{
+    return unsupported(INST, "fmi3GetOutputDerivatives (maxOutputDerivativeOrder = 0)");
+}
+
+/* ---- event mode (both interfaces) -------------------------------------------------------- */
+
+fmi3Status fmi3UpdateDiscreteStates(fmi3Instance c, fmi3Boolean *discreteStatesNeedUpdate, fmi3Boolean *terminateSimulation,
+                                    fmi3Boolean *nominalsOfContinuousStatesChanged,
+                                    fmi3Boolean *valuesOfContinuousStatesChanged, fmi3Boolean *nextEventTimeDefined,
+                                    fmi3Float64 *nextEventTime)
+{
+    CHECK(c);
+    Flags f = {5, {discreteStatesNeedUpdate, terminateSimulation, nominalsOfContinuousStatesChanged,
+                   valuesOfContinuousStatesChanged, nextEventTimeDefined}, nextEventTime};
+    return call(INST, "update_discrete_states", read_flags, &f, NULL);
+}
+
+/* ---- model exchange ---------------------------------------------------------------------- */
+
+fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance c) { CHECK(c); return call(INST, "enter_continuous_time_mode", NULL, NULL, NULL); }
+
+fmi3Status fmi3CompletedIntegratorStep(fmi3Instance c, fmi3Boolean noSetFMUStatePriorToCurrentPoint,
+                                       fmi3Boolean *enterEventMode, fmi3Boolean *terminateSimulation)
+{
+    CHECK(c);
+    Flags f = {2, {enterEventMode, terminateSimulation}, NULL};
+    return call(INST, "completed_integrator_step", read_flags, &f, NULL);
+}
+
+fmi3Status fmi3SetTime(fmi3Instance c, fmi3Float64 time) { CHECK(c); return call(INST, "set_time", NULL, NULL, "(d)", time); }
+
+fmi3Status fmi3SetContinuousStates(fmi3Instance c, const fmi3Float64 continuousStates[], size_t nContinuousStates)
+{
+    CHECK(c);
+    GIL g = py.PyGILState_Ensure();
+    PyObject *x = value_list('d', continuousStates, nContinuousStates);
+    py.PyGILState_Release(g);
+    return call(INST, "set_continuous_states", NULL, NULL, "(N)", x);
+}
+
+fmi3Status fmi3GetContinuousStateDerivatives(fmi3Instance c, fmi3Float64 derivatives[], size_t nContinuousStates)
+{
+    CHECK(c);
+    return get_array(INST, "get_derivatives", derivatives, nContinuousStates);
+}
+
+fmi3Status fmi3GetEventIndicators(fmi3Instance c, fmi3Float64 eventIndicators[], size_t nEventIndicators)
+{
+    CHECK(c);
+    return get_array(INST, "get_event_indicators", eventIndicators, nEventIndicators);
+}
+
+fmi3Status fmi3GetContinuousStates(fmi3Instance c, fmi3Float64 continuousStates[], size_t nContinuousStates)
+{
+    CHECK(c);
+    return get_array(INST, "get_continuous_states", continuousStates, nContinuousStates);
+}
+
+fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance c, fmi3Float64 nominals[], size_t nContinuousStates)
+{
+    CHECK(c);
+    return get_array(INST, "get_nominals", nominals, nContinuousStates);
+}
+
+static int read_size(Inst *in, PyObject *r, void *ctx)
+{
+    (void)in;
+    *(size_t *)ctx = (size_t)py.PyLong_AsLong(r);
+    return ST_OK;
+}
+
+fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance c, size_t *nEventIndicators)
+{
+    CHECK(c && nEventIndicators);
+    return call(INST, "number_of_event_indicators", read_size, nEventIndicators, NULL);
+}
+
+fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance c, size_t *nContinuousStates)
+{
+    CHECK(c && nContinuousStates);
+    return call(INST, "number_of_continuous_states", read_size, nContinuousStates, NULL);
+}
+
+/* ---- co-simulation ----------------------------------------------------------------------- */
+
+fmi3Status fmi3EnterStepMode(fmi3Instance c) { CHECK(c); return call(INST, "enter_step_mode", NULL, NULL, NULL); }
+
+fmi3Status fmi3DoStep(fmi3Instance c, fmi3Float64 currentCommunicationPoint, fmi3Float64 communicationStepSize,
+                      fmi3Boolean noSetFMUStatePriorToCurrentPoint, fmi3Boolean *eventHandlingNeeded,
+                      fmi3Boolean *terminateSimulation, fmi3Boolean *earlyReturn, fmi3Float64 *lastSuccessfulTime)
+{
+    CHECK(c);
+    Flags f = {3, {eventHandlingNeeded, terminateSimulation, earlyReturn}, lastSuccessfulTime};
+    return call(INST, "do_step3", read_flags, &f, "(dd)", currentCommunicationPoint, communicationStepSize);
+}
+
+#endif /* POGOFMU_FMI == 3 */

@@ -371,6 +371,37 @@ class Simulator:
         self.q_out = self.q
         return self.x_out, self.q_out
 
+    def advance_to_event(self, t_target: float) -> bool:
+        """Like :meth:`advance`, but stop at the first event on the way, *before* its jump.
+
+        Returns True when an event lies in ``(t_out, t_target]``: then ``t_out`` is its exact time
+        and ``x_out`` the state there, on the guard; the jump stays pending and the next
+        :meth:`advance` (e.g. ``advance(t_out)``) applies it.  Otherwise it is ``advance(t_target)``
+        and returns False.  The step sequence is that of :meth:`advance`: stopping changes no
+        event time (FMI 3.0 co-simulation with early return).
+        """
+        if t_target < self.t_out:
+            raise ValueError(f"cannot go back in time: t = {t_target} < {self.t_out}")
+        while self.pending is None and self.t < t_target:
+            self._step()
+        if self.pending is not None and self.t <= t_target:
+            self.t_out, self.x_out, self.q_out = self.t, self.x, self.q
+            return True
+        self.advance(t_target)
+        return False
+
+    def apply_event(self, index: int, t: float, x) -> list:
+        """Apply the jump of event ``index`` at time ``t`` to the state ``x`` located by someone
+        else (an FMI 3.0 model-exchange importer's solver); returns the new continuous state.
+        Records, Zeno and domain checks as for an event the engine located itself."""
+        self.t = self.t_out = float(t)
+        self.x = [float(v) for v in x]
+        self.seg = None
+        self.pending = (index, self.x)
+        self._apply_pending()
+        self.x_out, self.q_out = self.x, self.q
+        return self.x
+
     def snapshot(self):
         """A deep copy of the whole integrator state (for fmi2GetFMUstate).
 

@@ -309,6 +309,7 @@ class HybridSlave:
         except (ModelError, ArithmeticError, ValueError, TypeError):
             return {v.name: 0 for v in model.all_outputs()}
         out.update(n_events=0, t_last_event=self._t_start, last_event=0)
+        self._complete_outputs(self._t_start, x, q, tuple(self._u), p, out)
         return out
 
     def _update_outputs(self):
@@ -320,6 +321,7 @@ class HybridSlave:
             out["t_last_event"], out["last_event"] = self._t_start, 0
         else:
             out["t_last_event"], out["last_event"] = last.time, last.index + 1
+        self._complete_outputs(sim.t_out, sim.x_out, sim.q_out, sim.u, sim.p, out)
         self._out = out
         rbuf, ibuf = self._rbuf, self._ibuf
         if len(rbuf) > 1:
@@ -331,6 +333,13 @@ class HybridSlave:
         elif ibuf:
             ibuf[0] = self._int_values(out)
         self._ctl[0] = 1
+
+    def _complete_outputs(self, t, x, q, u, p, out):
+        """Hook: add further variables to ``out`` (FMI 3.0: states, derivatives, event indicators)."""
+
+    def _advance_engine(self, sim, t_end):
+        """Hook: how a communication step runs the engine (FMI 3.0: stop at events)."""
+        sim.advance(t_end)
 
     # ---- FMI calls ----------------------------------------------------------------------------
     def setup_experiment(self, start_time, stop_time=None, tolerance=None):
@@ -376,7 +385,7 @@ class HybridSlave:
             if self._inputs_changed:
                 sim.set_input(self._u)
                 self._inputs_changed = False
-            sim.advance(max(current_time + step_size, sim.t_out))
+            self._advance_engine(sim, max(current_time + step_size, sim.t_out))
         except ModelError as exc:
             # the model cannot go on (the leg bottomed out, an event storm, ...): Error, so that no
             # master mistakes a truncated run for a result; the state saved before stays usable

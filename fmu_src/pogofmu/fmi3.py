@@ -1,0 +1,392 @@
+"""FMI 3.0 for any :class:`~pogofmu.model.HybridModel`: model exchange and co-simulation with
+event mode, on top of the FMI 2.0 adapter (:class:`~pogofmu.fmi.HybridSlave`).
+
+Nothing here is specific to a model, and no equation is written twice: flows, guards, jumps,
+outputs, parameter rules and the engine are the model's and :mod:`pogofmu.engine`'s.  The same
+slave files (``fmu_src/slave_*.py``) make both generations: for an FMI 3.0 FMU the boot code
+(``pogofmu_boot.py``, ``fmi=3`` in ``resources/pogofmu_launch.txt``) wraps the slave class with
+:func:`fmi3_class`.  The C side is ``fmu_src/native/pogofmu_fmi.c`` built with ``-DPOGOFMU_FMI=3``.
+
+Variables (:func:`fmi3_variables`): those of the FMI 2.0 FMU (same names, units, descriptions,
+value references), then
+
+* every continuous state that is not already an output of the same name, as a ``local``;
+* ``der(<state>)`` for every state (``ContinuousStateDerivative``);
+* ``guard_<event>`` for every event of the model (``EventIndicator``): the event's guard while the
+  event is active in the current mode, ``1`` while it is inactive (a value that cannot cross zero);
+* ``time``, the independent variable FMI 3.0 requires.
+
+Model exchange (``fmi3InstantiateModelExchange``): the importer integrates the states and locates
+the sign changes of the indicators.  ``fmi3UpdateDiscreteStates`` applies the jump of the first
+event (in the model's priority order) whose guard has crossed *in its direction*: a falling guard
+fires when it is ``<= 0`` and was ``> 0`` at some indicator evaluation since the latest event
+(a rising one: ``>= 0`` after ``< 0``).  A guard exactly zero after a jump is disarmed until it
+leaves zero, the engine's restart rule.  A sign change in the wrong direction applies nothing.
+``valuesOfContinuousStatesChanged`` is true exactly when the jump changed a state;
+``nominalsOfContinuousStatesChanged`` is always false (nominals are 1).  The domain of the model
+is checked in ``fmi3CompletedIntegratorStep``, event storms and domain at each event.
+
+Co-simulation (``fmi3InstantiateCoSimulation``): the engine inside, as in FMI 2.0.  With
+``earlyReturnAllowed`` ``fmi3DoStep`` stops at the first event of the step, at its exact time
+(``lastSuccessfulTime``, ``earlyReturn`` when it lies before the end of the step):
+
+* with ``eventModeUsed`` it stops *before* the jump (outputs: the left limit) and sets
+  ``eventHandlingNeeded``; ``fmi3UpdateDiscreteStates`` in Event Mode applies the jump;
+* without, it applies the jump itself and returns right after it.
+
+Without ``earlyReturnAllowed`` it behaves like the FMI 2.0 FMU (every event handled inside the
+step).  The step sequence of the engine, hence every event time, does not depend on where the
+steps stop.
+"""
+from __future__ import annotations
+
+import math
+from typing import Tuple
+
+from .fmi import ERROR, FMUError, FmiVariable, HybridSlave, fmi2_variables
+from .model import FALLING, HybridModel, ModelError, Params
+
+__all__ = ["fmi3_variables", "fmi3_class", "Fmi3Slave", "rate_unit", "indicator_name"]
+
+# the unit of d(state)/dt for the units of pogofmu.units
+_RATE_UNITS = {"m": "m/s", "m/s": "m/s2", "m.s": "m", "s": "", "J": "W", "": ""}
+
+
+def rate_unit(unit: str) -> str:
+    try:
+        return _RATE_UNITS[unit]
+    except KeyError:
+        raise ValueError(f"no unit for the rate of a state in {unit!r}: add it to pogofmu.fmi3._RATE_UNITS") from None
+
+
+def indicator_name(event) -> str:
+    return f"guard_{event.name}"
+
+
+def fmi3_variables(model: HybridModel) -> Tuple[FmiVariable, ...]:
+    """FMI 2.0 variables, then state locals, derivatives and event indicators (module docstring).
+
+    Every variable an FMU computes has the role ``("output", name)``: its value is
+    ``outputs[name]`` of the adapter."""
+    out = list(fmi2_variables(model))
+    names = {v.name for v in out}
+    for var in model.states:
+        if var.name not in names:
+            out.append(FmiVariable(var.name, len(out), "Real", "local", "continuous",
+                                   f"continuous state: {var.description}", var.unit, None, ("output", var.name)))
+    for var in model.states:
+        out.append(FmiVariable(f"der({var.name})", len(out), "Real", "local", "continuous",
+                               f"time derivative of {var.name} ({var.description})", rate_unit(var.unit), None,
+                               ("output", f"der({var.name})")))
+    for ev in model.events:
+        way = "falling: fires at > 0 -> <= 0" if ev.direction == FALLING else "rising: fires at < 0 -> >= 0"
+        out.append(FmiVariable(indicator_name(ev), len(out), "Real", "local", "continuous",
+                               f"event indicator of {ev.name}: its guard ({way}) while active, 1 while inactive",
+                               "", None, ("output", indicator_name(ev))))
+    out.append(FmiVariable("time", len(out), "Real", "independent", "continuous", "simulation time", "s", None,
+                           ("output", "time")))
+    return tuple(out)
+
+
+def state_vrs(model: HybridModel, variables) -> Tuple[int, ...]:
+    """Value references of the continuous states, in the model's state order."""
+    by_name = {v.name: v.vr for v in variables}
+    return tuple(by_name[v.name] for v in model.states)
+
+
+def check_state_outputs(model: HybridModel):
+    """An output that shares its name with a state is that state's variable in FMI 3.0: its value
+    must be the state's (checked at the default initial state).  Returns a problem or None."""
+    p = model.params()
+    x, q = model.initial(p)
+    u = tuple(float(v.start) for v in model.inputs)
+    out = model.output_fn(0.0, x, q, u, p)
+    for i, var in enumerate(model.states):
+        if var.name in out and out[var.name] != x[i]:
+            return (f"{model.name}: output {var.name} = {out[var.name]!r} differs from the state {var.name} = "
+                    f"{x[i]!r}: an FMI 3.0 state variable must carry the state's value")
+    return None
+
+
+def _before_side(falling, g):
+    return g > 0.0 if falling else g < 0.0
+
+
+class Fmi3Slave(HybridSlave):
+    """The FMI 3.0 adapter; use :func:`fmi3_class` to derive it for a slave class."""
+
+    _tables = None
+
+    @classmethod
+    def _variable_tables(cls):
+        if cls.__dict__.get("_tables") is None:
+            variables = fmi3_variables(cls.model)
+            served = [v for v in variables if v.role[0] == "output"]
+            cls._tables = (variables, {v.vr: v for v in variables},
+                           [v for v in served if v.type == "Real"], [v for v in served if v.type == "Integer"])
+        return cls._tables
+
+    def _reset_state(self):
+        super()._reset_state()
+        if not hasattr(self, "_mode"):
+            self._mode, self._event_mode_used, self._early_return_allowed = "cs", False, False
+        self._me_t = 0.0
+        self._me_x = None
+        self._armed = [False] * len(type(self).model.events)
+        self._me_stale = False
+        self._stop = None
+
+    def _native_attach(self, mode="cs", event_mode_used=False, early_return_allowed=False):
+        if mode not in ("cs", "me"):
+            raise FMUError(f"interface type {mode!r} is not provided (model exchange or co-simulation)")
+        self._mode = mode
+        self._event_mode_used, self._early_return_allowed = bool(event_mode_used), bool(early_return_allowed)
+        return super()._native_attach(mode, event_mode_used, early_return_allowed)
+
+    # ---- variables --------------------------------------------------------------------------
+    def _complete_outputs(self, t, x, q, u, p, out):
+        model = type(self).model
+        sim = self._sim
+        out["time"] = t
+        for var, v in zip(model.states, x):
+            out[var.name] = v
+        if model.states:
+            f = sim.fun(t, x) if sim is not None and q is sim.q and u is sim.u else model.flow(t, x, q, u, p)
+            for var, v in zip(model.states, f):
+                out[f"der({var.name})"] = v
+        for ev in model.events:
+            out[indicator_name(ev)] = ev.guard(x, q, u, p) if ev.active(q) else 1.0
+
+    def _initial_outputs(self):
+        out = super()._initial_outputs()
+        for var in type(self).variables():  # zeros where the start values break a rule
+            if var.role[0] == "output":
+                out.setdefault(var.role[1], 0)
+        return out
+
+    def _get(self, vrs, type_, convert):
+        if self._me_stale:
+            self._me_refresh()
+        return super()._get(vrs, type_, convert)
+
+    # ---- initialization ---------------------------------------------------------------------
+    def exit_initialization_mode(self):
+        super().exit_initialization_mode()
+        sim = self._sim
+        self._me_t, self._me_x = sim.t_out, list(sim.x_out)
+        self._arm()
+
+    def _me_instance(self, what):
+        if self._mode != "me":
+            raise FMUError(f"{what} is a model-exchange function: this instance is a co-simulation instance")
+        if self._failed is not None:
+            raise FMUError(f"{what} refused: the instance stopped at t = {self._me_t!r} s ({self._failed}); "
+                           f"restore a saved state (fmi3SetFMUState) or reset the instance")
+        if self._sim is None:
+            raise FMUError(f"{what} called before fmi3ExitInitializationMode")
+        if self._inputs_changed:
+            self._me_inputs()
+        return self._sim
+
+    def _me_inputs(self):
+        for var, v in zip(type(self).model.inputs, self._u):
+            if not math.isfinite(v):
+                raise FMUError(f"input {var.name} = {v!r} violates the rule: {var.name} must be a finite number")
+        sim = self._sim
+        sim.t = sim.t_out = self._me_t
+        sim.x = sim.x_out = list(self._me_x)
+        sim.seg, sim.pending = None, None
+        sim.set_input(self._u)
+        self._inputs_changed = False
+        self._stale()
+
+    def _stale(self):
+        self._me_stale = True
+        self._ctl[0] = 0
+
+    def _me_refresh(self):
+        self._me_stale = False
+        sim = self._sim
+        if sim is None:
+            return
+        if self._inputs_changed:
+            self._me_inputs()
+            self._me_stale = False
+        sim.t_out, sim.x_out, sim.q_out = self._me_t, self._me_x, sim.q
+        self._update_outputs()
+
+    def _arm(self):
+        """After initialization and after each event: a guard is armed if it lies strictly on the
+        side before its crossing (a guard exactly zero waits until it leaves zero)."""
+        sim = self._sim
+        q, u, p, x = sim.q, sim.u, sim.p, self._me_x
+        self._armed = [ev.active(q) and _before_side(ev.direction == FALLING, ev.guard(x, q, u, p))
+                       for ev in type(self).model.events]
+
+    # ---- model exchange ---------------------------------------------------------------------
+    def set_time(self, t):
+        t = float(t)
+        if not math.isfinite(t):
+            raise FMUError(f"time = {t!r} violates the rule: a finite number")
+        self._me_t = t
+        self._stale()
+
+    def set_continuous_states(self, x):
+        n = len(type(self).model.states)
+        if len(x) != n:
+            raise FMUError(f"{len(x)} continuous states given, {type(self).model.name} has {n}")
+        if self._sim is None:
+            raise FMUError("fmi3SetContinuousStates called before fmi3ExitInitializationMode")
+        self._me_x = [float(v) for v in x]
+        self._stale()
+
+    def get_continuous_states(self):
+        if self._sim is None:
+            model = type(self).model
+            try:
+                return list(model.initial(Params(self._par))[0])
+            except (ModelError, ArithmeticError, ValueError, TypeError) as exc:
+                raise FMUError(f"{model.name}: no initial state: {exc}") from None
+        return list(self._me_x)
+
+    def number_of_continuous_states(self):
+        return len(type(self).model.states)
+
+    def number_of_event_indicators(self):
+        return len(type(self).model.events)
+
+    def get_nominals(self):
+        return [1.0] * len(type(self).model.states)
+
+    def get_derivatives(self):
+        sim = self._me_instance("fmi3GetContinuousStateDerivatives")
+        return sim.fun(self._me_t, self._me_x) if self._me_x else []
+
+    def get_event_indicators(self):
+        sim = self._me_instance("fmi3GetEventIndicators")
+        q, u, p, x = sim.q, sim.u, sim.p, self._me_x
+        armed = self._armed
+        z = []
+        for k, ev in enumerate(type(self).model.events):
+            if ev.active(q):
+                g = ev.guard(x, q, u, p)
+                if not armed[k] and _before_side(ev.direction == FALLING, g):
+                    armed[k] = True
+                z.append(g)
+            else:
+                z.append(1.0)
+        return z
+
+    def completed_integrator_step(self):
+        sim = self._me_instance("fmi3CompletedIntegratorStep")
+        msg = type(self).model.domain(self._me_t, self._me_x, sim.q, sim.u, sim.p)
+        if msg is not None or not all(map(math.isfinite, self._me_x)):
+            self._failed = (f"{type(self).model.name}: the trajectory left the model's domain at t = "
+                            f"{self._me_t:.10g} s: {msg or 'the state became non-finite'}")
+            raise FMUError(self._failed, ERROR)
+        return (False, False)  # enterEventMode, terminateSimulation
+
+    def _me_update(self):
+        sim = self._me_instance("fmi3UpdateDiscreteStates")
+        model = type(self).model
+        t, x = self._me_t, self._me_x
+        q, u, p = sim.q, sim.u, sim.p
+        fired = None
+        for k, ev in enumerate(model.events):  # priority order
+            if self._armed[k] and ev.active(q) and not _before_side(ev.direction == FALLING, ev.guard(x, q, u, p)):
+                fired = k
+                break
+        changed = False
+        if fired is not None:
+            try:
+                x_new = sim.apply_event(fired, t, x)
+            except ModelError as exc:
+                self._failed = f"{model.name}: {exc}"
+                self._drain_engine()
+                raise FMUError(self._failed, ERROR) from None
+            changed = x_new != x
+            self._me_x = list(x_new)
+            self._drain_engine()
+            self._stale()
+        self._arm()
+        return changed
+
+    # ---- co-simulation ----------------------------------------------------------------------
+    def _advance_engine(self, sim, t_end):
+        if sim.pending is not None and sim.t == sim.t_out:
+            sim.advance(sim.t)  # an event the importer left unhandled: its jump first
+        self._stop = None
+        if not self._early_return_allowed:
+            sim.advance(t_end)
+        elif sim.advance_to_event(t_end):
+            self._stop = sim.t_out
+            if not self._event_mode_used:
+                sim.advance(sim.t_out)  # handled here: return right after its jump
+
+    def do_step3(self, current_time, step_size):
+        """fmi3DoStep: (eventHandlingNeeded, terminateSimulation, earlyReturn, lastSuccessfulTime)."""
+        if self._mode != "cs":
+            raise FMUError("fmi3DoStep is a co-simulation function: this instance is a model-exchange instance")
+        self._stop = None
+        self.do_step(current_time, step_size)
+        stop = self._stop
+        end = current_time + step_size
+        return (stop is not None and self._event_mode_used, False, stop is not None and stop < end, self._t_ok)
+
+    def _cs_update(self):
+        sim = self._sim
+        if sim is None:
+            raise FMUError("fmi3UpdateDiscreteStates called before fmi3ExitInitializationMode")
+        if sim.pending is not None and sim.t == sim.t_out:
+            try:
+                sim.advance(sim.t)
+            except ModelError as exc:
+                self._failed = f"{type(self).model.name}: {exc}"
+                self._drain_engine()
+                raise FMUError(self._failed, ERROR) from None
+            self._drain_engine()
+            self._update_outputs()
+        return False
+
+    # ---- both -------------------------------------------------------------------------------
+    def enter_event_mode(self):
+        pass
+
+    def enter_continuous_time_mode(self):
+        pass
+
+    def enter_step_mode(self):
+        pass
+
+    def update_discrete_states(self):
+        """(discreteStatesNeedUpdate, terminateSimulation, nominalsOfContinuousStatesChanged,
+        valuesOfContinuousStatesChanged, nextEventTimeDefined, nextEventTime)"""
+        changed = self._me_update() if self._mode == "me" else self._cs_update()
+        return (False, False, False, changed, False, 0.0)
+
+    def _get_fmu_state(self):
+        state = super()._get_fmu_state()
+        state["fmi3"] = {"t": self._me_t, "x": None if self._me_x is None else list(self._me_x),
+                         "armed": list(self._armed)}
+        return state
+
+    def _set_fmu_state(self, state):
+        super()._set_fmu_state(state)
+        extra = state["fmi3"]
+        self._me_t, self._armed = extra["t"], list(extra["armed"])
+        self._me_x = None if extra["x"] is None else list(extra["x"])
+        self._stop = None
+        if self._mode == "me" and self._sim is not None:
+            self._stale()
+
+
+_CLASSES = {}
+
+
+def fmi3_class(slave_cls):
+    """The FMI 3.0 slave class for a slave file's class (same name and model), made once."""
+    cls = _CLASSES.get(slave_cls)
+    if cls is None:
+        cls = _CLASSES[slave_cls] = type(slave_cls.__name__, (Fmi3Slave, slave_cls),
+                                         {"__module__": slave_cls.__module__, "_tables": None})
+    return cls
