@@ -307,6 +307,19 @@ def test_cs_early_return_lands_on_the_fmi2_event_times(name, h):
         assert res["n_events"][rows[0]] == k - 1 and res["n_events"][rows[1]] == k
 
 
+def test_cs_early_return_without_event_mode_returns_after_the_jump():
+    """earlyReturnAllowed alone: the FMU handles each event itself and returns right after it."""
+    h = 0.1
+    res, _ = simulate3("PogoStick", fmi_type="CoSimulation", early_return_allowed=True, output_interval=h)
+    got = off_grid_times(res["time"], h)
+    ref = [t for _, t in fmi2_events("PogoStick")]
+    assert len(got) == len(ref) and max(abs(a - b) for a, b in zip(got, ref)) <= 1e-12
+    times = np.asarray(res["time"])
+    for k, t in enumerate(got, start=1):
+        rows = np.flatnonzero(times == t)
+        assert len(rows) == 1 and res["n_events"][rows[0]] == k  # one sample, after the jump
+
+
 @pytest.mark.parametrize("name", FMUS)
 def test_cs_without_event_mode_equals_fmi2(name):
     stop = min(2.0, float(md3(name).defaultExperiment.stopTime))
