@@ -226,6 +226,31 @@ def unit_definitions(used):
     return defs
 
 
+def _description_body(root, cls, variables):
+    """UnitDefinitions, LogCategories, DefaultExperiment (the same in FMI 2.0 and 3.0); returns the
+    empty ModelVariables element."""
+    model = cls.model
+    used = {v.unit for v in variables if v.type == "Real" and v.unit}
+    if used:
+        root.append(unit_definitions(used))
+    cats = ET.SubElement(root, "LogCategories")
+    for name, description in cls.log_categories.items():
+        ET.SubElement(cats, "Category", name=name, description=description)
+    ET.SubElement(root, "DefaultExperiment", startTime="0.0", stopTime=repr(float(model.default_stop_time)),
+                  stepSize=repr(float(model.default_step)))
+    return ET.SubElement(root, "ModelVariables")
+
+
+def _variable_attributes(model, v):
+    if not v.description:
+        raise BuildError(f"{model.name}: variable {v.name} has no description")
+    attrs = {"name": v.name, "valueReference": str(v.vr), "description": v.description,
+             "causality": v.causality, "variability": v.variability}
+    if v.causality == "parameter":
+        attrs["initial"] = "exact"
+    return attrs
+
+
 def model_description_fmi2(cls, token: str) -> bytes:
     model = cls.model
     variables = cls.variables()
@@ -242,22 +267,9 @@ def model_description_fmi2(cls, token: str) -> bytes:
         "canBeInstantiatedOnlyOncePerProcess": "false", "canNotUseMemoryManagementFunctions": "true",
         "canGetAndSetFMUstate": "true", "canSerializeFMUstate": "true",
         "providesDirectionalDerivative": "false"})
-    used = {v.unit for v in variables if v.type == "Real" and v.unit}
-    if used:
-        root.append(unit_definitions(used))
-    cats = ET.SubElement(root, "LogCategories")
-    for name, description in cls.log_categories.items():
-        ET.SubElement(cats, "Category", name=name, description=description)
-    ET.SubElement(root, "DefaultExperiment", startTime="0.0", stopTime=repr(float(model.default_stop_time)),
-                  stepSize=repr(float(model.default_step)))
-    mv = ET.SubElement(root, "ModelVariables")
+    mv = _description_body(root, cls, variables)
     for v in variables:
-        if not v.description:
-            raise BuildError(f"{model.name}: variable {v.name} has no description")
-        attrs = {"name": v.name, "valueReference": str(v.vr), "description": v.description,
-                 "causality": v.causality, "variability": v.variability}
-        if v.causality == "parameter":
-            attrs["initial"] = "exact"
+        attrs = _variable_attributes(model, v)
         sv = ET.SubElement(mv, "ScalarVariable", attrs)
         t = {}
         if v.type == "Real" and v.unit:
@@ -301,22 +313,9 @@ def model_description_fmi3(cls, token: str) -> bytes:
     ET.SubElement(root, "CoSimulation", dict(common, canHandleVariableCommunicationStepSize="true",
                                              hasEventMode="true", canReturnEarlyAfterIntermediateUpdate="false",
                                              providesIntermediateUpdate="false", maxOutputDerivativeOrder="0"))
-    used = {v.unit for v in variables if v.type == "Real" and v.unit}
-    if used:
-        root.append(unit_definitions(used))
-    cats = ET.SubElement(root, "LogCategories")
-    for name, description in cls.log_categories.items():
-        ET.SubElement(cats, "Category", name=name, description=description)
-    ET.SubElement(root, "DefaultExperiment", startTime="0.0", stopTime=repr(float(model.default_stop_time)),
-                  stepSize=repr(float(model.default_step)))
-    mv = ET.SubElement(root, "ModelVariables")
+    mv = _description_body(root, cls, variables)
     for v in variables:
-        if not v.description:
-            raise BuildError(f"{model.name}: variable {v.name} has no description")
-        attrs = {"name": v.name, "valueReference": str(v.vr), "description": v.description,
-                 "causality": v.causality, "variability": v.variability}
-        if v.causality == "parameter":
-            attrs["initial"] = "exact"
+        attrs = _variable_attributes(model, v)
         if v.type == "Real" and v.unit:
             attrs["unit"] = v.unit
         if v.start is not None:

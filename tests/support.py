@@ -207,3 +207,18 @@ def run_libcosim(name, stop_time, step, outputs, initial=None, timeout=120):
     proc = subprocess.run([sys.executable, str(script), payload], capture_output=True, text=True, timeout=timeout)
     assert proc.returncode == 0, f"libcosimpy run failed ({proc.returncode}): {proc.stderr[-2000:]}"
     return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def compile_c_host(source, exe):
+    """Compile a C importer of tests/c_host/ with the system compiler against fmpy's FMI headers;
+    assert it links no libpython (it must bring nothing but dlopen)."""
+    import shutil
+
+    import build_fmu
+
+    cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
+    subprocess.run([cc, "-O1", "-Wall", f"-I{build_fmu.fmi_headers()}", str(source), "-o", str(exe), "-ldl"],
+                   check=True)
+    needed = subprocess.run(["readelf", "-d", str(exe)], capture_output=True, text=True, check=True).stdout
+    assert "libpython" not in needed
+    return exe

@@ -10,8 +10,6 @@
 """
 import ctypes
 import math
-import os
-import shutil
 import subprocess
 import sys
 import zipfile
@@ -21,7 +19,7 @@ import numpy as np
 import pytest
 
 import build_fmu
-from support import DIST, ROOT, fmu_path, parse_event_log, reference_events, simulate
+from support import DIST, ROOT, compile_c_host, fmu_path, parse_event_log, reference_events, simulate
 
 FMUS = sorted(build_fmu.slave_class(s).__name__ for s in build_fmu.slave_files())
 WITH_EVENTS = ["Penetrator", "PogoStick", "PogoStickMem", "PogoStickSMA"]
@@ -332,13 +330,7 @@ def test_cs_without_event_mode_equals_fmi2(name):
 
 @pytest.fixture(scope="module")
 def c_host3(tmp_path_factory):
-    exe = tmp_path_factory.mktemp("c_host3") / "fmi3_host"
-    cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
-    subprocess.run([cc, "-O1", "-Wall", f"-I{build_fmu.fmi_headers()}", str(C_HOST_SOURCE), "-o", str(exe), "-ldl"],
-                   check=True)
-    needed = subprocess.run(["readelf", "-d", str(exe)], capture_output=True, text=True, check=True).stdout
-    assert "libpython" not in needed
-    return exe
+    return compile_c_host(C_HOST_SOURCE, tmp_path_factory.mktemp("c_host3") / "fmi3_host")
 
 
 def run_c_host3(exe, tmp_path, name, stop, h, events, params=()):

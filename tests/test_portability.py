@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 import build_fmu
-from support import DIST, ROOT, fmu_path, simulate
+from support import DIST, ROOT, compile_c_host, fmu_path, simulate
 
 FMUS = sorted(build_fmu.slave_class(s).__name__ for s in build_fmu.slave_files())
 C_HOST_SOURCE = ROOT / "tests" / "c_host" / "fmi2_host.c"
@@ -33,13 +33,7 @@ def model_description(name):
 
 @pytest.fixture(scope="session")
 def c_host(tmp_path_factory):
-    exe = tmp_path_factory.mktemp("c_host") / "fmi2_host"
-    cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
-    subprocess.run([cc, "-O1", "-Wall", f"-I{build_fmu.fmi_headers()}", str(C_HOST_SOURCE), "-o", str(exe), "-ldl"],
-                   check=True)
-    needed = subprocess.run(["readelf", "-d", str(exe)], capture_output=True, text=True, check=True).stdout
-    assert "libpython" not in needed
-    return exe
+    return compile_c_host(C_HOST_SOURCE, tmp_path_factory.mktemp("c_host") / "fmi2_host")
 
 
 @pytest.fixture(scope="session")

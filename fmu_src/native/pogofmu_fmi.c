@@ -1102,6 +1102,17 @@ static Status deserialize(Inst *in, const char *bytes, size_t size, void **state
     return st;
 }
 
+/* start time, stop time and tolerance to the Python side (None where not defined) */
+static Status setup_experiment(Inst *in, int tolerance_defined, double tolerance, double start, int stop_defined,
+                               double stop_time)
+{
+    GIL g = py.PyGILState_Ensure();
+    PyObject *stop = stop_defined ? py.PyFloat_FromDouble(stop_time) : (py.Py_IncRef(py.none), py.none);
+    PyObject *tol = tolerance_defined ? py.PyFloat_FromDouble(tolerance) : (py.Py_IncRef(py.none), py.none);
+    py.PyGILState_Release(g);
+    return call(in, "setup_experiment", NULL, NULL, "(dNN)", start, stop, tol);
+}
+
 static Status unsupported(Inst *in, const char *what)
 {
     char msg[256];
@@ -1153,11 +1164,7 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fm
                                fmi2Real startTime, fmi2Boolean stopTimeDefined, fmi2Real stopTime)
 {
     CHECK(c);
-    GIL g = py.PyGILState_Ensure();
-    PyObject *stop = stopTimeDefined ? py.PyFloat_FromDouble(stopTime) : (py.Py_IncRef(py.none), py.none);
-    PyObject *tol = toleranceDefined ? py.PyFloat_FromDouble(tolerance) : (py.Py_IncRef(py.none), py.none);
-    py.PyGILState_Release(g);
-    return call(INST, "setup_experiment", NULL, NULL, "(dNN)", startTime, stop, tol);
+    return setup_experiment(INST, toleranceDefined, tolerance, startTime, stopTimeDefined, stopTime);
 }
 
 fmi2Status fmi2EnterInitializationMode(fmi2Component c) { CHECK(c); return call(INST, "enter_initialization_mode", NULL, NULL, NULL); }
@@ -1427,11 +1434,7 @@ fmi3Status fmi3EnterInitializationMode(fmi3Instance c, fmi3Boolean toleranceDefi
                                        fmi3Float64 startTime, fmi3Boolean stopTimeDefined, fmi3Float64 stopTime)
 {
     CHECK(c);
-    GIL g = py.PyGILState_Ensure();
-    PyObject *stop = stopTimeDefined ? py.PyFloat_FromDouble(stopTime) : (py.Py_IncRef(py.none), py.none);
-    PyObject *tol = toleranceDefined ? py.PyFloat_FromDouble(tolerance) : (py.Py_IncRef(py.none), py.none);
-    py.PyGILState_Release(g);
-    Status st = call(INST, "setup_experiment", NULL, NULL, "(dNN)", startTime, stop, tol);
+    Status st = setup_experiment(INST, toleranceDefined, tolerance, startTime, stopTimeDefined, stopTime);
     if (st > ST_WARNING) return st;
     Status st2 = call(INST, "enter_initialization_mode", NULL, NULL, NULL);
     return st2 > st ? st2 : st;
