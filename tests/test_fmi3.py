@@ -159,6 +159,23 @@ def test_me_hopcontroller_outputs_equal_fmi2():
     assert res["F_ext"][-1] == ref["F_ext"][-1] and res["F_ext"][-1] > 0
 
 
+def test_me_outputs_follow_the_inputs_at_once():
+    """Model exchange has no steps: an output that feeds through from an input (the controller's
+    thrust) changes when the input is set (the control law, evaluated here independently)."""
+    inst = MEInstance("HopController", F_max=1000.0)
+    inst.set("y", 0.9)
+    inst.set("ydot", 0.5)
+    inst.set("s", 1)
+    m, g, k, c, x_i, h, tau = 1.0, 9.81, 100.0, 0.5, 1.0, 1.5, 0.02
+    E = 0.5 * m * 0.25 + m * g * 0.9 + 0.5 * k * (0.9 - x_i) ** 2
+    expected = c * 0.5 + (m * g * h - E) / (tau * 0.5)  # 526.4 N < F_max: not clipped
+    assert 0 < expected < 1000.0
+    assert inst.get("F_ext") == pytest.approx(expected, rel=1e-12)
+    inst.set("ydot", -0.5)  # compression: no thrust
+    assert inst.get("F_ext") == 0.0 and inst.get("phase") == 1
+    inst.fmu.freeInstance()
+
+
 class MEInstance:
     """One FMI 3.0 model-exchange instance driven by hand through fmpy's FMU3Model."""
 

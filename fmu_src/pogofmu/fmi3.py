@@ -164,6 +164,12 @@ class Fmi3Slave(HybridSlave):
                 out.setdefault(var.role[1], 0)
         return out
 
+    def _set(self, vrs, values, type_):
+        result = super()._set(vrs, values, type_)
+        if self._mode == "me" and self._inputs_changed and self._sim is not None:
+            self._stale()  # outputs, derivatives and indicators may feed through from the inputs
+        return result
+
     def _get(self, vrs, type_, convert):
         if self._me_stale:
             self._me_refresh()
