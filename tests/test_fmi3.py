@@ -242,6 +242,7 @@ def test_me_jumps_only_for_guards_crossed_in_their_direction():
     ix = {n: i for i, n in enumerate(names)}
     x = inst.states()
     assert list(inst.indicators()) == [x[ix["z"]], 1.0]  # touchdown guard z; liftoff inactive in flight
+    assert [inst.get("guard_touchdown"), inst.get("guard_liftoff")] == [x[ix["z"]], 1.0]
     # no crossing: nothing happens
     assert inst.update() == (False, False) and inst.get("s") == 0
     # the foot crossed the ground (falling): touchdown, xdot <- ydot, z <- 0

@@ -66,8 +66,9 @@ def indicator_name(event) -> str:
 def fmi3_variables(model: HybridModel) -> Tuple[FmiVariable, ...]:
     """FMI 2.0 variables, then state locals, derivatives and event indicators (module docstring).
 
-    Every variable an FMU computes has the role ``("output", name)``: its value is
-    ``outputs[name]`` of the adapter."""
+    Outputs, state locals and time have the role ``("output", name)`` (``outputs[name]`` of the
+    adapter, refreshed once per step and served from the launcher's buffers); derivatives and
+    indicators ``("derived", name)``, computed only when asked for."""
     out = list(fmi2_variables(model))
     names = {v.name for v in out}
     for var in model.states:
@@ -77,12 +78,12 @@ def fmi3_variables(model: HybridModel) -> Tuple[FmiVariable, ...]:
     for var in model.states:
         out.append(FmiVariable(f"der({var.name})", len(out), "Real", "local", "continuous",
                                f"time derivative of {var.name} ({var.description})", rate_unit(var.unit), None,
-                               ("output", f"der({var.name})")))
+                               ("derived", f"der({var.name})")))
     for ev in model.events:
         way = "falling: fires at > 0 -> <= 0" if ev.direction == FALLING else "rising: fires at < 0 -> >= 0"
         out.append(FmiVariable(indicator_name(ev), len(out), "Real", "local", "continuous",
                                f"event indicator of {ev.name}: its guard ({way}) while active, 1 while inactive",
-                               "", None, ("output", indicator_name(ev))))
+                               "", None, ("derived", indicator_name(ev))))
     out.append(FmiVariable("time", len(out), "Real", "independent", "continuous", "simulation time", "s", None,
                            ("output", "time")))
     return tuple(out)
@@ -145,17 +146,30 @@ class Fmi3Slave(HybridSlave):
 
     # ---- variables --------------------------------------------------------------------------
     def _complete_outputs(self, t, x, q, u, p, out):
+        out["time"] = t
+        for var, v in zip(type(self).model.states, x):
+            out[var.name] = v
+
+    def _derived(self):
+        """Derivatives and event indicators at the point the outputs describe."""
         model = type(self).model
         sim = self._sim
-        out["time"] = t
-        for var, v in zip(model.states, x):
-            out[var.name] = v
-        if model.states:
-            f = sim.fun(t, x) if sim is not None and q is sim.q and u is sim.u else model.flow(t, x, q, u, p)
-            for var, v in zip(model.states, f):
-                out[f"der({var.name})"] = v
+        if sim is None:
+            try:
+                p = Params(self._par)
+                x, q = model.initial(p)
+            except (ModelError, ArithmeticError, ValueError, TypeError):
+                return {v.role[1]: 0.0 for v in type(self).variables() if v.role[0] == "derived"}
+            t, u = self._t_start, tuple(self._u)
+        elif self._mode == "me":
+            t, x, q, u, p = self._me_t, self._me_x, sim.q, sim.u, sim.p
+        else:
+            t, x, q, u, p = sim.t_out, sim.x_out, sim.q_out, sim.u, sim.p
+        f = model.flow(t, x, q, u, p) if model.states else []
+        out = {f"der({var.name})": v for var, v in zip(model.states, f)}
         for ev in model.events:
             out[indicator_name(ev)] = ev.guard(x, q, u, p) if ev.active(q) else 1.0
+        return out
 
     def _initial_outputs(self):
         out = super()._initial_outputs()
@@ -173,7 +187,17 @@ class Fmi3Slave(HybridSlave):
     def _get(self, vrs, type_, convert):
         if self._me_stale:
             self._me_refresh()
-        return super()._get(vrs, type_, convert)
+        derived = None
+        values = []
+        for vr in vrs:
+            var = self._variable(vr, type_)
+            if var.role[0] == "derived":
+                if derived is None:
+                    derived = self._derived()
+                values.append(convert(derived[var.role[1]]))
+            else:
+                values += super()._get((vr,), type_, convert)
+        return values
 
     # ---- initialization ---------------------------------------------------------------------
     def exit_initialization_mode(self):
