@@ -21,8 +21,9 @@ import pytest
 import build_fmu
 from support import DIST, ROOT, compile_c_host, fmu_path, parse_event_log, reference_events, simulate
 
-FMUS = sorted(build_fmu.slave_class(s).__name__ for s in build_fmu.slave_files())
-WITH_EVENTS = ["Penetrator", "PogoStick", "PogoStickMem", "PogoStickSMA"]
+MODELS = {build_fmu.slave_class(s).__name__: build_fmu.slave_class(s).model for s in build_fmu.slave_files()}
+FMUS = sorted(MODELS)
+WITH_EVENTS = sorted(name for name, model in MODELS.items() if model.events)
 C_HOST_SOURCE = ROOT / "tests" / "c_host" / "fmi3_host.c"
 BARE_ENV = {"PATH": "/usr/bin:/bin", "LANG": "C.UTF-8"}
 
@@ -98,8 +99,7 @@ def test_fmi3_validates_and_offers_both_interfaces(name):
 def test_fmi3_keeps_the_fmi2_variables(name):
     """Same names, value references, types, causalities, units, descriptions and start values."""
     v3 = {v.name: v for v in md3(name).modelVariables}
-    model = build_fmu.slave_class(next(s for s in build_fmu.slave_files()
-                                       if build_fmu.slave_class(s).__name__ == name)).model
+    model = MODELS[name]
     for v in md2(name).modelVariables:
         w = v3[v.name]
         assert (w.valueReference, w.causality, w.variability, w.description) == \
@@ -429,6 +429,25 @@ def test_bad_parameter_is_an_error_naming_it_and_reset_recovers(name, interface)
     fmu.freeInstance()
 
 
+def test_unsupported_functions_are_errors_naming_the_function():
+    from fmpy.fmi1 import FMICallException
+
+    messages = []
+    fmu = cs_instance("PogoStick", messages)
+    fmu.enterInitializationMode(startTime=0.0)
+    fmu.exitInitializationMode()
+    y = next(v.valueReference for v in md3("PogoStick").modelVariables if v.name == "y")
+    with pytest.raises(FMICallException) as exc:
+        fmu.getDirectionalDerivative([y], [y], [1.0])
+    assert "(error)" in str(exc.value)
+    assert "fmi3GetDirectionalDerivative" in messages[-1][2] and "not supported" in messages[-1][2]
+    with pytest.raises(FMICallException):
+        fmu.getInt8([y])
+    assert "fmi3GetInt8: value reference" in messages[-1][2]
+    assert fmu.getFloat64([y]) == [1.5]  # the instance is still usable
+    fmu.freeInstance()
+
+
 @pytest.mark.parametrize("name", WITH_EVENTS)
 def test_cs_fmu_state_round_trip_with_event_mode(name):
     """Save before an event, run on, restore: the same event times and outputs again."""
@@ -481,31 +500,88 @@ def test_me_fmu_state_round_trip():
 
 SEVERAL = r"""
 import json, sys
-from fmpy import simulate_fmu
+from fmpy import extract, read_model_description, simulate_fmu
+from fmpy.fmi2 import FMU2Slave
+from fmpy.fmi3 import FMU3Slave
 dist = sys.argv[1]
-out = {}
-# FMI 2.0 and FMI 3.0 FMUs, model exchange and co-simulation, of several models in one process
+out = {"project_importable": []}
+for module in ("pogofmu", "pythonfmu"):
+    try:
+        __import__(module)
+        out["project_importable"].append(module)
+    except ImportError:
+        pass
+# 1. one after the other: FMI 2.0 and 3.0, model exchange and co-simulation, several models
 out["cs3"] = simulate_fmu(dist + "/fmi3/PogoStick.fmu", stop_time=2.0, output_interval=1e-2,
                           use_event_mode=True, early_return_allowed=True)["y"][-1]
 out["me3"] = simulate_fmu(dist + "/fmi3/Penetrator.fmu", stop_time=2.0, output_interval=1e-2,
                           fmi_type="ModelExchange", solver="CVode", relative_tolerance=1e-10)["y"][-1]
 out["cs2"] = simulate_fmu(dist + "/PogoStick.fmu", stop_time=2.0, output_interval=1e-2)["y"][-1]
 out["sma3"] = simulate_fmu(dist + "/fmi3/PogoStickSMA.fmu", stop_time=2.0, output_interval=1e-2)["y"][-1]
-out["cs3_again"] = simulate_fmu(dist + "/fmi3/PogoStick.fmu", stop_time=2.0, output_interval=1e-2,
-                                use_event_mode=True, early_return_allowed=True)["y"][-1]
+
+
+# 2. alive at once, stepped in turn: FMI 2.0 PogoStick, FMI 3.0 PogoStick (event mode), FMI 3.0 Penetrator
+def open_fmu(path, fmi3, name):
+    md = read_model_description(path)
+    cls = FMU3Slave if fmi3 else FMU2Slave
+    fmu = cls(guid=md.guid, unzipDirectory=extract(path), modelIdentifier=md.coSimulation.modelIdentifier,
+              instanceName=name)
+    if fmi3:
+        fmu.instantiate(eventModeUsed=True, earlyReturnAllowed=True)
+        fmu.enterInitializationMode(startTime=0.0)
+        fmu.exitInitializationMode()
+        fmu.updateDiscreteStates()
+        fmu.enterStepMode()
+    else:
+        fmu.instantiate()
+        fmu.setupExperiment(startTime=0.0)
+        fmu.enterInitializationMode()
+        fmu.exitInitializationMode()
+    y = next(v.valueReference for v in md.modelVariables if v.name == "y")
+    return fmu, y
+
+
+live = [(open_fmu(dist + "/PogoStick.fmu", False, "a"), False), (open_fmu(dist + "/fmi3/PogoStick.fmu", True, "b"), True),
+        (open_fmu(dist + "/fmi3/Penetrator.fmu", True, "c"), True)]
+times = [0.0] * len(live)
+for k in range(1, 2001):
+    for i, ((fmu, _), fmi3) in enumerate(live):
+        while times[i] < k * 1e-3:
+            if fmi3:
+                handle, _, early, last = fmu.doStep(times[i], k * 1e-3 - times[i])
+                times[i] = last if early else k * 1e-3
+                if handle:
+                    fmu.enterEventMode()
+                    fmu.updateDiscreteStates()
+                    fmu.enterStepMode()
+            else:
+                fmu.doStep(times[i], k * 1e-3 - times[i])
+                times[i] = k * 1e-3
+out["live"] = [(fmu.getReal if not fmi3 else fmu.getFloat64)([y])[0] for (fmu, y), fmi3 in live]
+for (fmu, _), _ in live:
+    fmu.terminate()
+    fmu.freeInstance()
 print(json.dumps(out))
 """
 
 
 def test_several_fmi2_and_fmi3_fmus_in_one_fresh_process():
+    """In a venv holding only fmpy and numpy (test_portability's), one after the other and alive at
+    once: every result equals the one of the same FMU run alone."""
     import json
 
-    proc = subprocess.run([sys.executable, "-c", SEVERAL, str(DIST)], capture_output=True, text=True, timeout=600)
+    from test_portability import _clean_venv
+
+    proc = subprocess.run([str(_clean_venv()), "-c", SEVERAL, str(DIST)], capture_output=True, text=True,
+                          timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
     got = json.loads(proc.stdout.strip().splitlines()[-1])
-    # co-simulation: FMI 3.0 == FMI 2.0 exactly (same engine); the repeated run is unaffected
-    assert got["cs3"] == got["cs2"] == got["cs3_again"]
-    ref_sma = simulate("PogoStickSMA", stop_time=2.0, output_interval=1e-2)["y"][-1]
-    assert got["sma3"] == ref_sma
+    assert got["project_importable"] == []
+    # co-simulation: FMI 3.0 == FMI 2.0 exactly (same engine, same step sequence)
+    ref_stick = simulate("PogoStick", stop_time=2.0, output_interval=1e-2)["y"][-1]
+    assert got["cs3"] == got["cs2"] == ref_stick
+    assert got["sma3"] == simulate("PogoStickSMA", stop_time=2.0, output_interval=1e-2)["y"][-1]
     ref_pen = simulate("Penetrator", stop_time=2.0, output_interval=1e-2)["y"][-1]
-    assert got["me3"] == pytest.approx(ref_pen, abs=1e-5)
+    assert got["me3"] == pytest.approx(ref_pen, abs=1e-6)
+    assert got["live"][0] == got["live"][1] == ref_stick
+    assert got["live"][2] == ref_pen
