@@ -17,6 +17,11 @@ For each slave file ``fmu_src/slave_*.py`` (one FMU each):
    definitions, descriptions, start values, InitialUnknowns) and ``fmpy.validation.validate_fmu``
    must report no problem, otherwise the build fails.
 
+Each slave file gives two FMUs: FMI 2.0 co-simulation in ``dist/<Model>.fmu`` and FMI 3.0 (model
+exchange and co-simulation with event mode, ``pogofmu.fmi3``) in ``dist/fmi3/<Model>.fmu``, whose
+only binary is the launcher built with ``-DPOGOFMU_FMI=3`` (no FMI 3.0 Windows binary: pythonfmu's
+speak FMI 2.0).
+
 The zip is deterministic: with SOURCE_DATE_EPOCH set, the same sources give the same FMU bytes.
 
 Then every ``ssp/<System>/SystemStructure.ssd`` is packed with its ``.ssv`` files and the FMUs
