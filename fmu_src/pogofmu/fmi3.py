@@ -255,6 +255,8 @@ class Fmi3Slave(HybridSlave):
 
     # ---- model exchange ---------------------------------------------------------------------
     def set_time(self, t):
+        if self._mode != "me":
+            raise FMUError("fmi3SetTime is a model-exchange function: this instance is a co-simulation instance")
         t = float(t)
         if not math.isfinite(t):
             raise FMUError(f"time = {t!r} violates the rule: a finite number")
@@ -262,6 +264,9 @@ class Fmi3Slave(HybridSlave):
         self._stale()
 
     def set_continuous_states(self, x):
+        if self._mode != "me":
+            raise FMUError("fmi3SetContinuousStates is a model-exchange function: this instance is a "
+                           "co-simulation instance")
         n = len(type(self).model.states)
         if len(x) != n:
             raise FMUError(f"{len(x)} continuous states given, {type(self).model.name} has {n}")
