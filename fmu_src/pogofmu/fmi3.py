@@ -89,12 +89,6 @@ def fmi3_variables(model: HybridModel) -> Tuple[FmiVariable, ...]:
     return tuple(out)
 
 
-def state_vrs(model: HybridModel, variables) -> Tuple[int, ...]:
-    """Value references of the continuous states, in the model's state order."""
-    by_name = {v.name: v.vr for v in variables}
-    return tuple(by_name[v.name] for v in model.states)
-
-
 def check_state_outputs(model: HybridModel):
     """An output that shares its name with a state is that state's variable in FMI 3.0: its value
     must be the state's (checked at the default initial state).  Returns a problem or None."""
@@ -111,6 +105,11 @@ def check_state_outputs(model: HybridModel):
 
 def _before_side(falling, g):
     return g > 0.0 if falling else g < 0.0
+
+
+def _indicators(events, x, q, u, p):
+    """Each event's guard where the event is active in mode ``q``, 1 (cannot cross zero) elsewhere."""
+    return [ev.guard(x, q, u, p) if ev.active(q) else 1.0 for ev in events]
 
 
 class Fmi3Slave(HybridSlave):
@@ -167,8 +166,7 @@ class Fmi3Slave(HybridSlave):
             t, x, q, u, p = sim.t_out, sim.x_out, sim.q_out, sim.u, sim.p
         f = model.flow(t, x, q, u, p) if model.states else []
         out = {f"der({var.name})": v for var, v in zip(model.states, f)}
-        for ev in model.events:
-            out[indicator_name(ev)] = ev.guard(x, q, u, p) if ev.active(q) else 1.0
+        out.update(zip(map(indicator_name, model.events), _indicators(model.events, x, q, u, p)))
         return out
 
     def _initial_outputs(self):
@@ -301,15 +299,11 @@ class Fmi3Slave(HybridSlave):
         sim = self._me_instance("fmi3GetEventIndicators")
         q, u, p, x = sim.q, sim.u, sim.p, self._me_x
         armed = self._armed
-        z = []
-        for k, ev in enumerate(type(self).model.events):
-            if ev.active(q):
-                g = ev.guard(x, q, u, p)
-                if not armed[k] and _before_side(ev.direction == FALLING, g):
-                    armed[k] = True
-                z.append(g)
-            else:
-                z.append(1.0)
+        events = type(self).model.events
+        z = _indicators(events, x, q, u, p)
+        for k, (ev, g) in enumerate(zip(events, z)):
+            if not armed[k] and ev.active(q) and _before_side(ev.direction == FALLING, g):
+                armed[k] = True  # seen on the side before its crossing: may fire
         return z
 
     def completed_integrator_step(self):
