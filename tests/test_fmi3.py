@@ -11,7 +11,6 @@
 import ctypes
 import math
 import subprocess
-import sys
 import zipfile
 from functools import lru_cache
 
