@@ -49,7 +49,7 @@ from operator import itemgetter
 from dataclasses import dataclass
 from typing import NamedTuple, Optional, Tuple
 
-from .engine import Simulator
+from .engine import Simulator, snapshot_from_data, snapshot_to_data
 from .model import HybridModel, ModelError, Params
 
 __all__ = ["HybridSlave", "FMUError", "FmiVariable", "fmi2_variables", "LOG_CATEGORIES"]
@@ -57,6 +57,10 @@ __all__ = ["HybridSlave", "FMUError", "FmiVariable", "fmi2_variables", "LOG_CATE
 OK, WARNING, DISCARD, ERROR, FATAL = 0, 1, 2, 3, 4
 MAX_INTERNAL_STEPS_PER_CALL = 1e8  # a communication step needing more is refused before any work
 _STATUS_NAMES = ("ok", "warning", "discard", "error", "fatal")
+_STATE_FORMAT = "pogofmu-fmu-state-1"
+# the package this module was imported as: "_pogofmu_<Model>_<hash>" inside an FMU (one name per
+# build of one model, see build_fmu.py), "pogofmu" from the source tree
+_BUILD = __name__.rpartition(".")[0]
 
 LOG_CATEGORIES = {
     "logStatusWarning": "messages with status Warning",
@@ -499,10 +503,34 @@ class HybridSlave:
         else:
             self._out = dict(state["out"])
 
-    @staticmethod
-    def _fmu_state_to_bytes(state):
-        raise FMUError("serialization of the FMU state is not available in this build", ERROR)
+    def _fmu_state_to_bytes(self, state):
+        """fmi2SerializeFMUstate: the state as JSON (floats exact through repr), tagged with the
+        model and the build it belongs to."""
+        try:
+            data = dict(state, sim=None if state["sim"] is None else snapshot_to_data(state["sim"]))
+            text = json.dumps({"format": _STATE_FORMAT, "model": type(self).model.name, "build": _BUILD,
+                               "state": data}, separators=(",", ":"))
+        except (TypeError, ValueError) as exc:
+            raise FMUError(f"fmi2SerializeFMUstate: the state cannot be serialized ({exc})") from None
+        return text.encode()
 
-    @staticmethod
-    def _fmu_state_from_bytes(data):
-        raise FMUError("serialization of the FMU state is not available in this build", ERROR)
+    def _fmu_state_from_bytes(self, data):
+        """fmi2DeSerializeFMUstate: the inverse of :meth:`_fmu_state_to_bytes`; a state of another
+        model or of another build of this FMU is refused with a message saying whose it is."""
+        model = type(self).model
+        try:
+            try:
+                doc = json.loads(bytes(data).decode())
+            except ValueError as exc:  # also UnicodeDecodeError
+                raise ValueError(f"not a serialized pogofmu FMU state ({len(data)} bytes; {exc})") from None
+            if not isinstance(doc, dict) or doc.get("format") != _STATE_FORMAT:
+                raise ValueError(f"not a serialized pogofmu FMU state ({len(data)} bytes)")
+            if doc.get("model") != model.name or doc.get("build") != _BUILD:
+                raise ValueError(f"it belongs to model {doc.get('model')!r}, build {doc.get('build')!r}; "
+                                 f"this FMU is model {model.name!r}, build {_BUILD!r}")
+            state = doc["state"]
+            if state["sim"] is not None:
+                state["sim"] = snapshot_from_data(model, state["sim"])
+        except (ValueError, KeyError, TypeError) as exc:
+            raise FMUError(f"fmi2DeSerializeFMUstate refused: {exc}") from None
+        return state
