@@ -357,6 +357,9 @@ class Simulator:
 
     def advance(self, t_target: float):
         """Integrate to ``t_target`` (handling every event on the way); return ``(x, q)`` there."""
+        if self.t_out <= t_target < self.t:  # the common call: inside the step taken ahead
+            self.t_out, self.x_out, self.q_out = t_target, self.seg(t_target), self.q
+            return self.x_out, self.q_out
         if t_target < self.t_out:
             raise ValueError(f"cannot go back in time: t = {t_target} < {self.t_out}")
         while True:

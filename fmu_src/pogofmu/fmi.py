@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import json
 import math
+import struct
 from array import array
 from operator import itemgetter
 from dataclasses import dataclass
@@ -144,6 +145,14 @@ def _last_event(sim):
     return sim.events[-1] if sim.events else None
 
 
+def _values_getter(names):
+    """``out -> tuple of out[name] for names`` (itemgetter returns a bare value for one name)."""
+    if len(names) == 1:
+        name = names[0]
+        return lambda out: (out[name],)
+    return itemgetter(*names) if names else (lambda out: ())
+
+
 class HybridSlave:
     """Generic FMI 2.0 co-simulation slave for a :class:`HybridModel` (set ``model`` in a subclass)."""
 
@@ -167,13 +176,17 @@ class HybridSlave:
         self._vars = by_vr
         self._real_out_names = [v.name for v in real_out]
         self._int_out_names = [v.name for v in int_out]
-        self._real_values = itemgetter(*self._real_out_names) if real_out else (lambda out: ())
-        self._int_values = itemgetter(*self._int_out_names) if int_out else (lambda out: ())
+        # output values in buffer order, packed into the buffers in one call each
+        self._real_values = _values_getter(self._real_out_names)
+        self._int_values = _values_getter(self._int_out_names)
         self._real_out_vrs = tuple(v.vr for v in real_out)
         self._int_out_vrs = tuple(v.vr for v in int_out)
         self._rbuf = array("d", bytes(8 * len(real_out)))
         self._ibuf = array("i", [0] * len(int_out))
         self._ctl = array("i", [0])  # _ctl[0] = 1: the buffers hold the current outputs
+        self._rview, self._iview = memoryview(self._rbuf).cast("B"), memoryview(self._ibuf).cast("B")
+        self._pack_reals = struct.Struct(f"={len(real_out)}d").pack_into
+        self._pack_ints = struct.Struct(f"={len(int_out)}i").pack_into
         self._reset_state()
 
     @classmethod
@@ -325,15 +338,8 @@ class HybridSlave:
         else:
             out["t_last_event"], out["last_event"] = last.time, last.index + 1
         self._out = out
-        rbuf, ibuf = self._rbuf, self._ibuf
-        if len(rbuf) > 1:
-            rbuf[:] = array("d", self._real_values(out))
-        elif rbuf:
-            rbuf[0] = self._real_values(out)
-        if len(ibuf) > 1:
-            ibuf[:] = array("i", self._int_values(out))
-        elif ibuf:
-            ibuf[0] = self._int_values(out)
+        self._pack_reals(self._rview, 0, *self._real_values(out))
+        self._pack_ints(self._iview, 0, *self._int_values(out))
         self._ctl[0] = 1
 
     # ---- FMI calls ----------------------------------------------------------------------------
