@@ -22,8 +22,8 @@ Two like-for-like peers, both judged against the target:
 information: it mostly measures fmpy recording 14 outputs instead of one (the floor-io column
 shows that cost alone).
 
-A third peer, the C importer (issue 8): ``c_host/fmi2_record.c``, compiled here with the system
-compiler, loads the FMU's binary with ``dlopen(RTLD_LOCAL)`` in a process with no Python (the
+A third peer, the C importer (issue 8): the tests' C host ``tests/c_host/fmi2_host.c``, compiled
+here with the system compiler and ``-DRECORD_IN_MEMORY``, loads the FMU's binary with ``dlopen(RTLD_LOCAL)`` in a process with no Python (the
 launcher brings its own interpreter) and records every output at every point in memory, as
 fmpy does.  Its CPU time (``getrusage`` of the child) is compared with fmpy's *per communication
 step*: the fixed costs of each (fmpy reading and extracting the FMU; the C host starting an
@@ -147,8 +147,8 @@ def compile_c_host(dest: Path) -> Path:
 
     exe = dest / "fmi2_record"
     cc = shutil.which("cc") or shutil.which("gcc")
-    subprocess.run([cc, "-O2", f"-I{build_fmu.fmi_headers()}", str(HERE / "c_host" / "fmi2_record.c"),
-                    "-o", str(exe), "-ldl"], check=True)
+    subprocess.run([cc, "-O2", "-DRECORD_IN_MEMORY", f"-I{build_fmu.fmi_headers()}",
+                    str(ROOT / "tests" / "c_host" / "fmi2_host.c"), "-o", str(exe), "-ldl"], check=True)
     return exe
 
 
