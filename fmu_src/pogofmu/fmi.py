@@ -44,12 +44,13 @@ from __future__ import annotations
 
 import json
 import math
+import struct
 from array import array
 from operator import itemgetter
 from dataclasses import dataclass
 from typing import NamedTuple, Optional, Tuple
 
-from .engine import Simulator
+from .engine import Simulator, snapshot_from_data, snapshot_to_data
 from .model import HybridModel, ModelError, Params
 
 __all__ = ["HybridSlave", "FMUError", "FmiVariable", "fmi2_variables", "LOG_CATEGORIES"]
@@ -57,6 +58,10 @@ __all__ = ["HybridSlave", "FMUError", "FmiVariable", "fmi2_variables", "LOG_CATE
 OK, WARNING, DISCARD, ERROR, FATAL = 0, 1, 2, 3, 4
 MAX_INTERNAL_STEPS_PER_CALL = 1e8  # a communication step needing more is refused before any work
 _STATUS_NAMES = ("ok", "warning", "discard", "error", "fatal")
+_STATE_FORMAT = "pogofmu-fmu-state-1"
+# the package this module was imported as: "_pogofmu_<Model>_<hash>" inside an FMU (one name per
+# build of one model, see build_fmu.py), "pogofmu" from the source tree
+_BUILD = __name__.rpartition(".")[0]
 
 LOG_CATEGORIES = {
     "logStatusWarning": "messages with status Warning",
@@ -140,6 +145,14 @@ def _last_event(sim):
     return sim.events[-1] if sim.events else None
 
 
+def _values_getter(names):
+    """``out -> tuple of out[name] for names`` (itemgetter returns a bare value for one name)."""
+    if len(names) == 1:
+        name = names[0]
+        return lambda out: (out[name],)
+    return itemgetter(*names) if names else (lambda out: ())
+
+
 class HybridSlave:
     """Generic FMI 2.0 co-simulation slave for a :class:`HybridModel` (set ``model`` in a subclass)."""
 
@@ -163,13 +176,17 @@ class HybridSlave:
         self._vars = by_vr
         self._real_out_names = [v.name for v in real_out]
         self._int_out_names = [v.name for v in int_out]
-        self._real_values = itemgetter(*self._real_out_names) if real_out else (lambda out: ())
-        self._int_values = itemgetter(*self._int_out_names) if int_out else (lambda out: ())
+        # output values in buffer order, packed into the buffers in one call each
+        self._real_values = _values_getter(self._real_out_names)
+        self._int_values = _values_getter(self._int_out_names)
         self._real_out_vrs = tuple(v.vr for v in real_out)
         self._int_out_vrs = tuple(v.vr for v in int_out)
         self._rbuf = array("d", bytes(8 * len(real_out)))
         self._ibuf = array("i", [0] * len(int_out))
         self._ctl = array("i", [0])  # _ctl[0] = 1: the buffers hold the current outputs
+        self._rview, self._iview = memoryview(self._rbuf).cast("B"), memoryview(self._ibuf).cast("B")
+        self._pack_reals = struct.Struct(f"={len(real_out)}d").pack_into
+        self._pack_ints = struct.Struct(f"={len(int_out)}i").pack_into
         self._reset_state()
 
     @classmethod
@@ -323,15 +340,8 @@ class HybridSlave:
             out["t_last_event"], out["last_event"] = last.time, last.index + 1
         self._complete_outputs(sim.t_out, sim.x_out, sim.q_out, sim.u, sim.p, out)
         self._out = out
-        rbuf, ibuf = self._rbuf, self._ibuf
-        if len(rbuf) > 1:
-            rbuf[:] = array("d", self._real_values(out))
-        elif rbuf:
-            rbuf[0] = self._real_values(out)
-        if len(ibuf) > 1:
-            ibuf[:] = array("i", self._int_values(out))
-        elif ibuf:
-            ibuf[0] = self._int_values(out)
+        self._pack_reals(self._rview, 0, *self._real_values(out))
+        self._pack_ints(self._iview, 0, *self._int_values(out))
         self._ctl[0] = 1
 
     def _complete_outputs(self, t, x, q, u, p, out):
@@ -508,10 +518,34 @@ class HybridSlave:
         else:
             self._out = dict(state["out"])
 
-    @staticmethod
-    def _fmu_state_to_bytes(state):
-        raise FMUError("serialization of the FMU state is not available in this build", ERROR)
+    def _fmu_state_to_bytes(self, state):
+        """fmi2SerializeFMUstate: the state as JSON (floats exact through repr), tagged with the
+        model and the build it belongs to."""
+        try:
+            data = dict(state, sim=None if state["sim"] is None else snapshot_to_data(state["sim"]))
+            text = json.dumps({"format": _STATE_FORMAT, "model": type(self).model.name, "build": _BUILD,
+                               "state": data}, separators=(",", ":"))
+        except (TypeError, ValueError) as exc:
+            raise FMUError(f"fmi2SerializeFMUstate: the state cannot be serialized ({exc})") from None
+        return text.encode()
 
-    @staticmethod
-    def _fmu_state_from_bytes(data):
-        raise FMUError("serialization of the FMU state is not available in this build", ERROR)
+    def _fmu_state_from_bytes(self, data):
+        """fmi2DeSerializeFMUstate: the inverse of :meth:`_fmu_state_to_bytes`; a state of another
+        model or of another build of this FMU is refused with a message saying whose it is."""
+        model = type(self).model
+        try:
+            try:
+                doc = json.loads(bytes(data).decode())
+            except ValueError as exc:  # also UnicodeDecodeError
+                raise ValueError(f"not a serialized pogofmu FMU state ({len(data)} bytes; {exc})") from None
+            if not isinstance(doc, dict) or doc.get("format") != _STATE_FORMAT:
+                raise ValueError(f"not a serialized pogofmu FMU state ({len(data)} bytes)")
+            if doc.get("model") != model.name or doc.get("build") != _BUILD:
+                raise ValueError(f"it belongs to model {doc.get('model')!r}, build {doc.get('build')!r}; "
+                                 f"this FMU is model {model.name!r}, build {_BUILD!r}")
+            state = doc["state"]
+            if state["sim"] is not None:
+                state["sim"] = snapshot_from_data(model, state["sim"])
+        except (ValueError, KeyError, TypeError) as exc:
+            raise FMUError(f"fmi2DeSerializeFMUstate refused: {exc}") from None
+        return state

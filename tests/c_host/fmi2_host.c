@@ -5,7 +5,10 @@
  * REAL_VRS / INT_VRS: comma-separated value references to read after every step ("-" for none);
  * VR=VALUE: Real parameters set before initialization.  Prints one CSV line per communication
  * point: time, the reals (%.17g), the integers.  The FMU's log goes to stderr.  Exit status 0 if
- * the run reached STOP, 1 otherwise. */
+ * the run reached STOP, 1 otherwise.
+ *
+ * Built with -DRECORD_IN_MEMORY (benchmark (b), benchmarks/bench_fmu.py) it keeps every value in
+ * memory instead, as fmpy's simulate_fmu does, and prints one summary line at the end. */
 #include <dlfcn.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -54,9 +57,17 @@ int main(int argc, char **argv)
     double stop = atof(argv[4]), h = atof(argv[5]);
     fmi2ValueReference rv[256], iv[256];
     size_t nr = parse_vrs(argv[6], rv), ni = parse_vrs(argv[7], iv);
+    long steps = (long)(stop / h + 0.5);
+#ifdef RECORD_IN_MEMORY
+    double *r_all = malloc(sizeof(double) * (size_t)(steps + 1) * (nr + 1));
+    int *n_all = malloc(sizeof(int) * (size_t)(steps + 1) * (ni + 1));
+    if (!r_all || !n_all) return 4;
+#else
     double r[256];
     int n[256];
+#endif
     int rc = 1;
+    long k = 0;
     if (fmi2SetupExperiment(c, fmi2False, 0.0, 0.0, fmi2True, stop) > fmi2Warning) goto done;
     if (fmi2EnterInitializationMode(c) > fmi2Warning) goto done;
     for (int a = 8; a < argc; ++a) {
@@ -65,19 +76,30 @@ int main(int argc, char **argv)
         if (fmi2SetReal(c, &vr, 1, &v) > fmi2Warning) goto done;
     }
     if (fmi2ExitInitializationMode(c) > fmi2Warning) goto done;
-    long steps = (long)(stop / h + 0.5);
-    for (long k = 0; k <= steps; ++k) {
+    for (k = 0; k <= steps; ++k) {
         double t = k * h;
         if (k > 0 && fmi2DoStep(c, (k - 1) * h, t - (k - 1) * h, fmi2True) > fmi2Warning) goto done;
+#ifdef RECORD_IN_MEMORY
+        double *r = r_all + k * (long)(nr + 1);
+        int *n = n_all + k * (long)(ni + 1);
+        r[nr] = t;
+#endif
         if (fmi2GetReal(c, rv, nr, r) > fmi2Warning || fmi2GetInteger(c, iv, ni, n) > fmi2Warning) goto done;
+#ifndef RECORD_IN_MEMORY
         printf("%.17g", t);
         for (size_t i = 0; i < nr; ++i) printf(",%.17g", r[i]);
         for (size_t i = 0; i < ni; ++i) printf(",%d", n[i]);
         putchar('\n');
+#endif
     }
     rc = 0;
     fmi2Terminate(c);
 done:
+#ifdef RECORD_IN_MEMORY
+    printf("recorded %ld points, last t = %.17g\n", k, k ? r_all[(k - 1) * (long)(nr + 1) + nr] : 0.0);
+    free(r_all);
+    free(n_all);
+#endif
     fmi2FreeInstance(c);
     dlclose(lib);
     return rc;
