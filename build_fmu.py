@@ -311,7 +311,7 @@ def model_description_fmi3(cls, token: str) -> bytes:
         "description": model.description, "author": cls.author, "license": cls.license,
         "version": project_version(), "generationTool": f"pogofmu {project_version()} (build_fmu.py)",
         "generationDateAndTime": _build_date(), "variableNamingConvention": "flat"})
-    common = {"modelIdentifier": model.name, "canGetAndSetFMUState": "true", "canSerializeFMUState": "false",
+    common = {"modelIdentifier": model.name, "canGetAndSetFMUState": "true", "canSerializeFMUState": "true",
               "providesDirectionalDerivatives": "false", "providesAdjointDerivatives": "false",
               "canBeInstantiatedOnlyOncePerProcess": "false"}
     ET.SubElement(root, "ModelExchange", dict(common, needsCompletedIntegratorStep="true"))

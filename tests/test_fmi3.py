@@ -447,38 +447,65 @@ def test_unsupported_functions_are_errors_naming_the_function():
     fmu.freeInstance()
 
 
-@pytest.mark.parametrize("name", WITH_EVENTS)
-def test_cs_fmu_state_round_trip_with_event_mode(name):
-    """Save before an event, run on, restore: the same event times and outputs again."""
-    messages = []
+def cs_start(name, messages):
+    """A co-simulation instance with event mode and early return, initialized, in Step Mode."""
     fmu = cs_instance(name, messages, event_mode=True)
-    outs = [v.valueReference for v in md3(name).modelVariables if v.causality == "output" and v.type == "Float64"]
     fmu.enterInitializationMode(startTime=0.0)
     fmu.exitInitializationMode()
     fmu.updateDiscreteStates()
     fmu.enterStepMode()
+    return fmu
 
-    def run(t, t_end, h=0.05):
-        seen = []
-        while t < t_end - 1e-12:
-            target = min(t_end, (round(t / h + 1e-9) + 1) * h) if abs(t / h - round(t / h)) > 1e-9 else t + h
-            handle, _, early, last = fmu.doStep(currentCommunicationPoint=t, communicationStepSize=target - t)
-            t = last if early else target
-            if handle:
-                seen.append(last)
-                fmu.enterEventMode()
-                fmu.updateDiscreteStates()
-                fmu.enterStepMode()
-        return t, seen, fmu.getFloat64(outs)
 
-    t, _, _ = run(0.0, 0.2)
+def cs_run(fmu, name, t, t_end, h=0.05, stop_at_first_event=False):
+    """Step on the grid k*h from t to t_end (early returns in between); return (t, event times,
+    outputs)."""
+    outs = [v.valueReference for v in md3(name).modelVariables if v.causality == "output" and v.type == "Float64"]
+    seen = []
+    while t < t_end - 1e-12:
+        target = min(t_end, (math.floor(t / h + 1e-9) + 1) * h)
+        handle, _, early, last = fmu.doStep(currentCommunicationPoint=t, communicationStepSize=target - t)
+        t = last if early else target
+        if handle:
+            seen.append(last)
+            if stop_at_first_event:
+                break  # paused at the event, before its jump (Event Mode not entered yet)
+            fmu.enterEventMode()
+            fmu.updateDiscreteStates()
+            fmu.enterStepMode()
+    return t, seen, fmu.getFloat64(outs)
+
+
+@pytest.mark.parametrize("name", WITH_EVENTS)
+def test_cs_fmu_state_round_trip_with_event_mode(name):
+    """Save between events, run on, restore: the same event times and outputs again."""
+    fmu = cs_start(name, [])
+    t, _, _ = cs_run(fmu, name, 0.0, 0.2)
     state = fmu.getFMUState()
-    first = run(t, 2.0)
+    first = cs_run(fmu, name, t, 2.0)
     fmu.setFMUState(state)
-    second = run(t, 2.0)
+    second = cs_run(fmu, name, t, 2.0)
     assert first[1] and first == second
     fmu.freeFMUState(state)
     fmu.freeInstance()
+
+
+@pytest.mark.parametrize("name", WITH_EVENTS)
+def test_cs_serialized_state_at_an_event_restores_in_a_fresh_instance(name):
+    """Paused at the first event, before its jump: the serialized state, deserialized into a
+    fresh instance, applies the same jump and runs on bit for bit."""
+    a, b = cs_start(name, []), cs_start(name, [])
+    t, seen, _ = cs_run(a, name, 0.0, 5.0, stop_at_first_event=True)
+    assert seen and t == seen[0]
+    blob = a.serializeFMUState(a.getFMUState())
+    b.setFMUState(b.deserializeFMUState(blob))
+    for fmu in (a, b):
+        fmu.enterEventMode()
+        fmu.updateDiscreteStates()
+        fmu.enterStepMode()
+    assert cs_run(a, name, t, 3.0) == cs_run(b, name, t, 3.0)
+    a.freeInstance()
+    b.freeInstance()
 
 
 def test_me_fmu_state_round_trip():
@@ -490,10 +517,18 @@ def test_me_fmu_state_round_trip():
     inst.fmu.setTime(0.33)
     inst.set_states(x)
     assert inst.update() == (True, False) and inst.get("s") == 1
+    blob = inst.fmu.serializeFMUState(inst.fmu.getFMUState())  # in contact, one event done
     inst.fmu.setFMUState(state)
     assert np.array_equal(inst.states(), x0) and inst.get("s") == 0 and inst.get("n_events") == 0
     assert inst.get("time") == 0.0
     inst.fmu.freeFMUState(state)
+    fresh = MEInstance("PogoStick")
+    fresh.fmu.setFMUState(fresh.fmu.deserializeFMUState(blob))
+    expected = x.copy()
+    expected[1], expected[4] = x[3], 0.0  # the touchdown's jump: xdot <- ydot, z <- 0
+    assert np.array_equal(fresh.states(), expected) and fresh.get("s") == 1 and fresh.get("n_events") == 1
+    assert fresh.get("time") == 0.33
+    fresh.fmu.freeInstance()
     inst.fmu.freeInstance()
 
 
