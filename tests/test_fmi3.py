@@ -533,18 +533,12 @@ def test_me_fmu_state_round_trip():
 
 
 SEVERAL = r"""
-import json, sys
+import importlib.util, json, sys
 from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave
 dist = sys.argv[1]
-out = {"project_importable": []}
-for module in ("pogofmu", "pythonfmu"):
-    try:
-        __import__(module)
-        out["project_importable"].append(module)
-    except ImportError:
-        pass
+out = {"project_importable": [m for m in ("pogofmu", "pythonfmu") if importlib.util.find_spec(m)]}
 # 1. one after the other: FMI 2.0 and 3.0, model exchange and co-simulation, several models
 out["cs3"] = simulate_fmu(dist + "/fmi3/PogoStick.fmu", stop_time=2.0, output_interval=1e-2,
                           use_event_mode=True, early_return_allowed=True)["y"][-1]
