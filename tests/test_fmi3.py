@@ -374,6 +374,20 @@ def test_c_host_early_return_lands_on_the_fmi2_event_times(name, h, c_host3, tmp
     assert lines[-1] == f"end,{stop!r}" or float(lines[-1].split(",")[1]) == pytest.approx(stop, abs=1e-9)
 
 
+def test_c_host_model_exchange_with_its_own_euler_integrator(c_host3, tmp_path):
+    """Model exchange from C: explicit Euler (h = 1e-5 s) and sign changes of the indicators
+    between steps; every event it meets is a jump (no spurious one), at the closed-form times to
+    the first-order accuracy of Euler."""
+    proc = run_c_host3(c_host3, tmp_path, "PogoStick", 2.0, 1e-5, 2)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    events = [line.split(",") for line in proc.stdout.splitlines() if line.startswith("event,")]
+    ref = [r["time"] for r in reference_events() if r["time"] < 2.0]
+    assert len(events) == len(ref) == 4
+    assert all(changed == "1" for _, _, changed in events)
+    assert max(abs(float(t) - r) for (_, t, _), r in zip(events, ref)) < 1e-3
+    assert proc.stdout.splitlines()[-1] == "end,2"
+
+
 def test_c_host_bad_parameter_is_refused_with_its_name(c_host3, tmp_path):
     m = next(v for v in md3("PogoStick").modelVariables if v.name == "m")
     proc = run_c_host3(c_host3, tmp_path, "PogoStick", 1.0, 0.1, True, [f"{m.valueReference}=-1"])

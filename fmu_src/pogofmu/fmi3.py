@@ -24,7 +24,9 @@ fires when it is ``<= 0`` and was ``> 0`` at some indicator evaluation since the
 leaves zero, the engine's restart rule.  A sign change in the wrong direction applies nothing.
 ``valuesOfContinuousStatesChanged`` is true exactly when the jump changed a state;
 ``nominalsOfContinuousStatesChanged`` is always false (nominals are 1).  The domain of the model
-is checked in ``fmi3CompletedIntegratorStep``, event storms and domain at each event.
+is checked in ``fmi3CompletedIntegratorStep`` (which asks for Event Mode instead when an armed
+guard has crossed: a state a step past an event may lie outside the domain until the jump),
+event storms and domain at each event.
 
 Co-simulation (``fmi3InstantiateCoSimulation``): the engine inside, as in FMI 2.0.  With
 ``earlyReturnAllowed`` ``fmi3DoStep`` stops at the first event of the step, at its exact time
@@ -307,13 +309,22 @@ class Fmi3Slave(HybridSlave):
         return z
 
     def completed_integrator_step(self):
+        """(enterEventMode, terminateSimulation).  An armed guard on its after side asks for Event
+        Mode (the importer's step ended past an event; the state may lie a step beyond the guard,
+        outside the domain, until the jump); otherwise the model's domain is checked."""
         sim = self._me_instance("fmi3CompletedIntegratorStep")
+        events = type(self).model.events
+        pending = False
+        for k, (ev, g) in enumerate(zip(events, self.get_event_indicators())):
+            pending |= self._armed[k] and ev.active(sim.q) and not _before_side(ev.direction == FALLING, g)
+        if pending:
+            return (True, False)
         msg = type(self).model.domain(self._me_t, self._me_x, sim.q, sim.u, sim.p)
         if msg is not None or not all(map(math.isfinite, self._me_x)):
             self._failed = (f"{type(self).model.name}: the trajectory left the model's domain at t = "
                             f"{self._me_t:.10g} s: {msg or 'the state became non-finite'}")
             raise FMUError(self._failed, ERROR)
-        return (False, False)  # enterEventMode, terminateSimulation
+        return (False, False)
 
     def _me_update(self):
         sim = self._me_instance("fmi3UpdateDiscreteStates")

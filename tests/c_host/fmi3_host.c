@@ -2,6 +2,10 @@
  *
  *   fmi3_host UNZIPDIR MODEL_ID TOKEN STOP STEP EVENTS [VR=VALUE ...]
  *
+ * EVENTS = 2: model exchange instead, integrated by explicit Euler with step STEP; a sign change
+ * of an event indicator between two steps enters Event Mode; prints
+ * "event,<time>,<valuesOfContinuousStatesChanged>" for each.
+ *
  * EVENTS = 1: instantiate with eventModeUsed and earlyReturnAllowed; after every fmi3DoStep that
  * reports eventHandlingNeeded, run Event Mode (fmi3EnterEventMode, fmi3UpdateDiscreteStates until
  * done, fmi3EnterStepMode) and print "event,<lastSuccessfulTime %.17g>,<earlyReturn>".  After an
@@ -23,6 +27,69 @@ static void logger(fmi3InstanceEnvironment env, fmi3Status status, fmi3String ca
 
 #define LOAD(name) name##TYPE *name = (name##TYPE *)dlsym(lib, #name); if (!name) { fprintf(stderr, "missing %s\n", #name); return 2; }
 
+#define MAXN 64
+
+static int model_exchange(void *lib, char **argv, int argc, const char *resources, double stop, double h)
+{
+    LOAD(fmi3InstantiateModelExchange) LOAD(fmi3EnterInitializationMode) LOAD(fmi3ExitInitializationMode)
+    LOAD(fmi3SetFloat64) LOAD(fmi3EnterEventMode) LOAD(fmi3UpdateDiscreteStates) LOAD(fmi3EnterContinuousTimeMode)
+    LOAD(fmi3GetNumberOfContinuousStates) LOAD(fmi3GetNumberOfEventIndicators) LOAD(fmi3GetContinuousStates)
+    LOAD(fmi3SetContinuousStates) LOAD(fmi3GetContinuousStateDerivatives) LOAD(fmi3GetEventIndicators)
+    LOAD(fmi3SetTime) LOAD(fmi3CompletedIntegratorStep) LOAD(fmi3Terminate) LOAD(fmi3FreeInstance)
+    fmi3Instance c = fmi3InstantiateModelExchange("host", argv[3], resources, fmi3False, fmi3False, NULL, logger);
+    if (!c) { fprintf(stderr, "fmi3InstantiateModelExchange returned NULL\n"); return 3; }
+    int rc = 1;
+    size_t nx = 0, nz = 0;
+    double x[MAXN], dx[MAXN], z[MAXN], znew[MAXN], next_time, t = 0.0;
+    fmi3Boolean more, terminate, nominals, values, next_defined, enter, changed;
+    if (fmi3EnterInitializationMode(c, fmi3False, 0.0, 0.0, fmi3True, stop) > fmi3Warning) goto done;
+    for (int a = 7; a < argc; ++a) {
+        fmi3ValueReference vr = (fmi3ValueReference)strtoul(argv[a], NULL, 10);
+        double v = atof(strchr(argv[a], '=') + 1);
+        if (fmi3SetFloat64(c, &vr, 1, &v, 1) > fmi3Warning) goto done;
+    }
+    if (fmi3ExitInitializationMode(c) > fmi3Warning) goto done;
+    if (fmi3GetNumberOfContinuousStates(c, &nx) > fmi3Warning || fmi3GetNumberOfEventIndicators(c, &nz) > fmi3Warning) goto done;
+    if (nx > MAXN || nz > MAXN) goto done;
+    do {
+        if (fmi3UpdateDiscreteStates(c, &more, &terminate, &nominals, &values, &next_defined, &next_time) > fmi3Warning) goto done;
+    } while (more && !terminate);
+    if (fmi3EnterContinuousTimeMode(c) > fmi3Warning) goto done;
+    if (fmi3GetContinuousStates(c, x, nx) > fmi3Warning || fmi3GetEventIndicators(c, z, nz) > fmi3Warning) goto done;
+    long steps = (long)(stop / h + 0.5);
+    for (long k = 1; k <= steps; ++k) {
+        if (fmi3GetContinuousStateDerivatives(c, dx, nx) > fmi3Warning) goto done;
+        for (size_t i = 0; i < nx; ++i) x[i] += h * dx[i];
+        t = k * h;
+        if (fmi3SetTime(c, t) > fmi3Warning || fmi3SetContinuousStates(c, x, nx) > fmi3Warning) goto done;
+        if (fmi3GetEventIndicators(c, znew, nz) > fmi3Warning) goto done;
+        if (fmi3CompletedIntegratorStep(c, fmi3True, &enter, &terminate) > fmi3Warning) goto done;
+        int crossed = 0;
+        for (size_t i = 0; i < nz; ++i)
+            crossed |= (z[i] > 0 && znew[i] <= 0) || (z[i] < 0 && znew[i] >= 0);
+        if (crossed || enter) {
+            if (fmi3EnterEventMode(c) > fmi3Warning) goto done;
+            changed = fmi3False;
+            do {
+                if (fmi3UpdateDiscreteStates(c, &more, &terminate, &nominals, &values, &next_defined, &next_time) > fmi3Warning) goto done;
+                changed |= values;
+            } while (more && !terminate);
+            if (fmi3EnterContinuousTimeMode(c) > fmi3Warning) goto done;
+            if (fmi3GetContinuousStates(c, x, nx) > fmi3Warning || fmi3GetEventIndicators(c, znew, nz) > fmi3Warning) goto done;
+            printf("event,%.17g,%d\n", t, (int)changed);
+        }
+        memcpy(z, znew, nz * sizeof *z);
+        if (terminate) break;
+    }
+    printf("end,%.17g\n", t);
+    rc = 0;
+    fmi3Terminate(c);
+done:
+    fmi3FreeInstance(c);
+    dlclose(lib);
+    return rc;
+}
+
 int main(int argc, char **argv)
 {
     if (argc < 7) { fprintf(stderr, "usage: see the source\n"); return 2; }
@@ -36,6 +103,7 @@ int main(int argc, char **argv)
     snprintf(resources, sizeof resources, "%s/resources/", argv[1]);
     double stop = atof(argv[4]), h = atof(argv[5]);
     int events = atoi(argv[6]);
+    if (events == 2) return model_exchange(lib, argv, argc, resources, stop, h);
     fmi3Instance c = fmi3InstantiateCoSimulation("host", argv[3], resources, fmi3False, fmi3False, events, events,
                                                  NULL, 0, NULL, logger, NULL);
     if (!c) { fprintf(stderr, "fmi3InstantiateCoSimulation returned NULL\n"); return 3; }
