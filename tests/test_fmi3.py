@@ -175,6 +175,24 @@ def test_me_outputs_follow_the_inputs_at_once():
     inst.fmu.freeInstance()
 
 
+def test_me_leg_bottoming_out_is_an_error_with_condition_and_time():
+    """PogoStickMem, softening leg beta = 5 (README: bottoms out at t = 4.989 s in FMI 2.0):
+    under CVode the run ends in fmi3Error naming the condition, at the importer's step there."""
+    from fmpy import simulate_fmu
+    from fmpy.fmi1 import FMICallException
+
+    messages = []
+    with pytest.raises(FMICallException) as exc:
+        simulate_fmu(str(fmu3_path("PogoStickMem")), fmi_type="ModelExchange", solver="CVode",
+                     relative_tolerance=1e-10, start_values={"beta": 5.0}, stop_time=10, debug_logging=True,
+                     logger=lambda env, st, cat, msg: messages.append((st, msg.decode())))
+    assert "(error)" in str(exc.value)
+    text = [m for st, m in messages if st >= 3][0]
+    assert "leg length xbar" in text and "the leg bottomed out" in text, text
+    t = float(text.split("at t = ")[1].split(" s")[0])
+    assert 4.98 < t < 5.0, text
+
+
 class MEInstance:
     """One FMI 3.0 model-exchange instance driven by hand through fmpy's FMU3Model."""
 
