@@ -374,6 +374,22 @@ class Simulator:
         self.q_out = self.q
         return self.x_out, self.q_out
 
+    def snapshot(self):
+        """A deep copy of the whole integrator state (for fmi2GetFMUstate).
+
+        The model, the parameters and the method are immutable and shared, not copied; closures
+        are rebuilt on restore (the discrete state ``q`` is never mutated in place, so the
+        right-hand sides kept in past segments stay valid).
+        """
+        shared = {id(self.model): self.model, id(self.p): self.p, id(self.pair): self.pair}
+        state = {k: v for k, v in self.__dict__.items() if k not in ("fun", "active")}
+        return copy.deepcopy(state, shared)
+
+    def restore(self, snap):
+        shared = {id(snap["model"]): snap["model"], id(snap["p"]): snap["p"], id(snap["pair"]): snap["pair"]}
+        self.__dict__.update(copy.deepcopy(snap, shared))
+        self._rebind()
+
     def advance_to_event(self, t_target: float) -> bool:
         """Like :meth:`advance`, but stop at the first event on the way, *before* its jump.
 
@@ -385,6 +401,9 @@ class Simulator:
         """
         if t_target < self.t_out:
             raise ValueError(f"cannot go back in time: t = {t_target} < {self.t_out}")
+        if not self.model.events:  # nothing to stop at
+            self.advance(t_target)
+            return False
         while self.pending is None and self.t < t_target:
             self._step()
         if self.pending is not None and self.t <= t_target:
@@ -401,25 +420,11 @@ class Simulator:
         self.x = [float(v) for v in x]
         self.seg = None
         self.pending = (index, self.x)
-        self._apply_pending()
+        # the engine's own jump step (named apply_pending_event in the engine with a bounded event
+        # log, see fmi._BOUNDED_LOG)
+        (getattr(self, "apply_pending_event", None) or self._apply_pending)()
         self.x_out, self.q_out = self.x, self.q
         return self.x
-
-    def snapshot(self):
-        """A deep copy of the whole integrator state (for fmi2GetFMUstate).
-
-        The model, the parameters and the method are immutable and shared, not copied; closures
-        are rebuilt on restore (the discrete state ``q`` is never mutated in place, so the
-        right-hand sides kept in past segments stay valid).
-        """
-        shared = {id(self.model): self.model, id(self.p): self.p, id(self.pair): self.pair}
-        state = {k: v for k, v in self.__dict__.items() if k not in ("fun", "active")}
-        return copy.deepcopy(state, shared)
-
-    def restore(self, snap):
-        shared = {id(snap["model"]): snap["model"], id(snap["p"]): snap["p"], id(snap["pair"]): snap["pair"]}
-        self.__dict__.update(copy.deepcopy(snap, shared))
-        self._rebind()
 
     # ---- stepping ---------------------------------------------------------------------------
     def _step(self):
