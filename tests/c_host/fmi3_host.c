@@ -29,16 +29,30 @@ static void logger(fmi3InstanceEnvironment env, fmi3Status status, fmi3String ca
 
 #define MAXN 64
 
+/* The end of a run: "end,<t>" and fmi3Terminate after success, then fmi3FreeInstance, dlclose;
+ * the exit status (0 success, 1 a call failed). */
+static int finish(void *lib, fmi3Instance c, int ok, double t)
+{
+    fmi3TerminateTYPE *terminate = (fmi3TerminateTYPE *)dlsym(lib, "fmi3Terminate");
+    fmi3FreeInstanceTYPE *free_instance = (fmi3FreeInstanceTYPE *)dlsym(lib, "fmi3FreeInstance");
+    if (ok) {
+        printf("end,%.17g\n", t);
+        terminate(c);
+    }
+    free_instance(c);
+    dlclose(lib);
+    return ok ? 0 : 1;
+}
+
 static int model_exchange(void *lib, char **argv, int argc, const char *resources, double stop, double h)
 {
     LOAD(fmi3InstantiateModelExchange) LOAD(fmi3EnterInitializationMode) LOAD(fmi3ExitInitializationMode)
     LOAD(fmi3SetFloat64) LOAD(fmi3EnterEventMode) LOAD(fmi3UpdateDiscreteStates) LOAD(fmi3EnterContinuousTimeMode)
     LOAD(fmi3GetNumberOfContinuousStates) LOAD(fmi3GetNumberOfEventIndicators) LOAD(fmi3GetContinuousStates)
     LOAD(fmi3SetContinuousStates) LOAD(fmi3GetContinuousStateDerivatives) LOAD(fmi3GetEventIndicators)
-    LOAD(fmi3SetTime) LOAD(fmi3CompletedIntegratorStep) LOAD(fmi3Terminate) LOAD(fmi3FreeInstance)
+    LOAD(fmi3SetTime) LOAD(fmi3CompletedIntegratorStep)
     fmi3Instance c = fmi3InstantiateModelExchange("host", argv[3], resources, fmi3False, fmi3False, NULL, logger);
     if (!c) { fprintf(stderr, "fmi3InstantiateModelExchange returned NULL\n"); return 3; }
-    int rc = 1;
     size_t nx = 0, nz = 0;
     double x[MAXN], dx[MAXN], z[MAXN], znew[MAXN], next_time, t = 0.0;
     fmi3Boolean more, terminate, nominals, values, next_defined, enter, changed;
@@ -81,13 +95,9 @@ static int model_exchange(void *lib, char **argv, int argc, const char *resource
         memcpy(z, znew, nz * sizeof *z);
         if (terminate) break;
     }
-    printf("end,%.17g\n", t);
-    rc = 0;
-    fmi3Terminate(c);
+    return finish(lib, c, 1, t);
 done:
-    fmi3FreeInstance(c);
-    dlclose(lib);
-    return rc;
+    return finish(lib, c, 0, t);
 }
 
 int main(int argc, char **argv)
@@ -99,7 +109,7 @@ int main(int argc, char **argv)
     if (!lib) { fprintf(stderr, "dlopen: %s\n", dlerror()); return 2; }
     LOAD(fmi3InstantiateCoSimulation) LOAD(fmi3EnterInitializationMode) LOAD(fmi3ExitInitializationMode)
     LOAD(fmi3DoStep) LOAD(fmi3SetFloat64) LOAD(fmi3SetInt32) LOAD(fmi3EnterEventMode)
-    LOAD(fmi3UpdateDiscreteStates) LOAD(fmi3EnterStepMode) LOAD(fmi3Terminate) LOAD(fmi3FreeInstance)
+    LOAD(fmi3UpdateDiscreteStates) LOAD(fmi3EnterStepMode)
     snprintf(resources, sizeof resources, "%s/resources/", argv[1]);
     double stop = atof(argv[4]), h = atof(argv[5]);
     int events = atoi(argv[6]);
@@ -107,7 +117,6 @@ int main(int argc, char **argv)
     fmi3Instance c = fmi3InstantiateCoSimulation("host", argv[3], resources, fmi3False, fmi3False, events, events,
                                                  NULL, 0, NULL, logger, NULL);
     if (!c) { fprintf(stderr, "fmi3InstantiateCoSimulation returned NULL\n"); return 3; }
-    int rc = 1;
     fmi3Boolean more, terminate, nominals, values, next_defined, handle, early;
     double next_time, t = 0.0, last;
     if (fmi3EnterInitializationMode(c, fmi3False, 0.0, 0.0, fmi3True, stop) > fmi3Warning) goto done;
@@ -145,11 +154,7 @@ int main(int argc, char **argv)
         }
         if (terminate) break;
     }
-    printf("end,%.17g\n", t);
-    rc = 0;
-    fmi3Terminate(c);
+    return finish(lib, c, 1, t);
 done:
-    fmi3FreeInstance(c);
-    dlclose(lib);
-    return rc;
+    return finish(lib, c, 0, t);
 }
