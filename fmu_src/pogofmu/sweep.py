@@ -75,9 +75,10 @@ def parse_grid(spec: str):
             raise SweepError(f"--grid {spec!r}: the number of values n = {parts[2]} must be an integer >= 1 "
                              "(n = 1 only with a = b)")
         n = int(n)
-        values = [a + (b - a) * i / (n - 1) for i in range(n)] if n > 1 else [a]
+        # rounded to 15 significant digits: 0.2:1.0:3 is 0.2, 0.6, 1.0, not 0.6000000000000001
+        values = [float(f"{a + (b - a) * i / (n - 1):.15g}") for i in range(n)] if n > 1 else [a]
         if n > 1:
-            values[-1] = b  # exact end point
+            values[0], values[-1] = a, b  # exact end points
     else:
         values = [_number(v, f"--grid {spec!r}") for v in rhs.split(",")]
     return name, values
