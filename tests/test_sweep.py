@@ -28,7 +28,15 @@ POGOFMU = Path(sys.executable).with_name("pogofmu")  # the console script of the
 
 
 def _children():
-    return {p.pid for p in psutil.Process().children(recursive=True)}
+    """Child processes, but multiprocessing's resource tracker (it lives as long as this process)."""
+    out = set()
+    for p in psutil.Process().children(recursive=True):
+        try:
+            if "resource_tracker" not in " ".join(p.cmdline()):
+                out.add(p.pid)
+        except psutil.Error:
+            pass
+    return out
 
 
 def _wait_gone(pids, timeout=20.0):
