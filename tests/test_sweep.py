@@ -89,7 +89,11 @@ def test_grid_2x3_with_2_workers_equals_direct_fmpy_runs_and_1_worker(tmp_path):
             pass
     assert not _wait_gone(left, 10.0), f"worker processes of the sweep still running: {left}"
 
-    assert _sweep(fmu, *grid, "--workers", "1", "--out", tmp_path / "w1.parquet") == 0
+    ts = tmp_path / "series"
+    assert _sweep(fmu, *grid, "--workers", "1", "--out", tmp_path / "w1.parquet", "--timeseries", ts) == 0
+    import pyarrow.dataset as ds
+
+    series = ds.dataset(ts, format="parquet", partitioning="hive").to_table()
     two, one = _rows(tmp_path / "w2.parquet"), _rows(tmp_path / "w1.parquet")
     assert one == two, "1 and 2 workers give different tables"
     assert [(r["run_id"], r["k"], r["c"]) for r in two] == [
@@ -102,6 +106,9 @@ def test_grid_2x3_with_2_workers_equals_direct_fmpy_runs_and_1_worker(tmp_path):
         for name in ("y", "E"):
             assert (r[f"{name}_final"], r[f"{name}_min"], r[f"{name}_max"]) == (
                 direct[name][-1], np.min(direct[name]), np.max(direct[name]))
+        mine = series.filter(ds.field("run_id") == r["run_id"])  # the time series of the run, on the grid
+        for name in ("time", "y", "E", "n_events"):
+            assert np.array_equal(mine.column(name).to_numpy(), direct[name]), name
     assert len({r["t_last_event"] for r in two}) == 6  # the parameters did reach the FMU
 
 
@@ -248,3 +255,23 @@ def test_soil_study_against_direct_runs(tmp_path, scheduler):
         apex = np.max(direct["y"][lifts[0]:land + 1])
         assert math.isclose(float(r["rebound_height_m"]), apex, abs_tol=1e-5), (r["rebound_height_m"], apex)
         assert float(r["rebound_height_m"]) >= apex
+
+
+def test_run_and_ssp_are_subcommands_of_pogofmu(tmp_path):
+    """The entry points moved under the console script: pogofmu run (the master), pogofmu ssp."""
+    from support import DIST
+
+    check = subprocess.run([str(POGOFMU), "ssp", "check", str(DIST / "SpaceHopper.ssp")],
+                           capture_output=True, text=True, timeout=120)
+    assert check.returncode == 0 and "is valid" in check.stdout, check.stdout + check.stderr
+    bad = subprocess.run([str(POGOFMU), "ssp", "check", str(tmp_path / "none.ssp")], capture_output=True, text=True,
+                         timeout=120)
+    assert bad.returncode != 0
+    run = subprocess.run([str(POGOFMU), "run", "--dist", str(DIST), "--out", str(tmp_path / "results"), "PogoStick"],
+                         capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr[-3000:]
+    with open(tmp_path / "results" / "PogoStick" / "timeseries.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert float(rows[-1]["time"]) == pytest.approx(10.0) and int(rows[-1]["n_events"]) == 19
+    unknown = subprocess.run([str(POGOFMU), "nosuch"], capture_output=True, text=True, timeout=60)
+    assert unknown.returncode == 2 and "unknown command 'nosuch'" in unknown.stderr

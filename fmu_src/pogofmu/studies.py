@@ -194,6 +194,7 @@ def soil(out: Path, fmu: Path, samples_spec, n_samples, seed, stop_time, workers
     sc = ax.scatter([r["K"] for r in ok], [r["delta_max_m"] for r in ok], c=[r["n"] for r in ok], s=10)
     fig.colorbar(sc, ax=ax, label="n")
     ax.set_xscale("log")
+    ax.xaxis.set_minor_formatter(plt.NullFormatter())
     ax.set_xlabel("K [N/m^n]")
     ax.set_ylabel("delta_max [m]")
     ax.grid(True, alpha=0.3)
