@@ -166,8 +166,8 @@ def test_resume_after_an_interruption_runs_only_the_missing_points(tmp_path, sch
     fmu = fmu_path("PogoStick")
     out = tmp_path / "r.parquet"
     parts = tmp_path / "r.parquet.parts"
-    n = 12
-    cmd = [str(POGOFMU), "sweep", str(fmu), "--grid", f"k=60:170:{n}", "--set", "max_step=0.002", "--stop-time", "6",
+    n = 20  # about 0.2 s a run: the interruption comes after 2 of them, long before the last
+    cmd = [str(POGOFMU), "sweep", str(fmu), "--grid", f"k=60:170:{n}", "--set", "max_step=0.001", "--stop-time", "6",
            "--step", "1e-2", "--outputs", "y", "--chunk-size", "1", "--scheduler", scheduler, "--out", str(out),
            "--no-progress"]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)

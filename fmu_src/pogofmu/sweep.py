@@ -30,6 +30,7 @@ import re
 import shutil
 import sys
 import tempfile
+import threading
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -198,10 +199,6 @@ class Runner:
         self.unzipdir = extract(fmu)
         atexit.register(shutil.rmtree, self.unzipdir, True)
         self.vars = {v.name: v for v in self.md.modelVariables}
-        self.messages = []
-
-    def _logger(self, component, instance, status, category, message):
-        self.messages.append((status, _decode(category), _decode(message)))
 
 
     def run(self, point: Dict[str, float], settings: Settings):
@@ -211,7 +208,11 @@ class Runner:
         from fmpy.fmi1 import FMICallException
         from fmpy.simulation import instantiate_fmu
 
-        self.messages = []
+        messages = []  # this run's log (a worker with several threads runs several at once)
+
+        def logger(component, instance, status, category, message):
+            messages.append((status, _decode(category), _decode(message)))
+
         start = dict(settings.fixed)
         start.update(point)
         if settings.events:
@@ -223,7 +224,7 @@ class Runner:
         row = {"status": "ok", "message": ""}
         res = None
         t0 = time.perf_counter()
-        fmu = instantiate_fmu(self.unzipdir, self.md, "CoSimulation", False, True, self._logger)
+        fmu = instantiate_fmu(self.unzipdir, self.md, "CoSimulation", False, True, logger)
         try:
             res = simulate_fmu(self.unzipdir, model_description=self.md, fmu_instance=fmu,
                                start_values=start, stop_time=settings.stop_time,
@@ -237,10 +238,10 @@ class Runner:
             # fmi2Error leaves the instance usable enough to free; after fmi2Fatal nothing may be called
             if exc.status == 3:
                 fmu.freeInstance()
-            row.update(status="error" if exc.status == 3 else "fatal", message=self._problem(str(exc)))
+            row.update(status="error" if exc.status == 3 else "fatal", message=_problem(messages, str(exc)))
             res = None
         except Exception as exc:  # noqa: BLE001 (a run never takes the sweep down)
-            row.update(status="error", message=self._problem(f"{type(exc).__name__}: {exc}"))
+            row.update(status="error", message=_problem(messages, f"{type(exc).__name__}: {exc}"))
             res = None
         row["wall_s"] = time.perf_counter() - t0
         for name in record:
@@ -252,30 +253,32 @@ class Runner:
                 row[f"{name}_min"] = None if col is None else np.min(col).item()
                 row[f"{name}_max"] = None if col is None else np.max(col).item()
         if settings.events:
-            ev = parse_event_log(self.messages)
+            ev = parse_event_log(messages)
             row["event_t"] = [e["time"] for e in ev]
             row["event_name"] = [e["name"] for e in ev]
             row["event_state"] = [list(e["state"].items()) for e in ev]
         return row, (res if settings.timeseries else None)
 
-    def _problem(self, text):
-        """The FMU's own error/warning messages (the reason), then what failed."""
-        said = [m[2] for m in self.messages if m[0] >= 2]
-        return "; ".join(said + [text])
+
+def _problem(messages, text):
+    """The FMU's own error/warning messages (the reason), then what failed."""
+    return "; ".join([m[2] for m in messages if m[0] >= 2] + [text])
 
 
 _RUNNERS: Dict[str, Runner] = {}
+_RUNNERS_LOCK = threading.Lock()
 
 
 def _runner(key: str, data: bytes) -> Runner:
     """The worker's Runner of the FMU whose bytes hash to key (written and extracted once)."""
-    if key not in _RUNNERS:
-        folder = Path(tempfile.mkdtemp(prefix="pogofmu-sweep-"))
-        atexit.register(shutil.rmtree, folder, True)
-        path = folder / "model.fmu"
-        path.write_bytes(data)
-        _RUNNERS[key] = Runner(str(path))
-    return _RUNNERS[key]
+    with _RUNNERS_LOCK:
+        if key not in _RUNNERS:
+            folder = Path(tempfile.mkdtemp(prefix="pogofmu-sweep-"))
+            atexit.register(shutil.rmtree, folder, True)
+            path = folder / "model.fmu"
+            path.write_bytes(data)
+            _RUNNERS[key] = Runner(str(path))
+        return _RUNNERS[key]
 
 
 def run_chunk(key: str, data: bytes, names: Sequence[str], chunk, settings: Settings):
