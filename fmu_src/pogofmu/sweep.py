@@ -200,7 +200,6 @@ class Runner:
         atexit.register(shutil.rmtree, self.unzipdir, True)
         self.vars = {v.name: v for v in self.md.modelVariables}
 
-
     def run(self, point: Dict[str, float], settings: Settings):
         """Simulate one point; returns (row, result array or None). Never raises for a failed run."""
         import numpy as np
