@@ -275,3 +275,42 @@ def test_run_and_ssp_are_subcommands_of_pogofmu(tmp_path):
     assert float(rows[-1]["time"]) == pytest.approx(10.0) and int(rows[-1]["n_events"]) == 19
     unknown = subprocess.run([str(POGOFMU), "nosuch"], capture_output=True, text=True, timeout=60)
     assert unknown.returncode == 2 and "unknown command 'nosuch'" in unknown.stderr
+
+
+def test_a_worker_killed_mid_sweep_loses_no_run(tmp_path):
+    """A worker process dies (SIGKILL) while it runs a chunk; Dask may not retry the task here
+    (allowed-failures 0), so the sweep reruns the chunk's points one by one: every run is a row."""
+    import dask
+    from distributed import Client, LocalCluster
+
+    before = _children()
+    with dask.config.set({"distributed.scheduler.allowed-failures": 0}):
+        cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None)
+    try:
+        client = Client(cluster)
+        pids = client.run(os.getpid)
+        out, parts = tmp_path / "k.parquet", tmp_path / "k.parquet.parts"
+        n = 20
+        proc = subprocess.Popen([str(POGOFMU), "sweep", str(fmu_path("PogoStick")), "--grid", f"k=60:170:{n}",
+                                 "--set", "max_step=0.001", "--stop-time", "6", "--step", "1e-2", "--outputs", "y",
+                                 "--chunk-size", "5", "--scheduler", cluster.scheduler_address, "--out", str(out),
+                                 "--no-progress"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        deadline = time.monotonic() + 120
+        while not list(parts.glob("chunk-*.parquet")) and time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.02)
+        busy = []
+        while not busy and time.monotonic() < deadline:  # a worker in the middle of a chunk
+            busy = [w for w, keys in client.processing().items() if keys and w in pids]
+            time.sleep(0.01)
+        os.kill(pids[busy[0]], signal.SIGKILL)
+        stdout, stderr = proc.communicate(timeout=300)
+        assert proc.returncode == 0, stderr[-3000:]
+        rows = pq.read_table(out).to_pylist()
+        assert [r["run_id"] for r in rows] == list(range(n))
+        assert all(r["status"] == "ok" and r["n_events"] > 0 for r in rows), [r["message"] for r in rows]
+        assert len(list(parts.glob("*"))) == 0 and f"{n} runs" in stdout
+        assert "KilledWorker" in stdout and "running them one by one" in stdout, stdout + stderr[-3000:]
+    finally:
+        client.close()
+        cluster.close()
+    assert not _wait_gone(_children() - before), "worker processes left behind"

@@ -507,6 +507,8 @@ def run_sweep(sweep: Sweep, client, resume=False, overwrite=False, progress=True
                 exc = fut.exception()
                 fut.release()
                 if len(chunk) > 1:  # a worker died in this chunk: run its points one by one to find the culprit
+                    bar.write(f"runs {chunk[0][0]}-{chunk[-1][0]} failed together ({type(exc).__name__}: {exc}); "
+                              "running them one by one")
                     for item in chunk:
                         f = submit([item])
                         futures[f] = [item]
