@@ -72,7 +72,8 @@ def _sweep(*args):
 
 def test_grid_2x3_with_2_workers_equals_direct_fmpy_runs_and_1_worker(tmp_path):
     fmu = fmu_path("PogoStick")
-    grid = ["--grid", "k=80,120", "--grid", "c=0.2:1.0:3", "--stop-time", "4", "--step", "1e-3", "--outputs", "y,E"]
+    # no --step: the default experiment's 1 ms (the direct runs' grid below)
+    grid = ["--grid", "k=80,120", "--grid", "c=0.2:1.0:3", "--stop-time", "4", "--outputs", "y,E"]
     # 2 workers: the console script as a user runs it, in its own process; its workers carry a mark
     mark = uuid.uuid4().hex
     env = dict(os.environ, POGOFMU_TEST_MARK=mark)
@@ -107,6 +108,7 @@ def test_grid_2x3_with_2_workers_equals_direct_fmpy_runs_and_1_worker(tmp_path):
             assert (r[f"{name}_final"], r[f"{name}_min"], r[f"{name}_max"]) == (
                 direct[name][-1], np.min(direct[name]), np.max(direct[name]))
         mine = series.filter(ds.field("run_id") == r["run_id"])  # the time series of the run, on the grid
+        assert mine.num_rows == 4001
         for name in ("time", "y", "E", "n_events"):
             assert np.array_equal(mine.column(name).to_numpy(), direct[name]), name
     assert len({r["t_last_event"] for r in two}) == 6  # the parameters did reach the FMU

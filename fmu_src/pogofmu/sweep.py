@@ -199,6 +199,8 @@ class Runner:
         self.unzipdir = extract(fmu)
         atexit.register(shutil.rmtree, self.unzipdir, True)
         self.vars = {v.name: v for v in self.md.modelVariables}
+        ex = self.md.defaultExperiment  # its step as it is (fmpy alone would coarsen it to <= 1000 points)
+        self.default_step = float(ex.stepSize) if ex is not None and ex.stepSize is not None else None
 
     def run(self, point: Dict[str, float], settings: Settings):
         """Simulate one point; returns (row, result array or None). Never raises for a failed run."""
@@ -227,7 +229,7 @@ class Runner:
         try:
             res = simulate_fmu(self.unzipdir, model_description=self.md, fmu_instance=fmu,
                                start_values=start, stop_time=settings.stop_time,
-                               output_interval=settings.step, output=record, validate=False)
+                               output_interval=settings.step or self.default_step, output=record, validate=False)
             fmu.freeInstance()
             stop = settings.stop_time if settings.stop_time is not None else float(self.md.defaultExperiment.stopTime)
             if not math.isclose(res["time"][-1], stop, rel_tol=0, abs_tol=1e-9 * max(1.0, abs(stop))):
