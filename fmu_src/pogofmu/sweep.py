@@ -409,7 +409,7 @@ def open_cluster(workers: Optional[int] = None, scheduler: Optional[str] = None)
 
     if scheduler:
         try:
-            return Client(scheduler, timeout="30s"), None
+            return Client(scheduler, timeout="10s"), None
         except (OSError, TimeoutError) as exc:
             raise SweepError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
     n = workers or os.cpu_count() or 1
@@ -618,7 +618,10 @@ def sweep_main(argv):
 def execute(sweep: Sweep, workers=None, scheduler=None, **kwargs):
     """Open the cluster, run the sweep, close the cluster (also on an interruption)."""
     prepare(sweep)  # a bad option fails before any worker starts
-    client, cluster = open_cluster(workers, scheduler)
+    try:
+        client, cluster = open_cluster(workers, scheduler)
+    except KeyboardInterrupt:
+        return 130
     try:
         run_sweep(sweep, client, **kwargs)
     except KeyboardInterrupt:
