@@ -54,7 +54,7 @@ def scheduler():
     from distributed import LocalCluster
 
     before = _children()
-    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None)
+    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0")
     workers = _children() - before
     assert len(workers) >= 2
     yield cluster.scheduler_address
@@ -287,7 +287,7 @@ def test_a_worker_killed_mid_sweep_loses_no_run(tmp_path):
 
     before = _children()
     with dask.config.set({"distributed.scheduler.allowed-failures": 0}):
-        cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None)
+        cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0")
     try:
         client = Client(cluster)
         pids = client.run(os.getpid)

@@ -415,8 +415,9 @@ def open_cluster(workers: Optional[int] = None, scheduler: Optional[str] = None)
     n = workers or os.cpu_count() or 1
     if n < 1:
         raise SweepError(f"--workers {workers}: must be >= 1")
-    # the workers' logs are silenced: a run's failure is its row; a closing cluster's heartbeat errors are noise
-    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+    # the workers' logs are silenced: a run's failure is its row; a closing cluster's heartbeat errors are noise;
+    # the scheduler's HTTP server (dashboard off) on a free port: several sweeps may run side by side
+    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
                            silence_logs=logging.CRITICAL)
     return Client(cluster), cluster
 
