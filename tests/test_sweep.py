@@ -316,3 +316,33 @@ def test_a_worker_killed_mid_sweep_loses_no_run(tmp_path):
         client.close()
         cluster.close()
     assert not _wait_gone(_children() - before), "worker processes left behind"
+
+
+def test_a_lost_scheduler_stops_the_sweep_and_resume_finishes_it_elsewhere(tmp_path, scheduler):
+    """The cluster goes away mid-sweep: the sweep stops at once, says so, keeps what it saved and
+    records no run it did not do; --resume on another cluster runs the rest."""
+    from distributed import LocalCluster
+
+    before = _children()
+    lost = LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=":0")
+    out, parts = tmp_path / "l.parquet", tmp_path / "l.parquet.parts"
+    n = 16
+    args = [str(POGOFMU), "sweep", str(fmu_path("PogoStick")), "--grid", f"k=60:170:{n}", "--stop-time", "5",
+            "--step", "1e-2", "--outputs", "y", "--chunk-size", "2", "--out", str(out), "--no-progress"]
+    proc = subprocess.Popen(args + ["--scheduler", lost.scheduler_address], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 120
+        while not list(parts.glob("chunk-*.parquet")) and time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.02)
+    finally:
+        lost.close()
+    stdout, stderr = proc.communicate(timeout=120)
+    assert not _wait_gone(_children() - before), "worker processes left behind"
+    assert proc.returncode == 2 and "the sweep stopped" in stderr and "--resume runs the rest" in stderr, stderr[-2000:]
+    saved = [r for f in parts.glob("chunk-*.parquet") for r in pq.read_table(f).to_pylist()]
+    assert 2 <= len(saved) < n and all(r["status"] == "ok" for r in saved)
+    resumed = subprocess.run(args + ["--scheduler", scheduler, "--resume"], capture_output=True, text=True, timeout=300)
+    assert resumed.returncode == 0, resumed.stderr[-3000:]
+    rows = pq.read_table(out).to_pylist()
+    assert [r["run_id"] for r in rows] == list(range(n)) and all(r["status"] == "ok" for r in rows)

@@ -519,7 +519,10 @@ def run_sweep(sweep: Sweep, client, resume=False, overwrite=False, progress=True
         pending = as_completed(list(futures))
         for fut in pending:
             chunk = futures.pop(fut)
-            if fut.status == "error":
+            if fut.status == "cancelled":  # the scheduler went away (or cancelled it): stop, --resume goes on
+                raise RuntimeError(f"the cluster cancelled the task of runs {chunk[0][0]}-{chunk[-1][0]} "
+                                   "(scheduler lost?)")
+            if fut.status == "error":  # a worker died running it (KilledWorker), or the task itself failed
                 exc = fut.exception()
                 fut.release()
                 if len(chunk) > 1:  # a worker died in this chunk: run its points one by one to find the culprit
@@ -554,6 +557,11 @@ def run_sweep(sweep: Sweep, client, resume=False, overwrite=False, progress=True
         log(f"\ninterrupted: {len(done) + n_run} of {len(sweep.points)} runs saved in {parts}; "
             "the same command with --resume runs the rest")
         raise
+    except Exception as exc:  # a lost scheduler, a full disk, ...: what is saved stays saved
+        bar.close()
+        raise SweepError(f"the sweep stopped ({type(exc).__name__}: {exc}); {len(done) + n_run} of "
+                         f"{len(sweep.points)} runs are saved in {parts}: the same command with --resume runs "
+                         "the rest") from exc
     bar.close()
 
     tables = [pq.read_table(f, schema=sch) for f in sorted(parts.glob("chunk-*.parquet"))]
