@@ -346,3 +346,28 @@ def test_a_lost_scheduler_stops_the_sweep_and_resume_finishes_it_elsewhere(tmp_p
     assert resumed.returncode == 0, resumed.stderr[-3000:]
     rows = pq.read_table(out).to_pylist()
     assert [r["run_id"] for r in rows] == list(range(n)) and all(r["status"] == "ok" for r in rows)
+
+
+def _hide_pogofmu():
+    sys.modules["pogofmu.sweep"] = None  # the worker's next import of it fails, as where it is not installed
+
+
+def _unhide_pogofmu():
+    sys.modules.pop("pogofmu.sweep", None)
+
+
+def test_workers_without_pogofmu_are_refused_before_any_run(tmp_path, scheduler):
+    from distributed import Client
+
+    with Client(scheduler) as client:
+        client.run(_hide_pogofmu)
+        try:
+            out = tmp_path / "n.parquet"
+            proc = subprocess.run([str(POGOFMU), "sweep", str(fmu_path("PogoStick")), "--grid", "k=80,90",
+                                   "--scheduler", scheduler, "--out", str(out), "--no-progress"],
+                                  capture_output=True, text=True, timeout=120)
+        finally:
+            client.run(_unhide_pogofmu)
+    assert proc.returncode == 2, proc.stderr[-2000:]
+    assert "the cluster's workers cannot run a sweep (ModuleNotFoundError" in proc.stderr
+    assert "they need pogofmu" in proc.stderr and not out.exists()

@@ -454,6 +454,21 @@ def prepare(sweep: Sweep):
     return data, _sha256(data), md
 
 
+def check_workers(client):
+    """Every worker can import what a run needs (else every run would fail with the same message)."""
+    def probe():  # a local function: sent by value, so that it runs where pogofmu is missing too
+        import importlib
+
+        for module in ("numpy", "scipy.integrate", "fmpy", "pogofmu.sweep"):
+            importlib.import_module(module)
+
+    try:
+        client.run(probe)
+    except Exception as exc:  # noqa: BLE001
+        raise SweepError(f"the cluster's workers cannot run a sweep ({type(exc).__name__}: {exc}): they need "
+                         "pogofmu (with fmpy, numpy, scipy) installed (README: \"On a Dask cluster\")") from None
+
+
 def run_sweep(sweep: Sweep, client, resume=False, overwrite=False, progress=True, log=print):
     """Run every missing point of the sweep on the client's cluster; write sweep.out. Returns the
     number of runs done by this call."""
@@ -501,6 +516,7 @@ def run_sweep(sweep: Sweep, client, resume=False, overwrite=False, progress=True
         for i, _ in todo:
             shutil.rmtree(ts_dir / f"run_id={i}", ignore_errors=True)
 
+    check_workers(client)
     n_workers = max(1, len(client.scheduler_info().get("workers", {})))
     # about 32 tasks per worker: a Dask task costs ~ms against ~0.1 s a run, and small chunks even out the tail
     size = sweep.chunk_size or max(1, min(64, math.ceil(len(todo) / (32 * n_workers))))
