@@ -6,6 +6,8 @@
     python3 tasks.py test    # the test suite (what CI runs)
     python3 tasks.py bench   # the benchmarks (benchmarks/)
 
+``run`` forwards to the ``pogofmu`` command of the venv (``pogofmu run``, ``pogofmu ssp run``).
+
 The first call creates ``.venv/`` beside this file and installs the project with its test
 dependencies into it (again whenever pyproject.toml changes); every command then runs inside it.
 """
@@ -56,12 +58,12 @@ def main(argv):
         rc = subprocess.call([sys.executable, str(ROOT / "build_fmu.py")], cwd=ROOT)
         if rc:
             return rc
-        rc = subprocess.call([sys.executable, "-m", "pogofmu.master", *rest], cwd=ROOT)
+        rc = subprocess.call([sys.executable, "-m", "pogofmu.cli", "run", *rest], cwd=ROOT)
         if rc:
             return rc
         # the system-level example: the SpaceHopper on the Moon, run by the project's SSP master
         for body in ("moon",):
-            rc |= subprocess.call([sys.executable, "-m", "pogofmu.ssp", "run", str(ROOT / "dist" / "SpaceHopper.ssp"),
+            rc |= subprocess.call([sys.executable, "-m", "pogofmu.cli", "ssp", "run", str(ROOT / "dist" / "SpaceHopper.ssp"),
                                    "--parameters", body, "--stop-time", "30", "--step", "1e-3",
                                    "--out", str(ROOT / "results" / f"SpaceHopper-{body}")], cwd=ROOT)
         return rc

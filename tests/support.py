@@ -13,6 +13,8 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from pogofmu.sweep import parse_event_log  # noqa: F401  (the tests read the FMUs' event log with it)
+
 ROOT = Path(__file__).resolve().parents[1]
 DIST = Path(os.environ.get("POGOFMU_DIST", ROOT / "dist")).resolve()  # build target of the session
 REFERENCE = ROOT.parent / "shared" / "reference"
@@ -48,20 +50,6 @@ class Run:
     def events(self):
         """Events reported through the logEvents category (needs log_events=1)."""
         return parse_event_log(self.messages)
-
-
-def parse_event_log(messages):
-    out = []
-    for status, category, text in messages:
-        if category != "logEvents":
-            continue
-        # "event 3 touchdown at t = 1.2631688706933197 s; state before jump: xbar=1.0, ..."
-        head, _, state = text.partition("; state before jump: ")
-        words = head.split()
-        values = dict(kv.split("=") for kv in state.split(", ")) if state else {}
-        out.append({"index": int(words[1]), "name": words[2], "time": float(words[words.index("=") + 1]),
-                    "state": {k: float(v) for k, v in values.items()}})
-    return out
 
 
 def simulate(name, start_values=None, stop_time=None, output_interval=None, input=None,

@@ -1,0 +1,139 @@
+#!/usr/bin/env python3
+"""Benchmark (c): ``pogofmu sweep`` on Dask against bare ``fmpy.simulate_fmu`` runs (issue 11).
+
+N PogoStick runs (default 1000), 10 s at ``output_interval`` 1e-3 (10 000 communication steps),
+every output recorded, a grid over the stiffness ``k`` from 80 to 120 N/m (every run differs):
+
+* **bare**: ``fmpy.simulate_fmu(..., start_values={"k": k}, ...)`` for every point in this
+  process, one after the other, (i) on the ``.fmu`` with fmpy's defaults (validation and extraction
+  per run: what a hand-written loop costs) and (ii) on the FMU extracted once with its model
+  description read once — the same fmpy work a sweep worker does per run, the peer of the target;
+* **sweep, 1 worker** and **sweep, 2 workers**: the same points through the sweep machinery
+  (``pogofmu.sweep.run_sweep``: Dask tasks of chunks, summaries, Parquet part files, the final
+  table) on a local cluster of 1 and of 2 worker processes. The cluster's start (about 1 s, with
+  the workers' imports of fmpy and scipy) is timed apart and not counted: it is paid once per
+  sweep, not per run. Sending the FMU to the workers and extracting it there are counted.
+
+Printed: wall and CPU time of each; the per-run overhead of the sweep (1 worker) over bare
+``simulate_fmu`` (ii) in CPU time — every CPU second the sweep costs: the worker's, and this
+process's, which holds the client and the scheduler (target <= 10 %; the wall-time figure is
+printed too); and the speed-up of 2 workers over 1 in wall time (target >= 1.8x on 2 cores).
+The CPU figure stands up to other load on the machine, the speed-up does not: run it alone for
+the figures of the README. Exit status 1 if a target is missed.
+
+    python benchmarks/bench_sweep.py [--runs 1000] [--fmu dist/PogoStick.fmu]
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import scipy.integrate  # noqa: F401  (before any FMU is loaded: avoids a teardown crash, README "Known issues")
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+sys.path.insert(0, str(ROOT))
+
+STOP_TIME = 10.0
+STEP = 1e-3
+OVERHEAD_TARGET = 0.10
+SPEEDUP_TARGET = 1.8
+
+
+def bare(fmu: Path, ks, extracted: bool):
+    """simulate_fmu per point; extracted: on the FMU extracted once, its model description read once
+    (the fmpy work a sweep worker does, without the machinery around it)."""
+    import shutil
+
+    from fmpy import extract, read_model_description, simulate_fmu
+
+    kwargs, path = {}, str(fmu)
+    if extracted:
+        path = extract(str(fmu))
+        kwargs = {"model_description": read_model_description(path), "validate": False}
+    t0, c0 = time.perf_counter(), time.process_time()
+    for k in ks:
+        simulate_fmu(path, start_values={"k": k}, stop_time=STOP_TIME, output_interval=STEP, **kwargs)
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    if extracted:
+        shutil.rmtree(path, ignore_errors=True)
+    return wall, cpu
+
+
+def _cpu(pids):
+    """CPU time (user + system) of these processes so far [s]."""
+    import psutil
+
+    return sum(sum(psutil.Process(pid).cpu_times()[:2]) for pid in pids)
+
+
+def _import_worker_side():
+    import fmpy.simulation  # noqa: F401
+    import scipy.integrate  # noqa: F401
+
+    import pogofmu.sweep  # noqa: F401
+
+
+def swept(fmu: Path, ks, workers: int, tmp: Path):
+    from pogofmu.sweep import Settings, Sweep, close_cluster, open_cluster, run_sweep
+
+    t0 = time.perf_counter()
+    client, cluster = open_cluster(workers=workers)
+    client.wait_for_workers(workers)
+    client.run(_import_worker_side)  # a fresh worker process imports fmpy, scipy, pyarrow: part of its start
+    t_start = time.perf_counter() - t0
+    pids = [os.getpid(), *client.run(os.getpid).values()]  # this process holds the client and the scheduler
+    try:
+        sweep = Sweep(str(fmu), ["k"], [(k,) for k in ks], Settings(stop_time=STOP_TIME, step=STEP),
+                      str(tmp / f"sweep-{workers}.parquet"))
+        t0, c0 = time.perf_counter(), _cpu(pids)
+        run_sweep(sweep, client, progress=False, log=lambda *a: None)
+        wall, cpu = time.perf_counter() - t0, _cpu(pids) - c0
+    finally:
+        close_cluster(client, cluster)
+    return wall, cpu, t_start
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--runs", type=int, default=1000, help="number of runs (default 1000)")
+    ap.add_argument("--fmu", default=str(ROOT / "dist" / "PogoStick.fmu"))
+    args, _ = ap.parse_known_args(argv)  # tasks.py bench passes every script the same options
+    fmu = Path(args.fmu)
+    if not fmu.is_file():
+        sys.exit(f"{fmu} missing: python3 tasks.py build")
+    n = args.runs
+    ks = [80.0 + 40.0 * i / max(1, n - 1) for i in range(n)]
+    print(f"(c) sweep on Dask vs bare simulate_fmu: {n} PogoStick runs, {STOP_TIME:g} s at {STEP:g} s, "
+          "every output recorded", flush=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        print(f"  {'':28s}{'wall':>9s} {'per run':>10s} {'CPU':>9s} {'per run':>10s}")
+        line = lambda name, wall, cpu, note="": print(  # noqa: E731
+            f"  {name:28s}{wall:8.2f}s {1e3 * wall / n:7.1f} ms {cpu:8.2f}s {1e3 * cpu / n:7.1f} ms  {note}", flush=True)
+        t_user, c_user = bare(fmu, ks, extracted=False)
+        line("bare simulate_fmu(.fmu)", t_user, c_user, "fmpy's defaults: extracts and validates every run")
+        t_bare, c_bare = bare(fmu, ks, extracted=True)
+        line("bare simulate_fmu(dir)", t_bare, c_bare, "extracted once: the peer of the target")
+        t1, c1, s1 = swept(fmu, ks, 1, Path(tmp))
+        line("sweep, 1 worker", t1, c1, f"cluster start {s1:.2f} s; CPU of worker + client + scheduler")
+        t2, c2, s2 = swept(fmu, ks, 2, Path(tmp))
+        line("sweep, 2 workers", t2, c2, f"cluster start {s2:.2f} s")
+    overhead = c1 / c_bare - 1.0
+    speedup = t1 / t2
+    ok_o, ok_s = overhead <= OVERHEAD_TARGET, speedup >= SPEEDUP_TARGET
+    print(f"  sweep (1 worker) against the hand-written loop on the .fmu: wall {100 * (t1 / t_user - 1):+.1f} %, "
+          f"CPU {100 * (c1 / c_user - 1):+.1f} %")
+    print(f"  per-run overhead of the sweep (1 worker) over bare simulate_fmu (extracted once): CPU "
+          f"{100 * overhead:+.1f} % (target <= {100 * OVERHEAD_TARGET:.0f} %: {'holds' if ok_o else 'MISSED'}); "
+          f"wall {100 * (t1 / t_bare - 1):+.1f} %")
+    print(f"  speed-up 2 workers / 1 worker: {speedup:.2f}x (target >= {SPEEDUP_TARGET}x: "
+          f"{'holds' if ok_s else 'MISSED'})")
+    return 0 if ok_o and ok_s else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,240 @@
+"""Studies built on the sweep (``pogofmu study NAME``), each writing CSV + PNG (+ the sweep's Parquet).
+
+* ``work-precision`` — the paper's Figs 21-22 for PogoStick.fmu: the largest event-time error
+  against the closed form over the 19 events of the default drop, against ``rel_tol`` (1e-3 ...
+  1e-12), for method 5 (Dormand-Prince 5(4)) and 8 (DOP853), with ``max_step`` 0.01 s and
+  unbounded (0), and the number of events located in the 10 s.
+* ``soil`` — Monte Carlo of Penetrator.fmu over an uncertain Hunt-Crossley soil (K, n, c_r):
+  distributions of the deepest penetration ``delta_max``, the first rebound height (apex of the
+  mass after the first liftoff) and the number of hops (liftoffs) in the run.
+
+Host-side code (fmpy, dask, pyarrow, matplotlib).
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import sys
+from pathlib import Path
+
+from pogofmu.sweep import Settings, Sweep, SweepError, add_arguments, execute, make_points, parse_sample
+
+ROOT = Path(__file__).resolve().parents[2]
+REFERENCE = ROOT.parent / "shared" / "reference" / "pogo_basic_events.csv"
+TOLERANCES = [10.0 ** -k for k in range(3, 13)]  # 1e-3 ... 1e-12
+SOIL_DEFAULTS = [  # the soil of the default drop (K = 1e4 N/m^1.5, n = 1.5, c_r = 0.5), made uncertain
+    "K=lognormal(9.2103404,0.5)",  # median 1e4 N/m^n (ln 1e4 = 9.2103404), a factor 1.65 per sigma
+    "n=uniform(1.2,1.8)",
+    "c_r=uniform(0.2,0.8)",
+]
+
+
+def _read_table(path: Path):
+    import pyarrow.parquet as pq
+
+    return pq.read_table(path).to_pylist()
+
+
+def _write_csv(path: Path, rows, fields):
+    with path.open("w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=fields)
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: (repr(v) if isinstance(v, float) else v) for k, v in r.items() if k in fields})
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+# =============================================================================================
+# work-precision (Figs 21-22)
+# =============================================================================================
+
+def reference_times(path: Path):
+    """Closed-form event times [(name, t)] of the default PogoStick drop (40-digit roots)."""
+    if not path.is_file():
+        raise SweepError(f"--reference {path}: no such file (the closed-form events of the default drop, "
+                         "shared/reference/pogo_basic_events.csv)")
+    with path.open() as f:
+        rows = list(csv.DictReader(line for line in f if not line.startswith("#")))
+    return [(r["event"], float(r["time_s"])) for r in rows]
+
+
+def event_errors(event_t, event_name, ref):
+    """Per located event (in order) its error against the reference event of the same index."""
+    out = []
+    for i, (t, name) in enumerate(zip(event_t, event_name)):
+        if i < len(ref):
+            out.append({"index": i + 1, "event": name, "time_s": t, "time_ref_s": ref[i][1],
+                        "error_s": abs(t - ref[i][1]), "same_kind": name == ref[i][0]})
+    return out
+
+
+def slope(tols, errs):
+    """Least-squares slope of log10(error) against log10(rel_tol)."""
+    import numpy as np
+
+    return float(np.polyfit(np.log10(tols), np.log10(errs), 1)[0])
+
+
+def work_precision(out: Path, fmu: Path, reference: Path, workers=None, scheduler=None, progress=True):
+    ref = reference_times(reference)
+    out.mkdir(parents=True, exist_ok=True)
+    names, points = make_points([("method", [5, 8]), ("max_step", [0.01, 0.0]), ("rel_tol", TOLERANCES)])
+    # the event times do not depend on the communication grid (README "How the solver works"): 0.1 s
+    sweep = Sweep(str(fmu), names, points, Settings(stop_time=10.0, step=0.1, outputs=[], events=True),
+                  str(out / "work_precision.parquet"))
+    if execute(sweep, workers, scheduler, overwrite=True, progress=progress):
+        raise SweepError("interrupted")
+    rows, events = [], []
+    for r in _read_table(out / "work_precision.parquet"):
+        errs = event_errors(r["event_t"] or [], r["event_name"] or [], ref) if r["status"] == "ok" else []
+        key = {"method": r["method"], "max_step": r["max_step"], "rel_tol": r["rel_tol"]}
+        events += [{**key, **e} for e in errs]
+        rows.append({**key, "status": r["status"], "n_events": r["n_events"], "n_reference": len(ref),
+                     "max_event_error_s": max((e["error_s"] for e in errs), default=float("nan")),
+                     "wall_s": r["wall_s"], "message": r["message"]})
+    _write_csv(out / "work_precision.csv", rows, list(rows[0]))
+    _write_csv(out / "work_precision_events.csv", events, list(events[0]) if events else ["method"])
+    curves = {}
+    for r in rows:
+        curves.setdefault((r["method"], r["max_step"]), []).append(r)
+    plt = _plt()
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(7.5, 8.0), sharex=True)
+    for (method, max_step), rs in sorted(curves.items()):
+        label = f"method {method}, max_step {'0.01 s' if max_step else 'unbounded'}"
+        style = dict(marker="o" if method == 5 else "s", ls="-" if max_step else "--", lw=1.0, ms=4)
+        full = [r for r in rs if r["n_events"] == len(ref)]
+        ax1.loglog([r["rel_tol"] for r in full], [max(r["max_event_error_s"], 1e-17) for r in full],
+                   label=label, **style)
+        ax2.semilogx([r["rel_tol"] for r in rs], [r["n_events"] if r["n_events"] is not None else 0 for r in rs],
+                     label=label, **style)
+        fit = [r for r in full if r["max_event_error_s"] > 1e-13 and r["rel_tol"] >= 1e-10]
+        if not max_step and len(fit) >= 3:  # with max_step 0.01 the step bound, not rel_tol, sets the error
+            print(f"{label}: slope {slope([r['rel_tol'] for r in fit], [r['max_event_error_s'] for r in fit]):.2f} "
+                  f"(log error vs log rel_tol, {len(fit)} tolerances above the round-off floor)")
+    ax1.loglog(TOLERANCES, TOLERANCES, color="0.6", lw=0.8, label="error = rel_tol [s]")
+    ax1.set_ylabel("largest event-time error [s]")
+    ax1.set_title("PogoStick.fmu, default drop, 10 s: error against the closed form (Fig. 21)", fontsize=9)
+    ax2.axhline(len(ref), color="0.6", lw=0.8)
+    ax2.set_ylabel("events located in 10 s")
+    ax2.set_xlabel("rel_tol")
+    ax2.set_title(f"number of events (closed form: {len(ref)}) (Fig. 22)", fontsize=9)
+    for ax in (ax1, ax2):
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out / "work_precision.png", dpi=110)
+    plt.close(fig)
+    print(f"wrote {out / 'work_precision.csv'}, {out / 'work_precision_events.csv'}, {out / 'work_precision.png'}")
+    return rows
+
+
+# =============================================================================================
+# soil Monte Carlo (Penetrator)
+# =============================================================================================
+
+def soil_metrics(row, g):
+    """delta_max, first rebound height (apex of y after the first liftoff, ballistic: F_ext = 0) and
+    number of hops (liftoffs) of one run of the sweep table."""
+    if row["status"] != "ok":
+        return {"delta_max_m": None, "rebound_height_m": None, "n_hops": None}
+    names, states = row["event_name"], row["event_state"]
+    lift = [dict(s) for n, s in zip(names, states) if n == "liftoff"]
+    apex = lift[0]["y"] + lift[0]["ydot"] ** 2 / (2 * g) if lift else None
+    return {"delta_max_m": row["delta_max_final"], "rebound_height_m": apex, "n_hops": len(lift)}
+
+
+def soil(out: Path, fmu: Path, samples_spec, n_samples, seed, stop_time, workers=None, scheduler=None,
+         progress=True):
+    import numpy as np
+    from fmpy import read_model_description
+
+    out.mkdir(parents=True, exist_ok=True)
+    samples = {s[0]: s for s in (parse_sample(t) for t in SOIL_DEFAULTS)}
+    samples.update({s[0]: s for s in (parse_sample(t) for t in samples_spec)})
+    names, points = make_points([], list(samples.values()), n_samples, seed)
+    sweep = Sweep(str(fmu), names, points, Settings(stop_time=stop_time, step=0.01, outputs=["delta_max"],
+                                                    events=True), str(out / "soil.parquet"))
+    if execute(sweep, workers, scheduler, overwrite=True, progress=progress):
+        raise SweepError("interrupted")
+    g = float(next(v.start for v in read_model_description(str(fmu)).modelVariables if v.name == "g"))
+    rows = []
+    for r in _read_table(out / "soil.parquet"):
+        rows.append({"run_id": r["run_id"], **{n: r[n] for n in names}, "status": r["status"],
+                     **soil_metrics(r, g), "message": r["message"]})
+    _write_csv(out / "soil.csv", rows, list(rows[0]))
+    ok = [r for r in rows if r["status"] == "ok"]
+    plt = _plt()
+    fig, axes = plt.subplots(2, 2, figsize=(9, 7))
+    specs = ", ".join(f"{n} ~ {d}{a}" for n, d, a in samples.values())
+    for ax, key, label in ((axes[0, 0], "delta_max_m", "deepest penetration delta_max [m]"),
+                           (axes[0, 1], "rebound_height_m", "first rebound height (apex of y) [m]"),
+                           (axes[1, 0], "n_hops", "hops (liftoffs) in the run")):
+        vals = np.array([r[key] for r in ok if r[key] is not None], dtype=float)
+        if key == "n_hops" and len(vals):
+            ax.hist(vals, bins=np.arange(vals.min() - 0.5, vals.max() + 1.5, 1.0), rwidth=0.85)
+        elif len(vals):
+            ax.hist(vals, bins=max(5, min(40, len(vals) // 5)))
+        if len(vals):
+            p5, p50, p95 = np.percentile(vals, [5, 50, 95])
+            ax.set_title(f"median {p50:.4g}, 5-95 % [{p5:.4g}, {p95:.4g}]", fontsize=8)
+            print(f"{label}: median {p50:.4g}, 5-95 % [{p5:.4g}, {p95:.4g}]")
+        ax.set_xlabel(label)
+        ax.set_ylabel("runs")
+        ax.grid(True, alpha=0.3)
+    ax = axes[1, 1]
+    sc = ax.scatter([r["K"] for r in ok], [r["delta_max_m"] for r in ok], c=[r["n"] for r in ok], s=10)
+    fig.colorbar(sc, ax=ax, label="n")
+    ax.set_xscale("log")
+    ax.xaxis.set_minor_formatter(plt.NullFormatter())
+    ax.set_xlabel("K [N/m^n]")
+    ax.set_ylabel("delta_max [m]")
+    ax.grid(True, alpha=0.3)
+    fig.suptitle(f"Penetrator.fmu, drop from 1.5 m, {stop_time:g} s, {len(ok)} of {len(rows)} runs ok "
+                 f"(seed {seed})\n{specs}", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out / "soil.png", dpi=110)
+    plt.close(fig)
+    print(f"wrote {out / 'soil.csv'}, {out / 'soil.png'}")
+    return rows
+
+
+def study_main(argv):
+    ap = argparse.ArgumentParser(prog="pogofmu study", description="studies on the sweep: CSV + PNG")
+    sub = ap.add_subparsers(dest="study", required=True)
+    wp = sub.add_parser("work-precision", help="Figs 21-22: event-time error and events located vs rel_tol")
+    wp.add_argument("--out", default=str(ROOT / "results" / "work-precision"), help="output folder")
+    wp.add_argument("--fmu", default=str(ROOT / "dist" / "PogoStick.fmu"))
+    wp.add_argument("--reference", default=str(REFERENCE), help="closed-form events (CSV)")
+    add_arguments(wp)
+    so = sub.add_parser("soil", help="Monte Carlo of the Penetrator over an uncertain soil")
+    so.add_argument("--out", default=str(ROOT / "results" / "soil"), help="output folder")
+    so.add_argument("--fmu", default=str(ROOT / "dist" / "Penetrator.fmu"))
+    so.add_argument("--samples", type=int, default=200, help="Monte Carlo samples (default 200)")
+    so.add_argument("--seed", type=int, default=0)
+    so.add_argument("--stop-time", type=float, default=10.0, help="[s] (default 10)")
+    so.add_argument("--sample", action="append", default=[], metavar="NAME=DIST(a,b)",
+                    help=f"replace a default distribution or add one (defaults: {' '.join(SOIL_DEFAULTS)})")
+    add_arguments(so)
+    args = ap.parse_args(argv)
+    try:
+        if args.study == "work-precision":
+            work_precision(Path(args.out), Path(args.fmu), Path(args.reference), args.workers, args.scheduler,
+                           not args.no_progress)
+        else:
+            if not (math.isfinite(args.stop_time) and args.stop_time > 0):
+                raise SweepError(f"--stop-time {args.stop_time!r}: must be a finite number > 0 [s]")
+            soil(Path(args.out), Path(args.fmu), args.sample, args.samples, args.seed, args.stop_time,
+                 args.workers, args.scheduler, not args.no_progress)
+    except SweepError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    return 0

@@ -1,0 +1,669 @@
+"""Parameter sweeps and Monte Carlo runs of an FMU on Dask, one Parquet row per run.
+
+    pogofmu sweep dist/PogoStick.fmu --grid k=50:200:4 --grid c=0.1,0.5 --out k_c.parquet
+    pogofmu sweep dist/Penetrator.fmu --sample K=lognormal(9.21,0.5) --samples 200 --seed 1 --out soil.parquet
+
+The runs are the shipped FMU artefact simulated by fmpy (``simulate_fmu``) in Dask worker
+processes: a local cluster (``--workers W``, one thread each) or an existing one
+(``--scheduler tcp://host:8786``). The FMU file is sent to the workers once and extracted once
+per worker; each run gets a fresh FMU instance (0.7 ms, while extracting costs ~8 ms a run).
+Runs go in chunks, one Dask task per chunk, so that scheduling costs little against the runs.
+
+Every finished chunk is written at once as a part file next to the output
+(``OUT.parquet.parts/``); when every run is done the parts are joined, ordered by ``run_id``,
+into ``OUT.parquet`` and the part folder is removed. ``--resume`` reads the parts of an
+interrupted sweep, checks that it is the same sweep (FMU file, points, settings) and runs only
+the missing points. A run that fails (a parameter the FMU refuses, a leg that bottoms out, an
+event storm, even a worker that dies) is a row with ``status`` and the FMU's own ``message``.
+
+Host-side code: fmpy, numpy, dask.distributed, pyarrow, tqdm; never imported inside an FMU.
+"""
+from __future__ import annotations
+
+import atexit
+import hashlib
+import itertools
+import json
+import math
+import os
+import re
+import shutil
+import sys
+import tempfile
+import threading
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Dict, List, Optional, Sequence
+
+SUMMARY_OUTPUTS = ("n_events", "t_last_event")  # FMU outputs that get a column of their own
+DISTRIBUTIONS = {  # name -> (numpy Generator method, argument names, rule on the arguments)
+    "uniform": ("uniform", ("low", "high"), lambda a, b: a < b, "low < high"),
+    "loguniform": (None, ("low", "high"), lambda a, b: 0 < a < b, "0 < low < high"),
+    "normal": ("normal", ("mean", "sd"), lambda m, s: s > 0, "sd > 0"),
+    "lognormal": ("lognormal", ("mu", "sigma"), lambda m, s: s > 0, "sigma > 0"),
+}
+
+
+# Dask settings of a local cluster: the worker's statistical profiler (a stack sample every 10 ms) and
+# the monitors polling every 20-500 ms cost ~7 % of a PogoStick run's CPU time; a sweep needs none of them
+QUIET_CLUSTER = {
+    "distributed.worker.profile.enabled": False,
+    "distributed.admin.tick.interval": "500ms",
+    "distributed.worker.memory.monitor-interval": "1s",
+    "distributed.admin.system-monitor.interval": "2s",
+}
+
+
+class SweepError(Exception):
+    """The sweep cannot be run as specified; the message names the option, its value and the rule."""
+
+
+# =============================================================================================
+# the points: grids and samples
+# =============================================================================================
+
+def _number(text: str, what: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise SweepError(f"{what}: {text!r} is not a number") from None
+
+
+def parse_grid(spec: str):
+    """``NAME=a:b:n`` (n values from a to b, evenly spaced) or ``NAME=v1,v2,...`` -> (name, values)."""
+    name, sep, rhs = spec.partition("=")
+    name = name.strip()
+    if not sep or not name or not rhs.strip():
+        raise SweepError(f"--grid {spec!r}: expected NAME=a:b:n or NAME=v1,v2,...")
+    if ":" in rhs:
+        parts = rhs.split(":")
+        if len(parts) != 3:
+            raise SweepError(f"--grid {spec!r}: a range is a:b:n (start, stop, number of values)")
+        a, b = (_number(p, f"--grid {spec!r}") for p in parts[:2])
+        n = _number(parts[2], f"--grid {spec!r}")
+        if n != int(n) or n < 1 or (n == 1 and a != b):
+            raise SweepError(f"--grid {spec!r}: the number of values n = {parts[2]} must be an integer >= 1 "
+                             "(n = 1 only with a = b)")
+        n = int(n)
+        # rounded to 15 significant digits: 0.2:1.0:3 is 0.2, 0.6, 1.0, not 0.6000000000000001
+        values = [float(f"{a + (b - a) * i / (n - 1):.15g}") for i in range(n)] if n > 1 else [a]
+        if n > 1:
+            values[0], values[-1] = a, b  # exact end points
+    else:
+        values = [_number(v, f"--grid {spec!r}") for v in rhs.split(",")]
+    return name, values
+
+
+_SAMPLE = re.compile(r"^\s*([A-Za-z_][\w.\[\]]*)\s*=\s*([a-z]+)\s*\((.*)\)\s*$")
+
+
+def parse_sample(spec: str):
+    """``NAME=DIST(a,b)`` with DIST one of uniform, loguniform, normal, lognormal -> (name, dist, args)."""
+    m = _SAMPLE.match(spec)
+    if not m:
+        raise SweepError(f"--sample {spec!r}: expected NAME=DIST(a,b) with DIST one of {', '.join(DISTRIBUTIONS)}")
+    name, dist, args = m.group(1), m.group(2), m.group(3)
+    if dist not in DISTRIBUTIONS:
+        raise SweepError(f"--sample {spec!r}: unknown distribution {dist!r} (one of {', '.join(DISTRIBUTIONS)})")
+    _, arg_names, rule, rule_text = DISTRIBUTIONS[dist]
+    values = [_number(a, f"--sample {spec!r}") for a in args.split(",")] if args.strip() else []
+    if len(values) != len(arg_names):
+        raise SweepError(f"--sample {spec!r}: {dist} takes {len(arg_names)} arguments ({', '.join(arg_names)})")
+    if not rule(*values):
+        raise SweepError(f"--sample {spec!r}: {dist}({', '.join(f'{n}={v!r}' for n, v in zip(arg_names, values))}) "
+                         f"breaks the rule {rule_text}")
+    return name, dist, tuple(values)
+
+
+def draw(samples, n: int, seed: Optional[int]):
+    """n values of every sampled parameter, drawn from numpy's default_rng(seed) in the order given.
+
+    Column after column: parameter 1 gets the first n draws, parameter 2 the next n, ...; the same
+    seed and the same --sample list give the same points on any machine.
+    """
+    import numpy as np
+
+    rng = np.random.default_rng(seed)
+    columns = []
+    for name, dist, args in samples:
+        method = DISTRIBUTIONS[dist][0]
+        if dist == "loguniform":
+            vals = np.exp(rng.uniform(math.log(args[0]), math.log(args[1]), n))
+        else:
+            vals = getattr(rng, method)(*args, n)
+        columns.append([float(v) for v in vals])
+    return [tuple(col[i] for col in columns) for i in range(n)]
+
+
+def make_points(grids, samples=(), n_samples=None, seed=None):
+    """(names, points): the Cartesian product of the grids (first grid varies slowest), and for
+    each grid point the n_samples Monte Carlo samples (if any --sample is given)."""
+    names = [g[0] for g in grids] + [s[0] for s in samples]
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise SweepError(f"parameter(s) {', '.join(dup)} given more than once (in --grid / --sample)")
+    if samples and not n_samples:
+        raise SweepError("--sample needs --samples N (the number of Monte Carlo samples, >= 1)")
+    if n_samples and not samples:
+        raise SweepError(f"--samples {n_samples}: there is no --sample NAME=DIST(...) to draw")
+    if n_samples is not None and n_samples < 1:
+        raise SweepError(f"--samples {n_samples}: must be >= 1")
+    grid_points = list(itertools.product(*(g[1] for g in grids)))
+    sample_points = draw(samples, n_samples, seed) if samples else [()]
+    points = [gp + sp for gp in grid_points for sp in sample_points]
+    if not names:
+        raise SweepError("nothing to sweep: give at least one --grid NAME=... or --sample NAME=DIST(...)")
+    return names, points
+
+
+# =============================================================================================
+# one run (in a worker process)
+# =============================================================================================
+
+@dataclass
+class Settings:
+    stop_time: Optional[float] = None  # None: the FMU's default experiment
+    step: Optional[float] = None  # communication step; None: the default experiment's
+    outputs: Optional[List[str]] = None  # None: every output of the FMU
+    events: bool = False  # record the event log (needs the FMU parameter log_events)
+    timeseries: bool = False  # return the recorded outputs on the grid too
+    fixed: Dict[str, float] = field(default_factory=dict)  # start values common to every run
+
+
+_EVENT = re.compile(r"^event (\d+) (\S+) at t = (\S+) s(?:; state before jump: (.*))?$")
+
+
+def parse_event_log(messages):
+    """Events in the FMU's logEvents messages [(status, category, text)] (needs log_events = 1):
+    dicts with index, name, time and the state before the jump."""
+    out = []
+    for _, category, text in messages:
+        m = _EVENT.match(text) if category == "logEvents" else None
+        if m:
+            state = dict(kv.split("=") for kv in m.group(4).split(", ")) if m.group(4) else {}
+            out.append({"index": int(m.group(1)), "name": m.group(2), "time": float(m.group(3)),
+                        "state": {k: float(v) for k, v in state.items()}})
+    return out
+
+
+def recorded_outputs(md, outputs=None):
+    """The outputs a run records: those asked for (default: every output) and n_events, t_last_event."""
+    names = [v.name for v in md.modelVariables if v.causality == "output"] if outputs is None else list(outputs)
+    have = {v.name for v in md.modelVariables}
+    return names + [n for n in SUMMARY_OUTPUTS if n in have and n not in names]
+
+
+def _decode(b):
+    return b.decode(errors="replace") if b else ""
+
+
+class Runner:
+    """One extracted FMU, run as often as asked; each run in a fresh instance."""
+
+    def __init__(self, fmu: str):
+        import scipy.integrate  # noqa: F401  (README "Known issues": avoids a teardown crash)
+        from fmpy import extract, read_model_description
+
+        self.md = read_model_description(fmu)
+        self.unzipdir = extract(fmu)
+        atexit.register(shutil.rmtree, self.unzipdir, True)
+        self.vars = {v.name: v for v in self.md.modelVariables}
+        ex = self.md.defaultExperiment  # its step as it is (fmpy alone would coarsen it to <= 1000 points)
+        self.default_step = float(ex.stepSize) if ex is not None and ex.stepSize is not None else None
+
+    def run(self, point: Dict[str, float], settings: Settings):
+        """Simulate one point; returns (row, result array or None). Never raises for a failed run."""
+        import numpy as np
+        from fmpy import simulate_fmu
+        from fmpy.fmi1 import FMICallException
+        from fmpy.simulation import instantiate_fmu
+
+        messages = []  # this run's log (a worker with several threads runs several at once)
+
+        def logger(component, instance, status, category, message):
+            messages.append((status, _decode(category), _decode(message)))
+
+        start = dict(settings.fixed)
+        start.update(point)
+        if settings.events:
+            start["log_events"] = 1
+        for name, value in start.items():
+            if self.vars[name].type == "Integer":
+                start[name] = int(value)
+        record = recorded_outputs(self.md, settings.outputs)
+        row = {"status": "ok", "message": ""}
+        res = None
+        t0 = time.perf_counter()
+        fmu = instantiate_fmu(self.unzipdir, self.md, "CoSimulation", False, True, logger)
+        try:
+            res = simulate_fmu(self.unzipdir, model_description=self.md, fmu_instance=fmu,
+                               start_values=start, stop_time=settings.stop_time,
+                               output_interval=settings.step or self.default_step, output=record, validate=False)
+            fmu.freeInstance()
+            stop = settings.stop_time if settings.stop_time is not None else float(self.md.defaultExperiment.stopTime)
+            if not math.isclose(res["time"][-1], stop, rel_tol=0, abs_tol=1e-9 * max(1.0, abs(stop))):
+                row.update(status="incomplete", message=f"the run stopped at t = {res['time'][-1]!r} s "
+                                                        f"before the stop time {stop!r} s")
+        except FMICallException as exc:
+            # fmi2Error leaves the instance usable enough to free; after fmi2Fatal nothing may be called
+            if exc.status == 3:
+                fmu.freeInstance()
+            row.update(status="error" if exc.status == 3 else "fatal", message=_problem(messages, str(exc)))
+            res = None
+        except Exception as exc:  # noqa: BLE001 (a run never takes the sweep down)
+            row.update(status="error", message=_problem(messages, f"{type(exc).__name__}: {exc}"))
+            res = None
+        row["wall_s"] = time.perf_counter() - t0
+        for name in record:
+            if name in SUMMARY_OUTPUTS:
+                row[name] = None if res is None else res[name][-1].item()
+            else:
+                col = None if res is None else res[name]
+                row[f"{name}_final"] = None if col is None else col[-1].item()
+                row[f"{name}_min"] = None if col is None else np.min(col).item()
+                row[f"{name}_max"] = None if col is None else np.max(col).item()
+        if settings.events:
+            ev = parse_event_log(messages)
+            row["event_t"] = [e["time"] for e in ev]
+            row["event_name"] = [e["name"] for e in ev]
+            row["event_state"] = [list(e["state"].items()) for e in ev]
+        return row, (res if settings.timeseries else None)
+
+
+def _problem(messages, text):
+    """The FMU's own error/warning messages (the reason), then what failed."""
+    return "; ".join([m[2] for m in messages if m[0] >= 2] + [text])
+
+
+_RUNNERS: Dict[str, Runner] = {}
+_RUNNERS_LOCK = threading.Lock()
+
+
+def _runner(key: str, data: bytes) -> Runner:
+    """The worker's Runner of the FMU whose bytes hash to key (written and extracted once)."""
+    with _RUNNERS_LOCK:
+        if key not in _RUNNERS:
+            folder = Path(tempfile.mkdtemp(prefix="pogofmu-sweep-"))
+            atexit.register(shutil.rmtree, folder, True)
+            path = folder / "model.fmu"
+            path.write_bytes(data)
+            _RUNNERS[key] = Runner(str(path))
+        return _RUNNERS[key]
+
+
+def run_chunk(key: str, data: bytes, names: Sequence[str], chunk, settings: Settings):
+    """Dask task: run [(run_id, point), ...]; returns [(row, timeseries or None), ...]."""
+    runner = _runner(key, data)
+    out = []
+    for run_id, point in chunk:
+        row, res = runner.run(dict(zip(names, point)), settings)
+        out.append(({"run_id": run_id, **dict(zip(names, point)), **row}, res))
+    return out
+
+
+# =============================================================================================
+# the table
+# =============================================================================================
+
+def check_names(md, names, settings: Settings):
+    """Every swept or fixed name is a parameter of the FMU; every output is an output."""
+    vars_ = {v.name: v for v in md.modelVariables}
+    params = sorted(n for n, v in vars_.items() if v.causality == "parameter")
+    for n in list(names) + list(settings.fixed):
+        if n not in vars_ or vars_[n].causality != "parameter":
+            raise SweepError(f"{n!r} is not a parameter of {md.modelName} (parameters: {', '.join(params)})")
+        if vars_[n].type not in ("Real", "Integer"):
+            raise SweepError(f"parameter {n} of {md.modelName} is {vars_[n].type}: only Real and Integer can be swept")
+    outs = sorted(n for n, v in vars_.items() if v.causality == "output")
+    for n in settings.outputs or ():
+        if n not in vars_ or vars_[n].causality != "output":
+            raise SweepError(f"--outputs: {n!r} is not an output of {md.modelName} (outputs: {', '.join(outs)})")
+    if settings.events and "log_events" not in vars_:
+        raise SweepError(f"--events needs the parameter log_events, which {md.modelName} does not have")
+    for name, text in (("--stop-time", settings.stop_time), ("--step", settings.step)):
+        if text is not None and not (math.isfinite(text) and text > 0):
+            raise SweepError(f"{name} {text!r}: must be a finite number > 0 [s]")
+
+
+def check_point_types(md, names, points):
+    """Integer parameters take integral values only (a grid 1:3:3 is fine, 1.5 is not)."""
+    vars_ = {v.name: v for v in md.modelVariables}
+    for j, n in enumerate(names):
+        if vars_[n].type == "Integer":
+            bad = [p[j] for p in points if p[j] != int(p[j])]
+            if bad:
+                raise SweepError(f"parameter {n} is an Integer: value {bad[0]!r} is not integral")
+
+
+def schema(md, names, settings: Settings):
+    import pyarrow as pa
+
+    vars_ = {v.name: v for v in md.modelVariables}
+    typ = lambda n: pa.int64() if vars_[n].type in ("Integer", "Boolean", "Enumeration") else pa.float64()  # noqa: E731
+    fields = [("run_id", pa.int64())] + [(n, typ(n)) for n in names]
+    fields += [("status", pa.string()), ("message", pa.string()), ("wall_s", pa.float64())]
+    for n in recorded_outputs(md, settings.outputs):
+        if n in SUMMARY_OUTPUTS:
+            fields.append((n, typ(n)))
+        else:
+            fields += [(f"{n}_{s}", typ(n)) for s in ("final", "min", "max")]
+    if settings.events:
+        fields += [("event_t", pa.list_(pa.float64())), ("event_name", pa.list_(pa.string())),
+                   ("event_state", pa.list_(pa.map_(pa.string(), pa.float64())))]
+    return pa.schema(fields)
+
+
+def _write_atomic(table, path: Path, metadata=None):
+    import pyarrow.parquet as pq
+
+    if metadata:
+        table = table.replace_schema_metadata({**(table.schema.metadata or {}), **metadata})
+    tmp = path.with_name(path.name + ".tmp")
+    pq.write_table(table, tmp)
+    os.replace(tmp, path)
+
+
+def _write_timeseries(folder: Path, run_id: int, res):
+    import pyarrow as pa
+
+    part = folder / f"run_id={run_id}"
+    part.mkdir(parents=True, exist_ok=True)
+    table = pa.table({n: res[n] for n in res.dtype.names})
+    _write_atomic(table, part / "part-0.parquet")
+
+
+# =============================================================================================
+# the sweep (client side)
+# =============================================================================================
+
+@dataclass
+class Sweep:
+    fmu: str
+    names: List[str]
+    points: List[tuple]
+    settings: Settings
+    out: str
+    timeseries_dir: Optional[str] = None
+    chunk_size: Optional[int] = None
+
+    def spec(self, sha: str) -> dict:
+        """What identifies the sweep for --resume."""
+        return {"fmu_sha256": sha, "names": self.names, "points": [list(p) for p in self.points],
+                "settings": asdict(self.settings), "timeseries": bool(self.timeseries_dir)}
+
+
+def _sha256(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
+
+
+def _parts_dir(out: Path) -> Path:
+    return out.with_name(out.name + ".parts")
+
+
+def _done_ids(parts: Path):
+    import pyarrow.parquet as pq
+
+    done = set()
+    for f in sorted(parts.glob("chunk-*.parquet")):
+        done.update(pq.read_table(f, columns=["run_id"]).column("run_id").to_pylist())
+    return done
+
+
+def open_cluster(workers: Optional[int] = None, scheduler: Optional[str] = None):
+    """A dask.distributed Client: to the scheduler at ``scheduler``, or to a new local cluster of
+    ``workers`` processes (default: every core) with one thread each. Returns (client, cluster)."""
+    import logging
+
+    import dask
+    from distributed import Client, LocalCluster
+
+    if scheduler:
+        try:
+            return Client(scheduler, timeout="10s"), None
+        except (OSError, TimeoutError) as exc:
+            raise SweepError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
+    n = workers or os.cpu_count() or 1
+    if n < 1:
+        raise SweepError(f"--workers {workers}: must be >= 1")
+    # the workers' logs are silenced: a run's failure is its row; a closing cluster's heartbeat errors are noise;
+    # the scheduler's HTTP server (dashboard off) on a free port: several sweeps may run side by side
+    with dask.config.set(QUIET_CLUSTER):
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
+                               silence_logs=logging.CRITICAL)
+        return Client(cluster), cluster
+
+
+def close_cluster(client, cluster):
+    client.close()
+    if cluster is not None:
+        cluster.close()
+
+
+def prepare(sweep: Sweep):
+    """Check the sweep against the FMU before anything runs; returns (FMU bytes, sha256, model description)."""
+    from fmpy import read_model_description
+
+    fmu = Path(sweep.fmu)
+    if not fmu.is_file():
+        raise SweepError(f"FMU {fmu}: no such file (build it with build_fmu.py, or python3 tasks.py build)")
+    data = fmu.read_bytes()
+    md = read_model_description(str(fmu))
+    check_names(md, sweep.names, sweep.settings)
+    check_point_types(md, sweep.names, sweep.points)
+    return data, _sha256(data), md
+
+
+def check_workers(client):
+    """Every worker can import what a run needs (else every run would fail with the same message)."""
+    def probe():  # a local function: sent by value, so that it runs where pogofmu is missing too
+        import importlib
+
+        for module in ("numpy", "scipy.integrate", "fmpy", "pogofmu.sweep"):
+            importlib.import_module(module)
+
+    try:
+        client.run(probe)
+    except Exception as exc:  # noqa: BLE001
+        raise SweepError(f"the cluster's workers cannot run a sweep ({type(exc).__name__}: {exc}): they need "
+                         "pogofmu (with fmpy, numpy, scipy) installed (README: \"On a Dask cluster\")") from None
+
+
+def run_sweep(sweep: Sweep, client, resume=False, overwrite=False, progress=True, log=print):
+    """Run every missing point of the sweep on the client's cluster; write sweep.out. Returns the
+    number of runs done by this call."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+    from distributed import as_completed
+    from tqdm import tqdm
+
+    fmu = Path(sweep.fmu)
+    data, sha, md = prepare(sweep)
+    sch = schema(md, sweep.names, sweep.settings)
+    spec = json.dumps(sweep.spec(sha), sort_keys=True)
+    out = Path(sweep.out)
+    parts = _parts_dir(out)
+    ts_dir = Path(sweep.timeseries_dir) if sweep.timeseries_dir else None
+
+    if resume:
+        if out.exists() and not parts.exists():
+            old = pq.read_schema(out).metadata or {}
+            if old.get(b"pogofmu.sweep") != spec.encode():
+                raise SweepError(f"--resume: {out} holds a different sweep (FMU file, points or settings differ)")
+            log(f"{out}: all {len(sweep.points)} runs are done already")
+            return 0
+        if parts.exists():
+            old = (parts / "spec.json").read_text() if (parts / "spec.json").exists() else ""
+            if old != spec:
+                raise SweepError(f"--resume: {parts} belongs to a different sweep (FMU file, points or settings "
+                                 "differ); run that sweep's command again, or delete the folder")
+    elif parts.exists() or out.exists():
+        if not overwrite:
+            what = f"{parts} (an interrupted sweep: --resume finishes it)" if parts.exists() else str(out)
+            raise SweepError(f"{what} exists: give --resume or --overwrite")
+        shutil.rmtree(parts, ignore_errors=True)
+        out.unlink(missing_ok=True)
+        if ts_dir is not None:
+            shutil.rmtree(ts_dir, ignore_errors=True)
+    parts.mkdir(parents=True, exist_ok=True)
+    (parts / "spec.json").write_text(spec)
+
+    done = _done_ids(parts)
+    todo = [(i, p) for i, p in enumerate(sweep.points) if i not in done]
+    if done:
+        log(f"resuming {out}: {len(done)} of {len(sweep.points)} runs done, running the other {len(todo)}")
+    if ts_dir is not None:  # a run that is redone must not leave an old series behind
+        for i, _ in todo:
+            shutil.rmtree(ts_dir / f"run_id={i}", ignore_errors=True)
+
+    check_workers(client)
+    n_workers = max(1, len(client.scheduler_info().get("workers", {})))
+    # about 32 tasks per worker: a Dask task costs ~ms against ~0.1 s a run, and small chunks even out the tail
+    size = sweep.chunk_size or max(1, min(64, math.ceil(len(todo) / (32 * n_workers))))
+    chunks = [todo[k:k + size] for k in range(0, len(todo), size)]
+    data_f = client.scatter(data, broadcast=True)
+    submit = lambda chunk: client.submit(run_chunk, sha, data_f, sweep.names, chunk, sweep.settings,  # noqa: E731
+                                         pure=False)
+    futures = {}
+    for chunk in chunks:
+        futures[submit(chunk)] = chunk
+    bar = tqdm(total=len(sweep.points), initial=len(done), unit="run", disable=not progress,
+               desc=fmu.stem, file=sys.stderr, smoothing=0.1)
+    n_run = 0
+    failed = 0
+    try:
+        pending = as_completed(list(futures))
+        for fut in pending:
+            chunk = futures.pop(fut)
+            if fut.status == "cancelled":  # the scheduler went away (or cancelled it): stop, --resume goes on
+                raise RuntimeError(f"the cluster cancelled the task of runs {chunk[0][0]}-{chunk[-1][0]} "
+                                   "(scheduler lost?)")
+            if fut.status == "error":  # a worker died running it (KilledWorker), or the task itself failed
+                exc = fut.exception()
+                fut.release()
+                if len(chunk) > 1:  # a worker died in this chunk: run its points one by one to find the culprit
+                    bar.write(f"runs {chunk[0][0]}-{chunk[-1][0]} failed together ({type(exc).__name__}: {exc}); "
+                              "running them one by one")
+                    for item in chunk:
+                        f = submit([item])
+                        futures[f] = [item]
+                        pending.add(f)
+                    continue
+                run_id, point = chunk[0]
+                results = [({"run_id": run_id, **dict(zip(sweep.names, point)), "status": "crashed",
+                             "message": f"the worker running this point failed: {type(exc).__name__}: {exc}"}, None)]
+            else:
+                results = fut.result()
+                fut.release()
+            rows = []
+            for row, res in results:
+                if ts_dir is not None and res is not None:
+                    _write_timeseries(ts_dir, row["run_id"], res)
+                rows.append(row)
+                failed += row["status"] != "ok"
+            table = pa.Table.from_pylist(rows, schema=sch)
+            _write_atomic(table, parts / f"chunk-{rows[0]['run_id']:08d}.parquet")
+            n_run += len(rows)
+            bar.update(len(rows))
+            if failed:
+                bar.set_postfix(failed=failed)
+    except KeyboardInterrupt:
+        bar.close()
+        client.cancel(list(futures))
+        log(f"\ninterrupted: {len(done) + n_run} of {len(sweep.points)} runs saved in {parts}; "
+            "the same command with --resume runs the rest")
+        raise
+    except Exception as exc:  # a lost scheduler, a full disk, ...: what is saved stays saved
+        bar.close()
+        raise SweepError(f"the sweep stopped ({type(exc).__name__}: {exc}); {len(done) + n_run} of "
+                         f"{len(sweep.points)} runs are saved in {parts}: the same command with --resume runs "
+                         "the rest") from exc
+    bar.close()
+
+    tables = [pq.read_table(f, schema=sch) for f in sorted(parts.glob("chunk-*.parquet"))]
+    table = pa.concat_tables(tables).sort_by("run_id") if tables else sch.empty_table()
+    if table.num_rows != len(sweep.points):
+        raise SweepError(f"internal: {table.num_rows} rows for {len(sweep.points)} points in {parts}")
+    _write_atomic(table, out, metadata={"pogofmu.sweep": spec})
+    shutil.rmtree(parts)
+    statuses = table.column("status").to_pylist()
+    bad = len(statuses) - statuses.count("ok")
+    log(f"{out}: {table.num_rows} runs ({n_run} run now), {bad} failed" + (
+        " (see the status and message columns)" if bad else ""))
+    return n_run
+
+
+def add_arguments(ap):
+    """The options of a sweep shared by ``pogofmu sweep`` and the studies (cluster and output)."""
+    g = ap.add_mutually_exclusive_group()
+    g.add_argument("--workers", type=int, help="local worker processes (default: every core)")
+    g.add_argument("--scheduler", metavar="ADDRESS", help="an existing Dask scheduler, e.g. tcp://10.0.0.5:8786")
+    ap.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def sweep_main(argv):
+    import argparse
+
+    ap = argparse.ArgumentParser(prog="pogofmu sweep", description=(
+        "Run an FMU for every point of a grid (Cartesian product) and/or for Monte Carlo samples on "
+        "Dask; one Parquet row per run."))
+    ap.add_argument("fmu", help="the FMU file, e.g. dist/PogoStick.fmu")
+    ap.add_argument("--grid", action="append", default=[], metavar="NAME=a:b:n|NAME=v1,v2,...",
+                    help="n values from a to b, or a list; several --grid span the Cartesian product")
+    ap.add_argument("--sample", action="append", default=[], metavar="NAME=DIST(a,b)",
+                    help="uniform(low,high), loguniform(low,high), normal(mean,sd), lognormal(mu,sigma) "
+                         "(mu, sigma of log NAME)")
+    ap.add_argument("--samples", type=int, help="number of Monte Carlo samples (per grid point)")
+    ap.add_argument("--seed", type=int, default=0, help="seed of numpy's default_rng (default 0)")
+    ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                    help="a parameter value common to every run")
+    ap.add_argument("--stop-time", type=float, help="[s] (default: the FMU's default experiment)")
+    ap.add_argument("--step", type=float, help="communication step [s] (default: the default experiment's)")
+    ap.add_argument("--outputs", help="comma-separated outputs to summarize (default: every output)")
+    ap.add_argument("--events", action="store_true", help="record every event (time, kind, state) from the "
+                                                          "FMU's event log (sets log_events = 1)")
+    ap.add_argument("--timeseries", metavar="DIR", help="also write every run's outputs on the grid to a "
+                                                        "Parquet dataset partitioned by run_id")
+    ap.add_argument("--chunk-size", type=int, help="runs per Dask task (default: about 32 tasks per worker, "
+                                                   "at most 64 runs)")
+    ap.add_argument("--out", required=True, help="the Parquet file to write")
+    ap.add_argument("--resume", action="store_true", help="finish an interrupted sweep (same command)")
+    ap.add_argument("--overwrite", action="store_true", help="replace an existing output")
+    add_arguments(ap)
+    args = ap.parse_args(argv)
+    try:
+        if args.chunk_size is not None and args.chunk_size < 1:
+            raise SweepError(f"--chunk-size {args.chunk_size}: must be >= 1")
+        fixed = {}
+        for s in args.set:
+            name, sep, value = s.partition("=")
+            if not sep:
+                raise SweepError(f"--set {s!r}: expected NAME=VALUE")
+            fixed[name.strip()] = _number(value, f"--set {s!r}")
+        names, points = make_points([parse_grid(g) for g in args.grid], [parse_sample(s) for s in args.sample],
+                                    args.samples, args.seed)
+        settings = Settings(stop_time=args.stop_time, step=args.step, events=args.events,
+                            outputs=[o.strip() for o in args.outputs.split(",") if o.strip()] if args.outputs else None,
+                            timeseries=bool(args.timeseries), fixed=fixed)
+        sweep = Sweep(args.fmu, names, points, settings, args.out, args.timeseries, args.chunk_size)
+        return execute(sweep, args.workers, args.scheduler, resume=args.resume, overwrite=args.overwrite,
+                       progress=not args.no_progress)
+    except SweepError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+
+
+def execute(sweep: Sweep, workers=None, scheduler=None, **kwargs):
+    """Open the cluster, run the sweep, close the cluster (also on an interruption)."""
+    prepare(sweep)  # a bad option fails before any worker starts
+    try:
+        client, cluster = open_cluster(workers, scheduler)
+    except KeyboardInterrupt:
+        return 130
+    try:
+        run_sweep(sweep, client, **kwargs)
+    except KeyboardInterrupt:
+        return 130
+    finally:
+        close_cluster(client, cluster)
+    return 0

@@ -1,0 +1,373 @@
+"""`pogofmu sweep` and `pogofmu study` (issue 11): Dask sweeps of the built FMUs, Parquet rows.
+
+References: direct fmpy runs of the same FMU (support.simulate), numpy's documented generator
+for the Monte Carlo draws, the closed-form events (shared/reference/pogo_basic_events.csv) and
+the work-precision expectations of tests/test_pogostick.py. The sweeps run on small local
+clusters (2 worker processes, one shared by most tests through --scheduler), and every test
+checks that no worker process outlives its cluster.
+"""
+import csv
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+import uuid
+from pathlib import Path
+
+import numpy as np
+import psutil
+import pyarrow.parquet as pq
+import pytest
+
+from pogofmu import cli
+from support import fmu_path, reference_events, simulate
+
+POGOFMU = Path(sys.executable).with_name("pogofmu")  # the console script of the venv
+
+
+def _children():
+    """Child processes, but multiprocessing's resource tracker (it lives as long as this process)."""
+    out = set()
+    for p in psutil.Process().children(recursive=True):
+        try:
+            if "resource_tracker" not in " ".join(p.cmdline()):
+                out.add(p.pid)
+        except psutil.Error:
+            pass
+    return out
+
+
+def _wait_gone(pids, timeout=20.0):
+    deadline = time.monotonic() + timeout
+    alive = set(pids)
+    while alive and time.monotonic() < deadline:
+        alive = {p for p in alive if psutil.pid_exists(p) and psutil.Process(p).status() != psutil.STATUS_ZOMBIE}
+        time.sleep(0.1)
+    return alive
+
+
+@pytest.fixture(scope="module")
+def scheduler():
+    """A 2-worker local cluster that the sweeps join with --scheduler (as an existing cluster)."""
+    from distributed import LocalCluster
+
+    before = _children()
+    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0")
+    workers = _children() - before
+    assert len(workers) >= 2
+    yield cluster.scheduler_address
+    cluster.close()
+    assert not _wait_gone(workers), "worker processes left behind by the local cluster"
+
+
+def _rows(path, drop=("wall_s",)):
+    return [{k: v for k, v in r.items() if k not in drop} for r in pq.read_table(path).to_pylist()]
+
+
+def _sweep(*args):
+    return cli.main(["sweep", *map(str, args), "--no-progress"])
+
+
+def test_grid_2x3_with_2_workers_equals_direct_fmpy_runs_and_1_worker(tmp_path):
+    fmu = fmu_path("PogoStick")
+    # no --step: the default experiment's 1 ms (the direct runs' grid below)
+    grid = ["--grid", "k=80,120", "--grid", "c=0.2:1.0:3", "--stop-time", "4", "--outputs", "y,E"]
+    # 2 workers: the console script as a user runs it, in its own process; its workers carry a mark
+    mark = uuid.uuid4().hex
+    env = dict(os.environ, POGOFMU_TEST_MARK=mark)
+    proc = subprocess.run([str(POGOFMU), "sweep", str(fmu), *grid, "--workers", "2", "--out", str(tmp_path / "w2.parquet")],
+                          capture_output=True, text=True, env=env, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert "6 runs" in proc.stdout and "0 failed" in proc.stdout, proc.stdout
+    left = []
+    for p in psutil.process_iter():
+        try:
+            if p.environ().get("POGOFMU_TEST_MARK") == mark:
+                left.append(p.pid)
+        except (psutil.Error, OSError):
+            pass
+    assert not _wait_gone(left, 10.0), f"worker processes of the sweep still running: {left}"
+
+    ts = tmp_path / "series"
+    assert _sweep(fmu, *grid, "--workers", "1", "--out", tmp_path / "w1.parquet", "--timeseries", ts) == 0
+    import pyarrow.dataset as ds
+
+    series = ds.dataset(ts, format="parquet", partitioning="hive").to_table()
+    two, one = _rows(tmp_path / "w2.parquet"), _rows(tmp_path / "w1.parquet")
+    assert one == two, "1 and 2 workers give different tables"
+    assert [(r["run_id"], r["k"], r["c"]) for r in two] == [
+        (0, 80.0, 0.2), (1, 80.0, 0.6), (2, 80.0, 1.0), (3, 120.0, 0.2), (4, 120.0, 0.6), (5, 120.0, 1.0)]
+    for r in two:
+        direct = simulate("PogoStick", start_values={"k": r["k"], "c": r["c"]}, stop_time=4.0, output_interval=1e-3)
+        assert r["status"] == "ok" and r["message"] == ""
+        assert r["n_events"] == direct["n_events"][-1] and r["n_events"] > 3
+        assert r["t_last_event"] == direct["t_last_event"][-1]  # bit for bit
+        for name in ("y", "E"):
+            assert (r[f"{name}_final"], r[f"{name}_min"], r[f"{name}_max"]) == (
+                direct[name][-1], np.min(direct[name]), np.max(direct[name]))
+        mine = series.filter(ds.field("run_id") == r["run_id"])  # the time series of the run, on the grid
+        assert mine.num_rows == 4001
+        for name in ("time", "y", "E", "n_events"):
+            assert np.array_equal(mine.column(name).to_numpy(), direct[name]), name
+    assert len({r["t_last_event"] for r in two}) == 6  # the parameters did reach the FMU
+
+
+def test_monte_carlo_is_reproducible_from_the_seed(tmp_path, scheduler):
+    fmu = fmu_path("PogoStick")
+    mc = ["--sample", "k=uniform(60,150)", "--sample", "c=lognormal(-1,0.5)", "--samples", "5",
+          "--stop-time", "2", "--step", "1e-2", "--outputs", "y", "--scheduler", scheduler]
+    for name, seed in (("a", 7), ("b", 7), ("c", 8)):
+        assert _sweep(fmu, *mc, "--seed", seed, "--out", tmp_path / f"{name}.parquet") == 0
+    a, b, c = (_rows(tmp_path / f"{n}.parquet") for n in "abc")
+    assert a == b
+    assert [r["k"] for r in a] != [r["k"] for r in c]
+    # the documented draw: numpy default_rng(seed), one parameter after the other, N values each
+    rng = np.random.default_rng(7)
+    assert [r["k"] for r in a] == list(rng.uniform(60, 150, 5))
+    assert [r["c"] for r in a] == list(rng.lognormal(-1, 0.5, 5))
+    assert all(r["status"] == "ok" for r in a)
+
+
+def test_failed_runs_are_rows_and_the_others_complete(tmp_path, scheduler):
+    """A refused parameter (at initialization) and a leg that bottoms out mid-run in one chunk,
+    on one worker: each is a row with the FMU's message, the runs after them still complete."""
+    out = tmp_path / "bad.parquet"
+    assert _sweep(fmu_path("PogoStickMem"), "--grid", "beta=5,0", "--grid", "c=0.5,-1", "--stop-time", "6",
+                  "--step", "1e-2", "--outputs", "y", "--chunk-size", "4", "--scheduler", scheduler, "--out", out) == 0
+    rows = {(r["beta"], r["c"]): r for r in _rows(out)}
+    bottom = rows[(5.0, 0.5)]
+    assert bottom["status"] in ("error", "fatal") and "bottomed out" in bottom["message"], bottom
+    assert bottom["n_events"] is None  # a truncated run never passes for a result
+    assert "t = 4.98" in bottom["message"]  # README: the softening leg bottoms out at t = 4.989 s
+    for beta in (5.0, 0.0):
+        r = rows[(beta, -1.0)]
+        assert r["status"] == "error" and "parameter c = -1.0" in r["message"] and "c >= 0" in r["message"], r
+        assert r["n_events"] is None
+    good = rows[(0.0, 0.5)]
+    direct = simulate("PogoStickMem", start_values={"beta": 0.0, "c": 0.5}, stop_time=6.0, output_interval=1e-2)
+    assert good["status"] == "ok" and good["n_events"] == direct["n_events"][-1]
+    assert good["t_last_event"] == direct["t_last_event"][-1]
+
+
+def test_bad_options_are_refused_before_anything_runs(tmp_path, capsys):
+    fmu = fmu_path("PogoStick")
+    out = tmp_path / "x.parquet"
+    assert _sweep(fmu, "--grid", "kk=1,2", "--out", out) == 2
+    err = capsys.readouterr().err
+    assert "'kk' is not a parameter of PogoStick" in err and "k, " in err
+    assert _sweep(fmu, "--sample", "k=normal(100,-1)", "--samples", "3", "--out", out) == 2
+    assert "normal(mean=100.0, sd=-1.0) breaks the rule sd > 0" in capsys.readouterr().err
+    assert _sweep(fmu, "--grid", "method=5,6.5", "--out", out) == 2
+    assert "parameter method is an Integer: value 6.5 is not integral" in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_resume_after_an_interruption_runs_only_the_missing_points(tmp_path, scheduler):
+    fmu = fmu_path("PogoStick")
+    out = tmp_path / "r.parquet"
+    parts = tmp_path / "r.parquet.parts"
+    n = 20  # about 0.2 s a run: the interruption comes after 2 of them, long before the last
+    cmd = [str(POGOFMU), "sweep", str(fmu), "--grid", f"k=60:170:{n}", "--set", "max_step=0.001", "--stop-time", "6",
+           "--step", "1e-2", "--outputs", "y", "--chunk-size", "1", "--scheduler", scheduler, "--out", str(out),
+           "--no-progress"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while len(list(parts.glob("chunk-*.parquet"))) < 2 and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.02)
+    proc.send_signal(signal.SIGINT)  # Ctrl-C
+    stdout, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 130, (proc.returncode, stdout, stderr[-3000:])
+    assert "--resume" in stdout and not out.exists()
+    before = {r["run_id"]: r for f in parts.glob("chunk-*.parquet") for r in pq.read_table(f).to_pylist()}
+    assert 2 <= len(before) < n, f"{len(before)} runs saved: the interruption came too late to test resume"
+
+    again = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    assert again.returncode == 2 and "--resume" in again.stderr  # an interrupted sweep is not overwritten silently
+    resumed = subprocess.run(cmd + ["--resume"], capture_output=True, text=True, timeout=300)
+    assert resumed.returncode == 0, resumed.stderr[-3000:]
+    assert f"{len(before)} of {n} runs done, running the other {n - len(before)}" in resumed.stdout
+    assert f"({n - len(before)} run now)" in resumed.stdout
+    rows = pq.read_table(out).to_pylist()
+    assert [r["run_id"] for r in rows] == list(range(n)) and not parts.exists()
+    for r in rows:
+        assert r["status"] == "ok"
+        if r["run_id"] in before:
+            assert r == before[r["run_id"]]  # the same row, wall time included: not run again
+    # a finished sweep resumed again does nothing
+    done = subprocess.run(cmd + ["--resume"], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0 and f"all {n} runs are done already" in done.stdout
+
+
+def _csv(path):
+    with open(path) as f:
+        return list(csv.DictReader(f))
+
+
+def test_work_precision_study_reproduces_figs_21_22(tmp_path, scheduler):
+    out = tmp_path / "wp"
+    assert cli.main(["study", "work-precision", "--out", str(out), "--scheduler", scheduler, "--no-progress"]) == 0
+    ref = [e["time"] for e in reference_events()]
+    summary = _csv(out / "work_precision.csv")
+    events = _csv(out / "work_precision_events.csv")
+    assert len(summary) == 2 * 2 * 10 and (out / "work_precision.png").stat().st_size > 10_000
+    key = lambda r: (int(r["method"]), float(r["max_step"]), float(r["rel_tol"]))  # noqa: E731
+    err = {}
+    for e in events:  # the error recomputed here from the located times and the closed form
+        err[key(e)] = max(err.get(key(e), 0.0), abs(float(e["time_s"]) - ref[int(e["index"]) - 1]))
+    for r in summary:
+        assert r["status"] == "ok"
+        assert float(r["max_event_error_s"]) == err[key(r)]
+        if float(r["max_step"]) == 0.01:  # Fig. 22: every event located at every tolerance with max_step
+            assert int(r["n_events"]) == 19, r
+            assert err[key(r)] < 1e-5
+    # Fig. 21: unbounded steps, method 5: the error falls in proportion to rel_tol
+    tols = [10.0 ** -k for k in range(4, 11)]
+    errs = [err[(5, 0.0, t)] for t in tols]
+    assert all(int(r["n_events"]) == 19 for r in summary if key(r)[0] == 5)
+    assert 0.7 <= np.polyfit(np.log10(tols), np.log10(errs), 1)[0] <= 1.3, errs
+    assert errs[-1] < errs[0] / 1e4
+    # the event times of the sweep are those of a direct fmpy run, bit for bit
+    direct = simulate("PogoStick", start_values={"log_events": 1, "method": 8, "rel_tol": 1e-9}, output_interval=1e-3)
+    got = sorted((int(e["index"]), float(e["time_s"])) for e in events if key(e) == (8, 0.01, 1e-9))
+    assert [t for _, t in got] == [e["time"] for e in direct.events()]
+
+
+def test_soil_study_against_direct_runs(tmp_path, scheduler):
+    out = tmp_path / "soil"
+    assert cli.main(["study", "soil", "--out", str(out), "--samples", "4", "--seed", "3", "--stop-time", "3",
+                     "--scheduler", scheduler, "--no-progress"]) == 0
+    rows = _csv(out / "soil.csv")
+    assert len(rows) == 4 and (out / "soil.png").stat().st_size > 10_000
+    assert len({r["K"] for r in rows}) == 4
+    for r in rows:
+        assert r["status"] == "ok"
+        params = {"K": float(r["K"]), "n": float(r["n"]), "c_r": float(r["c_r"])}
+        direct = simulate("Penetrator", start_values=params, stop_time=3.0, output_interval=1e-3)
+        # the record of the deepest penetration is an exact event value: equal bit for bit
+        assert float(r["delta_max_m"]) == direct["delta_max"][-1] > 0
+        # hops = liftoffs: contact (s = 1) -> flight (s = 0) on the 1 ms grid
+        s = direct["s"]
+        lifts = np.flatnonzero((s[:-1] == 1) & (s[1:] == 0)) + 1
+        assert int(r["n_hops"]) == len(lifts) >= 2
+        # first rebound height: the highest sample of y in the first flight after a liftoff
+        land = np.flatnonzero((s[:-1] == 0) & (s[1:] == 1))
+        land = land[land > lifts[0]][0]
+        apex = np.max(direct["y"][lifts[0]:land + 1])
+        assert math.isclose(float(r["rebound_height_m"]), apex, abs_tol=1e-5), (r["rebound_height_m"], apex)
+        assert float(r["rebound_height_m"]) >= apex
+
+
+def test_run_and_ssp_are_subcommands_of_pogofmu(tmp_path):
+    """The entry points moved under the console script: pogofmu run (the master), pogofmu ssp."""
+    from support import DIST
+
+    check = subprocess.run([str(POGOFMU), "ssp", "check", str(DIST / "SpaceHopper.ssp")],
+                           capture_output=True, text=True, timeout=120)
+    assert check.returncode == 0 and "is valid" in check.stdout, check.stdout + check.stderr
+    bad = subprocess.run([str(POGOFMU), "ssp", "check", str(tmp_path / "none.ssp")], capture_output=True, text=True,
+                         timeout=120)
+    assert bad.returncode != 0
+    run = subprocess.run([str(POGOFMU), "run", "--dist", str(DIST), "--out", str(tmp_path / "results"), "PogoStick"],
+                         capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr[-3000:]
+    with open(tmp_path / "results" / "PogoStick" / "timeseries.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert float(rows[-1]["time"]) == pytest.approx(10.0) and int(rows[-1]["n_events"]) == 19
+    unknown = subprocess.run([str(POGOFMU), "nosuch"], capture_output=True, text=True, timeout=60)
+    assert unknown.returncode == 2 and "unknown command 'nosuch'" in unknown.stderr
+
+
+def test_a_worker_killed_mid_sweep_loses_no_run(tmp_path):
+    """A worker process dies (SIGKILL) while it runs a chunk; Dask may not retry the task here
+    (allowed-failures 0), so the sweep reruns the chunk's points one by one: every run is a row."""
+    import dask
+    from distributed import Client, LocalCluster
+
+    before = _children()
+    with dask.config.set({"distributed.scheduler.allowed-failures": 0}):
+        cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0")
+    try:
+        client = Client(cluster)
+        pids = client.run(os.getpid)
+        out, parts = tmp_path / "k.parquet", tmp_path / "k.parquet.parts"
+        n = 20
+        proc = subprocess.Popen([str(POGOFMU), "sweep", str(fmu_path("PogoStick")), "--grid", f"k=60:170:{n}",
+                                 "--set", "max_step=0.001", "--stop-time", "6", "--step", "1e-2", "--outputs", "y",
+                                 "--chunk-size", "5", "--scheduler", cluster.scheduler_address, "--out", str(out),
+                                 "--no-progress"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        deadline = time.monotonic() + 120
+        while not list(parts.glob("chunk-*.parquet")) and time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.02)
+        busy = []
+        while not busy and time.monotonic() < deadline:  # a worker in the middle of a chunk
+            busy = [w for w, keys in client.processing().items() if keys and w in pids]
+            time.sleep(0.01)
+        os.kill(pids[busy[0]], signal.SIGKILL)
+        stdout, stderr = proc.communicate(timeout=300)
+        assert proc.returncode == 0, stderr[-3000:]
+        rows = pq.read_table(out).to_pylist()
+        assert [r["run_id"] for r in rows] == list(range(n))
+        assert all(r["status"] == "ok" and r["n_events"] > 0 for r in rows), [r["message"] for r in rows]
+        assert len(list(parts.glob("*"))) == 0 and f"{n} runs" in stdout
+        assert "KilledWorker" in stdout and "running them one by one" in stdout, stdout + stderr[-3000:]
+    finally:
+        client.close()
+        cluster.close()
+    assert not _wait_gone(_children() - before), "worker processes left behind"
+
+
+def test_a_lost_scheduler_stops_the_sweep_and_resume_finishes_it_elsewhere(tmp_path, scheduler):
+    """The cluster goes away mid-sweep: the sweep stops at once, says so, keeps what it saved and
+    records no run it did not do; --resume on another cluster runs the rest."""
+    from distributed import LocalCluster
+
+    before = _children()
+    lost = LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=":0")
+    out, parts = tmp_path / "l.parquet", tmp_path / "l.parquet.parts"
+    n = 16
+    args = [str(POGOFMU), "sweep", str(fmu_path("PogoStick")), "--grid", f"k=60:170:{n}", "--stop-time", "5",
+            "--step", "1e-2", "--outputs", "y", "--chunk-size", "2", "--out", str(out), "--no-progress"]
+    proc = subprocess.Popen(args + ["--scheduler", lost.scheduler_address], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 120
+        while not list(parts.glob("chunk-*.parquet")) and time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.02)
+    finally:
+        lost.close()
+    stdout, stderr = proc.communicate(timeout=120)
+    assert not _wait_gone(_children() - before), "worker processes left behind"
+    assert proc.returncode == 2 and "the sweep stopped" in stderr and "--resume runs the rest" in stderr, stderr[-2000:]
+    saved = [r for f in parts.glob("chunk-*.parquet") for r in pq.read_table(f).to_pylist()]
+    assert 2 <= len(saved) < n and all(r["status"] == "ok" for r in saved)
+    resumed = subprocess.run(args + ["--scheduler", scheduler, "--resume"], capture_output=True, text=True, timeout=300)
+    assert resumed.returncode == 0, resumed.stderr[-3000:]
+    rows = pq.read_table(out).to_pylist()
+    assert [r["run_id"] for r in rows] == list(range(n)) and all(r["status"] == "ok" for r in rows)
+
+
+def _hide_pogofmu():
+    sys.modules["pogofmu.sweep"] = None  # the worker's next import of it fails, as where it is not installed
+
+
+def _unhide_pogofmu():
+    sys.modules.pop("pogofmu.sweep", None)
+
+
+def test_workers_without_pogofmu_are_refused_before_any_run(tmp_path, scheduler):
+    from distributed import Client
+
+    with Client(scheduler) as client:
+        client.run(_hide_pogofmu)
+        try:
+            out = tmp_path / "n.parquet"
+            proc = subprocess.run([str(POGOFMU), "sweep", str(fmu_path("PogoStick")), "--grid", "k=80,90",
+                                   "--scheduler", scheduler, "--out", str(out), "--no-progress"],
+                                  capture_output=True, text=True, timeout=120)
+        finally:
+            client.run(_unhide_pogofmu)
+    assert proc.returncode == 2, proc.stderr[-2000:]
+    assert "the cluster's workers cannot run a sweep (ModuleNotFoundError" in proc.stderr
+    assert "they need pogofmu" in proc.stderr and not out.exists()
