@@ -654,8 +654,8 @@ def simulate(ssp, parameters: Optional[str] = None, stop_time: Optional[float] =
     ``add(row)`` and ``close(complete)``, e.g. a :class:`CSVStream`): it is called once the package
     and every number are found valid, before any FMU is loaded, and what it returns is returned.
     """
-    import scipy.integrate  # noqa: F401  (README "Known issues": before any FMU is loaded)
-
+    # no scipy import: the FMUs do not use scipy (the workaround of README "Known issues" is for
+    # scipy-using FMUs) and it would cost the master 50 MB of its 150 MB budget (issue 9 item 10)
     if algorithm not in ALGORITHMS:
         raise SSPError(f"algorithm {algorithm!r} is not one of {ALGORITHMS}")
     for what, value in (("communication step (--step)", step), ("stop time (--stop-time)", stop_time),
@@ -824,9 +824,10 @@ def _panels(rec, connections):
     return sorted(shown, key=lambda n: rec.types[n] != "Real"), copies  # integer signals last
 
 
-def plot(rec, path: Path, title: str, connections=()):
-    """The run's figure: every signal against time, y-labels with units, integer ticks for the
-    integer signals, each connected signal drawn once (its inputs named in the label)."""
+def figure(rec, title: str, connections=()):
+    """The run's figure (a matplotlib Figure): every signal against time, y-labels with units,
+    integer ticks for the integer signals, each connected signal drawn once (its inputs named in
+    the label), drawn from the run's min/max envelope."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -852,8 +853,18 @@ def plot(rec, path: Path, title: str, connections=()):
     fig.suptitle(title, fontsize=10)
     fig.align_ylabels(axes[:, 0])
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    return fig
+
+
+def plot(rec, path: Path, title: str, connections=()):
+    """:func:`figure` written to ``path`` (PNG)."""
+    import matplotlib.pyplot as plt
+
+    fig = figure(rec, title, connections)
+    try:
+        fig.savefig(path, dpi=110)
+    finally:
+        plt.close(fig)
     return path
 
 
