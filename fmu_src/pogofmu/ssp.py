@@ -1,7 +1,7 @@
 """SSP master: run an SSP 1.0 package (.ssp) of FMI 2.0 co-simulation FMUs with fmpy.
 
-    python -m pogofmu.ssp run dist/SpaceHopper.ssp --parameters moon --stop-time 30 --step 1e-3 [--out DIR]
-    python -m pogofmu.ssp check dist/SpaceHopper.ssp
+    .venv/bin/python -m pogofmu.ssp run dist/SpaceHopper.ssp --parameters moon --stop-time 30 --step 1e-3 [--out DIR]
+    .venv/bin/python -m pogofmu.ssp check dist/SpaceHopper.ssp
 
 What it does (README "SpaceHopper.ssp: the SSP master"):
 
@@ -24,8 +24,12 @@ What it does (README "SpaceHopper.ssp: the SSP master"):
   from the outputs at the start of the step, as libcosim's fixed-step algorithm);
 * checks every ``fmi2DoStep``: an error status ends the run with the component, the time and the
   FMU's own log message (never a silently truncated result);
-* writes every connector at every communication point to a CSV and plots them (PNG), and prints a
-  progress line every 10 % of a long run.
+* checks every other input (``--stop-time``/``--step`` finite, the ``.ssv`` values against their
+  types, the output folder writable) before the first step; never shows a traceback (an
+  unexpected error is one line; ``--debug`` or ``POGOFMU_DEBUG=1`` for the traceback);
+* streams every connector at every communication point to a CSV while it runs and plots them (PNG)
+  from a min/max envelope, so its memory does not grow with the run; prints a progress line
+  every 10 % of a long run.
 
 Host-side code (fmpy, numpy, matplotlib); never imported inside an FMU.
 """
@@ -917,11 +921,13 @@ def run(ssp, parameters=None, stop_time=None, step=1e-3, out=None, algorithm="ga
     return rec, csv_path, png_path
 
 
-def main(argv=None):
+def main(argv=None, prog="python -m pogofmu.ssp"):
+    """The command line (``run`` / ``check``); returns the exit status. ``prog`` names the command
+    in the usage text (a console command forwarding here may pass its own)."""
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument("--debug", action="store_true",
                         help="show the Python traceback of an unexpected error (also: POGOFMU_DEBUG=1)")
-    ap = argparse.ArgumentParser(prog="python -m pogofmu.ssp", description="SSP master built on fmpy")
+    ap = argparse.ArgumentParser(prog=prog, description="SSP master built on fmpy")
     sub = ap.add_subparsers(dest="command", required=True)
     r = sub.add_parser("run", parents=[common], help="simulate an .ssp with a fixed communication step")
     r.add_argument("ssp")
