@@ -54,8 +54,8 @@ def default_input_signals(model, stop: float, step: float, start_values=None):
     t = np.linspace(0.0, stop, int(round(stop / step)) + 1)
     names = [v.name for v in model.inputs]
     dtype = [("time", np.float64)] + [(n, np.int32 if n in model.integer_inputs else np.float64) for n in names]
-    rows = [(tk,) + tuple(model.default_input(float(tk), p)[n] for n in names) for tk in t]
-    return np.array(rows, dtype=dtype)
+    values = [model.default_input(float(tk), p) for tk in t]
+    return np.array([(tk,) + tuple(u[n] for n in names) for tk, u in zip(t, values)], dtype=dtype)
 
 
 def print_problems(component, instance, status, category, message):
