@@ -335,3 +335,198 @@ def test_command_line_run_writes_csv_plot_and_progress(tmp_path):
     assert rows[0].split(",")[:3] == ["time", "PogoStick.F_ext", "PogoStick.y"]
     assert len(rows) == 2002 and float(rows[-1].split(",")[0]) == pytest.approx(2.0)
     assert (out / "ceres.png").read_bytes()[:4] == b"\x89PNG"
+
+
+# ---------------------------------------------------------------------------------------------
+# issue 9, item 8: every user input checked before the first step, never a traceback
+# ---------------------------------------------------------------------------------------------
+
+def _ssv_edit(old, new):
+    def edit(text):
+        assert old in text
+        return text.replace(old, new)
+    return edit
+
+
+BAD_INPUT = {
+    # case: (edit of moon.ssv or None, extra command-line arguments, words the message must hold)
+    "Real abc": (_ssv_edit('name="k"><ssv:Real value="100"', 'name="k"><ssv:Real value="abc"'), [],
+                 ["resources/moon.ssv", "parameter 'k'", "'abc'", "not a number"]),
+    "empty value": (_ssv_edit('name="c"><ssv:Real value="0.5"', 'name="c"><ssv:Real value=" "'), [],
+                    ["resources/moon.ssv", "parameter 'c'", "is empty"]),
+    "Integer 2.5": (_ssv_edit("<ssv:Parameters>", '<ssv:Parameters><ssv:Parameter name="method">'
+                                                  '<ssv:Integer value="2.5"/></ssv:Parameter>'), [],
+                    ["resources/moon.ssv", "parameter 'method'", "Integer value '2.5'", "whole number"]),
+    "stop time nan": (None, ["--stop-time", "nan"], ["stop time", "--stop-time", "nan", "finite"]),
+    "stop time inf": (None, ["--stop-time", "inf"], ["stop time", "--stop-time", "inf", "finite"]),
+    "step nan": (None, ["--step", "nan"], ["communication step", "--step", "nan", "finite"]),
+    "out is a file": (None, ["--out", "{file}"], ["--out", "{file}", "is an existing file"]),
+    "out under a file": (None, ["--out", "{file}/sub"], ["--out", "{file}/sub", "cannot be written"]),
+    "out unwritable": (None, ["--out", "/proc/self/results"], ["--out", "/proc/self/results", "cannot be written"]),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_INPUT))
+def test_bad_user_input_is_refused_before_the_first_step(case, tmp_path, monkeypatch, capsys):
+    """Issue 9 item 8: each bad input ends in one message naming it, exit status 1, no traceback,
+    before any FMU steps (no progress line, no CSV; before the fix --out failed after the run)."""
+    edit, args, words = BAD_INPUT[case]
+    pkg = variant(tmp_path)
+    if edit:
+        ssv = pkg / "resources" / "moon.ssv"
+        ssv.write_text(edit(ssv.read_text()))
+    blocker = tmp_path / "a_file"
+    blocker.write_text("not a folder")
+    args = [a.replace("{file}", str(blocker)) for a in args]
+    words = [w.replace("{file}", str(blocker)) for w in words]
+    def no_fmu(*a, **k):  # main() would turn this into exit status 2
+        raise AssertionError("an FMU was loaded before the input was checked")
+
+    monkeypatch.setattr(master._Instance, "__init__", no_fmu)
+    out = tmp_path / "out"
+    argv = ["run", str(pkg), "--parameters", "moon", "--stop-time", "1", "--out", str(out)]
+    rc = master.main(argv + args)
+    err = capsys.readouterr().err
+    assert rc == 1, err  # (2 if an FMU had been loaded: refused before any step)
+    assert "Traceback" not in err and err.startswith("error: ")
+    for w in words:
+        assert w in err, err
+    assert not out.exists() or not list(out.iterdir())
+
+
+def test_bad_user_input_on_the_command_line_exits_without_traceback(tmp_path):
+    """The same through the real command (fresh process): `--out` a file, exit 1, one message."""
+    blocker = tmp_path / "a_file"
+    blocker.write_text("x")
+    proc = subprocess.run([sys.executable, "-m", "pogofmu.ssp", "run", str(SSP), "--parameters", "moon",
+                           "--stop-time", "1", "--out", str(blocker)], capture_output=True, text=True)
+    assert proc.returncode == 1 and "Traceback" not in proc.stderr
+    assert proc.stderr.strip() == f"error: output folder '{blocker}' (--out) is an existing file, not a folder"
+    assert " %  t = " not in proc.stdout  # not a single progress line: no step was taken
+
+
+def test_an_unexpected_error_is_one_line_asking_for_a_report(tmp_path, monkeypatch, capsys):
+    """Last resort: an exception the master does not expect prints one line (not a traceback),
+    exit status 2; --debug (or POGOFMU_DEBUG=1) gives the traceback."""
+    def broken(*a, **k):
+        raise ZeroDivisionError("float division by zero")
+
+    monkeypatch.setattr(master, "validate", broken)
+    monkeypatch.delenv("POGOFMU_DEBUG", raising=False)
+    assert master.main(["check", str(SSP)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert "unexpected ZeroDivisionError: float division by zero" in err and "report" in err
+    with pytest.raises(ZeroDivisionError):
+        master.main(["check", str(SSP), "--debug"])
+    monkeypatch.setenv("POGOFMU_DEBUG", "1")
+    with pytest.raises(ZeroDivisionError):
+        master.main(["check", str(SSP)])
+
+
+def test_a_run_failing_midway_keeps_its_rows_as_incomplete_not_as_the_result(tmp_path):
+    """A bottomed-out leg (k = 5 on Earth) ends the run: no <set>.csv passes for a result, the
+    rows so far are in <set>.incomplete.csv and the message says where and up to when."""
+    text = (ROOT / "ssp" / "SpaceHopper" / "earth.ssv").read_text()
+    pkg = variant(tmp_path, files={"resources/earth.ssv": text.replace('name="k"><ssv:Real value="100"',
+                                                                       'name="k"><ssv:Real value="5"')})
+    out = tmp_path / "out"
+    proc = subprocess.run([sys.executable, "-m", "pogofmu.ssp", "run", str(pkg), "--parameters", "earth",
+                           "--stop-time", "5", "--out", str(out), "--quiet"], capture_output=True, text=True)
+    assert proc.returncode == 1 and "Traceback" not in proc.stderr, proc.stderr
+    assert "bottomed out" in proc.stderr and "earth.incomplete.csv" in proc.stderr
+    assert not (out / "earth.csv").exists() and not (out / "earth.png").exists()
+    rows = (out / "earth.incomplete.csv").read_text().splitlines()
+    t_last = float(rows[-1].split(",")[0])
+    assert 0 < t_last < 5 and f"up to t = {t_last:.10g} s" in proc.stderr
+
+
+# ---------------------------------------------------------------------------------------------
+# issue 9, item 10: results streamed to disk, the figure decimated, the memory flat
+# ---------------------------------------------------------------------------------------------
+
+def test_envelope_keeps_every_slice_min_and_max():
+    """Against brute force: each slice's min and max (and their times) are in the envelope's
+    series, a single-sample spike survives 100x decimation, and a short run is kept whole."""
+    rng = np.random.default_rng(9)
+    n, bins = 10_007, 100
+    t = np.arange(n) * 1e-3
+    y = rng.normal(size=n)
+    y[4321] = 50.0  # one-sample spike: plain striding (every 100th sample) would drop it
+    env = master.Envelope(n, 2, bins)
+    for a in range(0, n, 777):  # blocks that straddle the slices
+        env.add(np.column_stack([t[a:a + 777], y[a:a + 777]]))
+    ts, ys = env.series(1)
+    assert len(ys) <= 2 * bins and ys.max() == 50.0 and ts[ys.argmax()] == t[4321]
+    assert np.all(np.diff(ts) > 0)  # in time order: drawable as a line
+    edges = [next(r for r in range(n) if r * bins // n == j) for j in range(bins)] + [n]
+    for a, b in zip(edges, edges[1:]):
+        seg = slice(a, b)
+        inside = (ts >= t[a]) & (ts <= t[b - 1])
+        assert ys[inside].min() == y[seg].min() and ys[inside].max() == y[seg].max()
+    small = master.Envelope(50, 2, bins)
+    small.add(np.column_stack([t[:50], y[:50]]))
+    np.testing.assert_array_equal(small.series(1)[1], y[:50])
+
+
+def test_csv_stream_memory_does_not_grow_with_the_run(tmp_path):
+    """The recorder of the run command: 10x more rows, (almost) no more memory (tracemalloc
+    peak within 0.5 MB, where keeping the rows would cost 11 MB more), and the CSV holds every
+    row exactly (integers as integers, floats round-tripping)."""
+    import csv
+    import tracemalloc
+
+    names, types = ["a.x", "a.s"], ["Real", "Integer"]
+
+    def peak(n):
+        tracemalloc.start()
+        s = master.CSVStream(tmp_path / f"r{n}.csv", names, types, ["m", None], n)
+        for k in range(n):
+            s.add([k * 1e-3, math.sin(k * 1e-3) / 3, k % 3])
+        s.close()
+        p = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+        return p
+
+    small, big = peak(10_000), peak(100_000)
+    assert big - small < 0.5e6, (small, big)
+    with (tmp_path / "r100000.csv").open() as f:
+        rows = list(csv.reader(f))
+    assert rows[0] == ["time", "a.x", "a.s"] and len(rows) == 100_001
+    k = 76_543
+    assert rows[k + 1] == [repr(k * 1e-3), repr(math.sin(k * 1e-3) / 3), str(k % 3)]
+    assert not (tmp_path / "r100000.csv.part").exists()
+
+
+def test_run_command_streams_the_same_rows_as_the_in_memory_result(tmp_path):
+    """The CSV of the run command holds exactly the samples simulate() returns in memory."""
+    out = tmp_path / "out"
+    assert master.main(["run", str(SSP), "--parameters", "moon", "--stop-time", "3", "--out", str(out),
+                        "--quiet"]) == 0
+    res = master.simulate(SSP, parameters="moon", stop_time=3.0, step=1e-3, echo_log=False)
+    import csv
+
+    with (out / "moon.csv").open() as f:
+        rows = list(csv.reader(f))
+    assert rows[0] == res.names and len(rows) == 3002
+    for j, name in enumerate(res.names):
+        column = np.array([float(r[j]) for r in rows[1:]])
+        np.testing.assert_array_equal(column, res[name], err_msg=name)
+
+
+def test_run_command_memory_is_flat_in_the_run_length(tmp_path):
+    """Issue 9 item 10 end to end: the peak RSS of the real command (fresh process each, CSV and
+    figure included) for 20 000 steps is within 5 MB of that for 2 000 steps; keeping every row
+    and plotting it all, as before, cost ~0.7 kB per step (13 MB here, 858 MB at 10^6 steps).
+    benchmarks/bench_soak.py measures 10^4 .. 10^6 steps."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from bench_soak import peak_rss
+
+    def peak(n):
+        cmd = [sys.executable, "-m", "pogofmu.ssp", "run", str(SSP), "--stop-time", repr(n * 1e-3), "--quiet",
+               "--out", str(tmp_path / str(n))]
+        return peak_rss(cmd, tmp_path)[0]
+
+    short, long = peak(2_000), peak(20_000)
+    assert long - short < 5.0, (short, long)
+    assert (tmp_path / "20000" / "default.csv").stat().st_size > 2_000_000  # the rows went to disk

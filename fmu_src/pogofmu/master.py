@@ -21,8 +21,11 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def simulate_default(fmu: Path, start_values=None, **kwargs):
-    """fmpy simulation of the FMU's default experiment; raises if the run stops early."""
+def simulate_default(fmu: Path, start_values=None, model=None, **kwargs):
+    """fmpy simulation of the FMU's default experiment; raises if the run stops early.
+
+    With a ``model`` that declares ``default_input`` the FMU's inputs follow it (sampled on the
+    output grid) and are recorded beside the outputs."""
     import scipy.integrate  # noqa: F401  (see README: avoids a teardown crash of scipy-using FMUs)
     from fmpy import read_model_description, simulate_fmu
 
@@ -31,12 +34,28 @@ def simulate_default(fmu: Path, start_values=None, **kwargs):
     kwargs.setdefault("output_interval", float(ex.stepSize))
     kwargs.setdefault("debug_logging", True)  # pythonfmu forwards no message without it
     kwargs.setdefault("logger", print_problems)
-    res = simulate_fmu(str(fmu), start_values=start_values or {}, **kwargs)
     stop = kwargs.get("stop_time", float(ex.stopTime))
+    if model is not None and model.default_input is not None and "input" not in kwargs:
+        kwargs["input"] = default_input_signals(model, stop, kwargs["output_interval"], start_values)
+        kwargs.setdefault("output", [v.name for v in model.all_outputs()] + [v.name for v in model.inputs])
+    res = simulate_fmu(str(fmu), start_values=start_values or {}, **kwargs)
     if not math.isclose(res["time"][-1], stop, rel_tol=0, abs_tol=1e-9 * max(1.0, stop)):
         raise RuntimeError(f"{fmu.name}: simulation stopped at t = {res['time'][-1]} s before "
                            f"the stop time {stop} s (see the FMU's log messages above)")
     return res
+
+
+def default_input_signals(model, stop: float, step: float, start_values=None):
+    """The model's ``default_input(t, p)`` sampled every ``step`` up to ``stop``, as the structured
+    array fmpy's ``simulate_fmu(input=...)`` takes (integer inputs as integers)."""
+    import numpy as np
+
+    p = model.params(**{k: v for k, v in (start_values or {}).items() if k in model.defaults()})
+    t = np.linspace(0.0, stop, int(round(stop / step)) + 1)
+    names = [v.name for v in model.inputs]
+    dtype = [("time", np.float64)] + [(n, np.int32 if n in model.integer_inputs else np.float64) for n in names]
+    values = [model.default_input(float(tk), p) for tk in t]
+    return np.array([(tk,) + tuple(u[n] for n in names) for tk, u in zip(t, values)], dtype=dtype)
 
 
 def print_problems(component, instance, status, category, message):
@@ -76,36 +95,111 @@ def write_csv(path: Path, res):
             w.writerow([repr(v) for v in row.item()])
 
 
-def plot_figures(res, model, out_dir: Path, title: str):
+def _label(names, units):
+    """``y, z [m]`` for one unit, ``E [J], s [-]`` for several; ``-`` for a dimensionless signal."""
+    us = [units.get(n) or "-" for n in names]
+    if len(set(us)) == 1:
+        return f"{', '.join(names)} [{us[0]}]"
+    return ", ".join(f"{n} [{u}]" for n, u in zip(names, us))
+
+
+def draw_panel(ax, res, panel, units, integers):
+    """One panel of a model's figure: a loop ``("vs", x, y[, rate, label+, label-])`` or signals
+    against time; every y-axis labelled with its unit, integer signals with integer ticks."""
+    import numpy as np
+    from matplotlib.ticker import MaxNLocator
+
+    if panel[0] == "vs":
+        xn, yn = panel[1], panel[2]
+        x, y = res[xn], res[yn]
+        if len(panel) > 3:
+            _signed_loop(ax, x, y, res[panel[3]], panel[4:6])
+        else:
+            ax.plot(x, y, lw=0.9)
+        ax.set_xlabel(_label([xn], units))
+        ax.set_ylabel(_label([yn], units))
+    else:
+        for name in panel:
+            if name in integers:
+                ax.step(res["time"], res[name], where="post", label=name, lw=0.9)
+            else:
+                ax.plot(res["time"], res[name], label=name, lw=0.9)
+        if all(n in integers for n in panel):
+            ax.yaxis.set_major_locator(MaxNLocator(integer=True))
+        ax.set_ylabel(_label(panel, units))
+        ax.set_xlabel("time [s]")
+        if len(panel) > 1:
+            ax.legend(loc="upper right", fontsize=8)
+    ax.grid(True, alpha=0.3)
+
+
+def _signed_loop(ax, x, y, rate, labels):
+    """A loop in two colours by the sign of ``rate`` (labels for rate > 0 and rate < 0), an arrow
+    on each branch's first run, and an inset magnifying the middle of the first rate > 0 run,
+    where the two branches are seen apart (in a thin loop, such as Hunt-Crossley's, they touch
+    at the scale of the whole loop)."""
+    import numpy as np
+    from matplotlib.ticker import MaxNLocator
+
+    branches = []
+    for sign, label, color in ((1, labels[0], "tab:red"), (-1, labels[1], "tab:blue")):
+        on = np.sign(rate) == sign
+        branches.append((np.where(on, x, np.nan), np.where(on, y, np.nan), color, label))
+        ax.plot(branches[-1][0], branches[-1][1], lw=0.9, color=color, label=label)
+        run = np.flatnonzero(on)
+        if len(run) > 2:
+            gaps = np.flatnonzero(np.diff(run) > 1)
+            k = (run[0] + (run[gaps[0]] if len(gaps) else run[-1])) // 2
+            branches[-1] += (k,)
+            ax.annotate("", xy=(x[k + 1], y[k + 1]), xytext=(x[k], y[k]),
+                        arrowprops=dict(arrowstyle="-|>", color=color, lw=1.2, mutation_scale=14))
+    ax.legend(loc="upper left", fontsize=8)
+    if len(branches[0]) < 5 or not np.all(np.isfinite([np.nanmin(x), np.nanmax(x)])):
+        return
+    k = branches[0][4]
+    half = 0.04 * (np.nanmax(x) - np.nanmin(x))
+    near = np.abs(x - x[k]) <= half
+    if half <= 0 or not np.any(near & (rate < 0)):
+        return
+    ins = ax.inset_axes([0.64, 0.07, 0.34, 0.4])  # lower right: empty for a loop rising to the right
+    for bx, by, color, label, *_ in branches:
+        ins.plot(bx, by, lw=1.2, color=color)
+    lo, hi = np.nanmin(y[near]), np.nanmax(y[near])
+    ins.set_xlim(x[k] - half, x[k] + half)
+    ins.set_ylim(lo - 0.05 * (hi - lo), hi + 0.05 * (hi - lo))
+    ins.tick_params(labelsize=7)
+    ins.xaxis.set_major_locator(MaxNLocator(3))
+    ins.grid(True, alpha=0.3)
+    ax.indicate_inset_zoom(ins, edgecolor="0.4")
+
+
+def figures(res, model, title: str):
+    """The model's figures (matplotlib Figure objects, one per entry of ``model.plots``)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    units = {v.name: v.unit for v in model.all_outputs()}
-    files = []
-    for i, panels in enumerate(model.plots, start=1):
-        fig, axes = plt.subplots(len(panels), 1, figsize=(8, 2.4 * len(panels) + 0.6), squeeze=False)
+    units = {v.name: v.unit for v in model.all_outputs() + tuple(model.inputs)}
+    integers = model.all_integer_outputs() | model.integer_inputs | {"s"}
+    out = []
+    for panels in model.plots:
+        height = sum(4.5 if panel[0] == "vs" else 2.4 for panel in panels) + 0.6
+        fig, axes = plt.subplots(len(panels), 1, figsize=(8, height), squeeze=False)
         for ax, panel in zip(axes[:, 0], panels):
-            if panel[0] == "vs":
-                _, xn, yn = panel
-                ax.plot(res[xn], res[yn], lw=0.9)
-                ax.set_xlabel(f"{xn} [{units.get(xn, '')}]")
-                ax.set_ylabel(f"{yn} [{units.get(yn, '')}]")
-            else:
-                for name in panel:
-                    if name == "s" or name in model.all_integer_outputs():
-                        ax.step(res["time"], res[name], where="post", label=name, lw=0.9)
-                    else:
-                        ax.plot(res["time"], res[name], label=name, lw=0.9)
-                unit = {units.get(n, "") for n in panel}
-                ax.set_ylabel(", ".join(panel) + (f" [{unit.pop()}]" if len(unit) == 1 and "" not in unit else ""))
-                ax.set_xlabel("time [s]")
-                if len(panel) > 1:
-                    ax.legend(loc="upper right", fontsize=8)
-            ax.grid(True, alpha=0.3)
+            draw_panel(ax, res, panel, units, integers)
         fig.suptitle(title, fontsize=10)
+        fig.align_ylabels(axes[:, 0])
         fig.tight_layout()
+        out.append(fig)
+    return out
+
+
+def plot_figures(res, model, out_dir: Path, title: str):
+    import matplotlib.pyplot as plt
+
+    files = []
+    for i, fig in enumerate(figures(res, model, title), start=1):
         path = out_dir / f"figure{i}.png"
         fig.savefig(path, dpi=110)
         plt.close(fig)
@@ -138,7 +232,7 @@ def run(dist: Path, out: Path, names=()):
     summary = []
     for fmu in fmus:
         model = model_of(fmu)
-        res = simulate_default(fmu)
+        res = simulate_default(fmu, model=model)
         d = out / fmu.stem
         d.mkdir(exist_ok=True)
         write_csv(d / "timeseries.csv", res)

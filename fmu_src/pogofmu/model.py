@@ -107,7 +107,12 @@ class HybridModel:
     ``bind(q, u, p) -> f(t, x)`` (optional) returns the flow for fixed ``(q, u, p)``, equal to
     ``flow(t, x, q, u, p)`` but free to hoist lookups out of the hot loop;
     ``plots`` lists the figures the master script draws: each a tuple of panels, a panel being a
-    tuple of output names against time, or ``("x", "r")`` style pairs marked ``vs``.
+    tuple of output (or input) names against time, or a loop ``("vs", x, y)``; a loop may name a
+    rate and two labels, ``("vs", x, y, rate, label_rate_positive, label_rate_negative)``, to be
+    drawn in two colours by the sign of ``rate`` (e.g. loading and unloading);
+    ``default_input(t, p) -> {input name: value}`` (optional) gives the inputs of the master
+    script's default experiment at time ``t`` (a model that only reacts to its inputs, such as a
+    controller, shows nothing with constant inputs).
     """
 
     name: str
@@ -126,6 +131,7 @@ class HybridModel:
     integer_inputs: frozenset = frozenset()
     bind: Optional[Callable] = None
     plots: tuple = ()
+    default_input: Optional[Callable] = None
     default_stop_time: float = 10.0
     default_step: float = 1e-3
 

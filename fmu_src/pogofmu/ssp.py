@@ -1,7 +1,7 @@
 """SSP master: run an SSP 1.0 package (.ssp) of FMI 2.0 co-simulation FMUs with fmpy.
 
-    python -m pogofmu.ssp run dist/SpaceHopper.ssp --parameters moon --stop-time 30 --step 1e-3 [--out DIR]
-    python -m pogofmu.ssp check dist/SpaceHopper.ssp
+    .venv/bin/python -m pogofmu.ssp run dist/SpaceHopper.ssp --parameters moon --stop-time 30 --step 1e-3 [--out DIR]
+    .venv/bin/python -m pogofmu.ssp check dist/SpaceHopper.ssp
 
 What it does (README "SpaceHopper.ssp: the SSP master"):
 
@@ -24,8 +24,12 @@ What it does (README "SpaceHopper.ssp: the SSP master"):
   from the outputs at the start of the step, as libcosim's fixed-step algorithm);
 * checks every ``fmi2DoStep``: an error status ends the run with the component, the time and the
   FMU's own log message (never a silently truncated result);
-* writes every connector at every communication point to a CSV and plots them (PNG), and prints a
-  progress line every 10 % of a long run.
+* checks every other input (``--stop-time``/``--step`` finite, the ``.ssv`` values against their
+  types, the output folder writable) before the first step; never shows a traceback (an
+  unexpected error is one line; ``--debug`` or ``POGOFMU_DEBUG=1`` for the traceback);
+* streams every connector at every communication point to a CSV while it runs and plots them (PNG)
+  from a min/max envelope, so its memory does not grow with the run; prints a progress line
+  every 10 % of a long run.
 
 Host-side code (fmpy, numpy, matplotlib); never imported inside an FMU.
 """
@@ -33,6 +37,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import shutil
 import sys
 import tempfile
@@ -200,12 +205,22 @@ def read_ssd(root: Path) -> System:
     start, stop = 0.0, None
     de = top.find("ssd:DefaultExperiment", NS)
     if de is not None:
-        start = float(de.get("startTime", 0.0))
-        stop = float(de.get("stopTime")) if de.get("stopTime") is not None else None
+        for attr in ("startTime", "stopTime"):
+            try:
+                value = parse_value("Real", de.get(attr)) if de.get(attr) is not None else None
+            except ValueError as exc:
+                problems.append(f"ssd:DefaultExperiment: {attr} {de.get(attr)!r} {exc}")
+                continue
+            if value is not None and not math.isfinite(value):
+                problems.append(f"ssd:DefaultExperiment: {attr} = {value!r} must be a finite number")
+            elif attr == "startTime" and value is not None:
+                start = value
+            elif value is not None:
+                stop = value
     parameter_sets = {}
     for ssv in sorted((root / "resources").glob("*.ssv")) if (root / "resources").is_dir() else []:
         source = f"resources/{ssv.name}"
-        parameter_sets[source] = read_ssv(ssv, source)
+        parameter_sets[source] = read_ssv(ssv, source, problems)
     system = System(system_el.get("name") or top.get("name"), root, components, connections, parameter_sets,
                     start, stop)
     if problems:
@@ -213,7 +228,46 @@ def read_ssd(root: Path) -> System:
     return system
 
 
-def read_ssv(path: Path, source: str) -> ParameterSet:
+INT32 = (-2 ** 31, 2 ** 31 - 1)  # the range of fmi2Integer
+
+
+def parse_value(type_: str, raw: Optional[str]):
+    """The value of an ``ssv:Real|Integer|Boolean|String`` element's ``value`` attribute.
+
+    Raises ValueError with the rule the text breaks (the caller names the parameter and the file).
+    Real follows xs:double (``1.62``, ``2e-3``, also ``NaN``/``INF``, which the FMU's own parameter
+    rules then judge); Integer is xs:int (a whole number within fmi2Integer's 32 bits, so ``2.5``
+    and ``3.0`` are refused); Boolean is ``true``/``false``/``1``/``0``.
+    """
+    if raw is None:
+        raise ValueError("has no value attribute")
+    if type_ == "String":
+        return raw
+    text = raw.strip()
+    if not text:
+        raise ValueError("is empty")
+    if type_ == "Real":
+        try:
+            return float(text)
+        except ValueError:
+            raise ValueError("is not a number (xs:double, e.g. 1.62 or 2e-3)") from None
+    if type_ == "Integer":
+        try:
+            value = int(text)
+        except ValueError:
+            raise ValueError("is not a whole number (xs:int, e.g. 8)") from None
+        if not INT32[0] <= value <= INT32[1]:
+            raise ValueError(f"is outside the 32-bit range [{INT32[0]}, {INT32[1]}] of fmi2Integer")
+        return value
+    if text in ("true", "1"):
+        return True
+    if text in ("false", "0"):
+        return False
+    raise ValueError("is not a boolean (true, false, 1 or 0)")
+
+
+def read_ssv(path: Path, source: str, problems: list) -> ParameterSet:
+    """Parse one .ssv; every value that breaks its type's rule is added to ``problems``."""
     try:
         top = ET.parse(path).getroot()
     except ET.ParseError as exc:
@@ -226,12 +280,13 @@ def read_ssv(path: Path, source: str) -> ParameterSet:
             v = pel.find(f"ssv:{t}", NS)
             if v is not None:
                 raw = v.get("value")
-                value = {"Real": float, "Integer": int, "Boolean": lambda s: s in ("true", "1"),
-                         "String": str}[t](raw)
-                params.append(Parameter(pel.get("name"), t, value, v.get("unit")))
+                try:
+                    params.append(Parameter(pel.get("name"), t, parse_value(t, raw), v.get("unit")))
+                except ValueError as exc:
+                    problems.append(f"{source}: parameter {pel.get('name')!r}: {t} value {raw!r} {exc}")
                 break
         else:
-            raise SSPError(f"{source}: parameter {pel.get('name')!r} has no Real/Integer/Boolean/String value")
+            problems.append(f"{source}: parameter {pel.get('name')!r} has no Real/Integer/Boolean/String value")
     return ParameterSet(top.get("name"), source, params)
 
 
@@ -449,46 +504,173 @@ class _Instance:
             self.fmu.freeInstance()
 
 
-class Result:
-    """Every connector at every communication point: ``res["PogoStick.y"]`` is a numpy array."""
+PLOT_BINS = 2000  # time slices of a figure's min/max envelope (more than the figure's pixel columns)
 
-    def __init__(self, names, types, n):
+
+class Envelope:
+    """Min/max envelope of every column of a run over ``bins`` equal slices of its rows.
+
+    Drawn as a line through each slice's minimum and maximum in time order, a run of any length
+    looks like the full one at the figure's resolution (every peak, every mode switch stays
+    visible) from at most ``2 * bins`` points per signal; with no more rows than ``bins`` it keeps
+    every row. Rows arrive in blocks of any size (:meth:`add`), so nothing else of the run is kept.
+    """
+
+    def __init__(self, n_rows: int, n_cols: int, bins: int = PLOT_BINS):
+        import numpy as np
+
+        self.n, self.bins, self.rows = n_rows, min(bins, n_rows), 0
+        shape = (self.bins, n_cols)
+        self.kmin, self.kmax = np.full(shape, -1, np.int64), np.full(shape, -1, np.int64)
+        self.vmin, self.vmax = np.full(shape, np.inf), np.full(shape, -np.inf)
+        self.tmin, self.tmax = np.zeros(shape), np.zeros(shape)
+
+    def add(self, block):
+        """Rows ``self.rows ...`` of the run: a 2-D array, column 0 the time."""
+        import numpy as np
+
+        block = np.asarray(block, dtype=np.float64)
+        m = len(block)
+        if m == 0:
+            return
+        slot = np.arange(self.rows, self.rows + m) * self.bins // self.n
+        cuts = np.flatnonzero(np.diff(slot)) + 1
+        cols = np.arange(block.shape[1])
+        for a, b in zip(np.r_[0, cuts], np.r_[cuts, m]):
+            seg, j = block[a:b], slot[a]
+            for pick, k_, v_, t_, better in ((np.argmin, self.kmin, self.vmin, self.tmin, np.less),
+                                             (np.argmax, self.kmax, self.vmax, self.tmax, np.greater)):
+                i = pick(seg, axis=0)
+                v = seg[i, cols]
+                new = better(v, v_[j])  # NaN never wins: a NaN sample leaves a gap
+                k_[j, new] = self.rows + a + i[new]
+                v_[j, new] = v[new]
+                t_[j, new] = seg[i[new], 0]
+        self.rows += m
+
+    def series(self, col: int):
+        """(time, value) of column ``col``: each slice's min and max in time order."""
+        import numpy as np
+
+        k = np.stack([self.kmin[:, col], self.kmax[:, col]], axis=1)
+        t = np.stack([self.tmin[:, col], self.tmax[:, col]], axis=1)
+        v = np.stack([self.vmin[:, col], self.vmax[:, col]], axis=1)
+        order = np.argsort(k, axis=1, kind="stable")
+        k, t, v = (np.take_along_axis(a, order, axis=1).ravel() for a in (k, t, v))
+        keep = (k >= 0) & np.r_[True, k[1:] != k[:-1]]
+        return t[keep], v[keep]
+
+
+class Result:
+    """Every connector at every communication point: ``res["PogoStick.y"]`` is a numpy array
+    (what :func:`simulate` returns by default; the ``run`` command streams to a CSV instead)."""
+
+    def __init__(self, names, types, units, n):
         import numpy as np
 
         self.names = ["time"] + list(names)
         self.types = dict(zip(names, types))
+        self.units = dict(zip(names, units))
         self.data = {"time": np.empty(n)}
         for name, t in zip(names, types):
             self.data[name] = np.empty(n, dtype=np.float64 if t == "Real" else np.int64)
-        self.n = n
+        self.n, self.rows = n, 0
+        self._envelope = None
 
     def __getitem__(self, name):
         return self.data[name]
 
-    def write_csv(self, path: Path):
+    def add(self, row):
+        for name, v in zip(self.names, row):
+            self.data[name][self.rows] = v
+        self.rows += 1
+
+    def close(self, complete=True):
+        pass
+
+    def envelope(self) -> Envelope:
+        if self._envelope is None:
+            import numpy as np
+
+            self._envelope = Envelope(self.rows, len(self.names))
+            self._envelope.add(np.column_stack([self.data[n][:self.rows] for n in self.names]))
+        return self._envelope
+
+
+class CSVStream:
+    """Rows written to ``path`` while the run goes (in chunks), with the figure's :class:`Envelope`
+    as the only thing kept in memory: the master's memory does not grow with the run's length.
+
+    The file is written as ``<path>.part`` and renamed to ``path`` once the run is complete; a run
+    that fails leaves its rows so far in ``<stem>.incomplete.csv`` (never a truncated ``path``).
+    """
+
+    CHUNK = 4096  # rows per write
+
+    def __init__(self, path: Path, names, types, units, n_rows):
         import csv
 
-        cols = [self.data[n] for n in self.names]
-        with Path(path).open("w", newline="") as f:
-            w = csv.writer(f)
-            w.writerow(self.names)
-            for row in zip(*cols):
-                w.writerow([repr(float(v)) if isinstance(v, float) or hasattr(v, "dtype") and v.dtype.kind == "f"
-                            else str(int(v)) for v in row])
+        self.path = Path(path)
+        self.part = self.path.with_name(self.path.name + ".part")
+        self.incomplete = self.path.with_name(f"{self.path.stem}.incomplete.csv")
+        self.names = ["time"] + list(names)
+        self.types = dict(zip(names, types))
+        self.units = dict(zip(names, units))
+        self.n, self.rows, self.last_time = n_rows, 0, None
+        self._env = Envelope(n_rows, len(self.names))
+        self._buf = []
+        self._file = self.part.open("w", newline="")
+        self._csv = csv.writer(self._file)  # floats as repr (shortest round trip), integers as integers
+        self._csv.writerow(self.names)
+
+    def add(self, row):
+        self._buf.append(row)
+        if len(self._buf) >= self.CHUNK:
+            self._flush()
+
+    def _flush(self):
+        if self._buf:
+            self._csv.writerows(self._buf)
+            self._env.add(self._buf)
+            self.rows += len(self._buf)
+            self.last_time = self._buf[-1][0]
+            self._buf.clear()
+
+    def close(self, complete=True):
+        if self._file.closed:
+            return
+        try:
+            self._flush()
+        finally:
+            self._file.close()
+        self.part.replace(self.path if complete else self.incomplete)
+
+    def envelope(self) -> Envelope:
+        return self._env
 
 
 def simulate(ssp, parameters: Optional[str] = None, stop_time: Optional[float] = None, step: float = 1e-3,
              start_time: Optional[float] = None, algorithm: str = "gauss-seidel", progress: bool = False,
-             echo_log: bool = True) -> Result:
-    """Run an SSP package; return a :class:`Result` (see the module docstring)."""
-    import scipy.integrate  # noqa: F401  (README "Known issues": before any FMU is loaded)
+             echo_log: bool = True, sink=None):
+    """Run an SSP package; return a :class:`Result` (see the module docstring).
 
+    ``sink(names, types, units, n_rows)``, if given, makes the recorder instead (an object with
+    ``add(row)`` and ``close(complete)``, e.g. a :class:`CSVStream`): it is called once the package
+    and every number are found valid, before any FMU is loaded, and what it returns is returned.
+    """
+    # no scipy import: the FMUs do not use scipy (the workaround of README "Known issues" is for
+    # scipy-using FMUs) and it would cost the master 50 MB of its 150 MB budget (issue 9 item 10)
     if algorithm not in ALGORITHMS:
         raise SSPError(f"algorithm {algorithm!r} is not one of {ALGORITHMS}")
-    if not (math.isfinite(step) and step > 0):
-        raise SSPError(f"communication step {step!r} must be a finite number > 0")
+    for what, value in (("communication step (--step)", step), ("stop time (--stop-time)", stop_time),
+                        ("start time", start_time)):
+        if value is not None and not (isinstance(value, (int, float)) and math.isfinite(value)):
+            raise SSPError(f"{what} = {value!r} must be a finite number")
+    if not step > 0:
+        raise SSPError(f"communication step (--step) = {step!r} must be > 0")
     work = Path(tempfile.mkdtemp(prefix="pogofmu_ssp_"))
     instances = {}
+    res = None
     try:
         root = unpack(Path(ssp), work / "package")
         system = read_ssd(root)
@@ -497,6 +679,8 @@ def simulate(ssp, parameters: Optional[str] = None, stop_time: Optional[float] =
         t_end = stop_time if stop_time is not None else system.stop_time
         if t_end is None:
             raise SSPError("no stop time: give one (--stop-time) or set ssd:DefaultExperiment stopTime")
+        if not t_end > t0:
+            raise SSPError(f"stop time {t_end!r} s must be later than the start time {t0!r} s")
         n_steps = int(round((t_end - t0) / step))
         if n_steps < 1 or not math.isclose(t0 + n_steps * step, t_end, rel_tol=1e-9, abs_tol=1e-12):
             raise SSPError(f"stop time {t_end} - start time {t0} is not a whole number of steps {step}")
@@ -508,7 +692,9 @@ def simulate(ssp, parameters: Optional[str] = None, stop_time: Optional[float] =
         incoming = {name: [c for c in system.connections if c.end_element == name] for name in order}
         # record: every connector of every component
         record = [(name, con) for name in order for con in system.components[name].connectors.values()]
-        res = Result([f"{n}.{c.name}" for n, c in record], [c.type for _, c in record], n_steps + 1)
+        columns = ([f"{n}.{c.name}" for n, c in record], [c.type for _, c in record],
+                   [c.unit or _fmu_unit(system.components[n].variables[c.name]) for n, c in record], n_steps + 1)
+        res = (sink or Result)(*columns)
         outputs = {name: [c for c in system.components[name].connectors.values() if c.kind != "input"]
                    for name in order}
         value = {}  # (component, connector) -> latest value of an output connector
@@ -543,8 +729,8 @@ def simulate(ssp, parameters: Optional[str] = None, stop_time: Optional[float] =
             if ints:
                 inst.fmu.setInteger(ints, iv)
 
-        def store(k, t):
-            res.data["time"][k] = t
+        def store(t):
+            row = [t]
             for name, con in record:
                 key = (name, con.name)
                 if con.kind == "input":
@@ -554,7 +740,8 @@ def simulate(ssp, parameters: Optional[str] = None, stop_time: Optional[float] =
                             else instances[name].fmu.getInteger([instances[name].vr(con.name)])[0]
                 else:
                     v = value[key]
-                res.data[f"{name}.{con.name}"][k] = v
+                row.append(v)
+            res.add(row)
 
         # ---- instantiate and initialize, in order ----
         for name in order:
@@ -580,7 +767,7 @@ def simulate(ssp, parameters: Optional[str] = None, stop_time: Optional[float] =
             read_outputs(inst)
         for name in order:  # inputs of earlier components fed by later ones
             set_inputs(instances[name])
-        store(0, t0)
+        store(t0)
 
         # ---- fixed-step loop ----
         insts = [instances[n] for n in order]
@@ -607,7 +794,7 @@ def simulate(ssp, parameters: Optional[str] = None, stop_time: Optional[float] =
                     read_outputs(inst)
             for c in system.connections:  # the values the inputs will get for the next step
                 inputs_now[(c.end_element, c.end_connector)] = value[(c.start_element, c.start_connector)]
-            store(k + 1, t0 + (k + 1) * step)
+            store(t0 + (k + 1) * step)
             if k + 1 in marks:
                 el = _time.perf_counter() - wall0
                 frac = (k + 1) / n_steps
@@ -615,9 +802,13 @@ def simulate(ssp, parameters: Optional[str] = None, stop_time: Optional[float] =
                       f"({k + 1}/{n_steps} steps, {el:.1f} s elapsed, ~{el / frac - el:.1f} s left)", flush=True)
         res.system = system.name
         res.parameter_set = ", ".join(sorted({ps.name for ps in selected.values() if ps is not None})) or "none"
-        res.algorithm, res.step = algorithm, step
+        res.algorithm, res.step, res.connections = algorithm, step, list(system.connections)
+        res.close(complete=True)
+        res.last_time = t0 + n_steps * step
         return res
     finally:
+        if res is not None:
+            res.close(complete=False)  # a no-op once the run is complete
         for inst in instances.values():
             try:
                 inst.close()
@@ -626,56 +817,119 @@ def simulate(ssp, parameters: Optional[str] = None, stop_time: Optional[float] =
         shutil.rmtree(work, ignore_errors=True)
 
 
-def plot(res: Result, path: Path, title: str):
+def _panels(rec, connections):
+    """The figure's panels, one signal each (integer signals last); a connected input is not
+    drawn again (it is its source's copy, held over the step): ``copies`` names it instead."""
+    fed = {f"{c.end_element}.{c.end_connector}": f"{c.start_element}.{c.start_connector}" for c in connections}
+    copies = {}
+    for dst, src in fed.items():
+        copies.setdefault(src, []).append(dst)
+    shown = [n for n in rec.names[1:] if n not in fed and not n.endswith(".n_events")]
+    return sorted(shown, key=lambda n: rec.types[n] != "Real"), copies  # integer signals last
+
+
+def figure(rec, title: str, connections=()):
+    """The run's figure (a matplotlib Figure): every signal against time, y-labels with units,
+    integer ticks for the integer signals, each connected signal drawn once (its inputs named in
+    the label), drawn from the run's min/max envelope."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
 
-    groups = {}
-    for name in res.names[1:]:
-        if name.endswith(".n_events"):
-            continue
-        key = "integer" if res.types[name] != "Real" else name.split(".", 1)[1]
-        groups.setdefault(key, []).append(name)
-    # merge connectors that carry the same signal (e.g. PogoStick.y and HopController.y)
-    panels = list(groups.values())
-    fig, axes = plt.subplots(len(panels), 1, figsize=(9, 1.9 * len(panels) + 0.8), sharex=True, squeeze=False)
-    t = res["time"]
-    for ax, names in zip(axes[:, 0], panels):
-        for name in names:
-            if res.types[name] != "Real":
-                ax.step(t, res[name], where="post", lw=0.8, label=name)
-            else:
-                ax.plot(t, res[name], lw=0.8, label=name)
-        ax.legend(loc="upper right", fontsize=7)
+    env = rec.envelope()
+    col = {n: i for i, n in enumerate(rec.names)}
+    panels, copies = _panels(rec, connections)
+    fig, axes = plt.subplots(len(panels), 1, figsize=(9, 1.7 * len(panels) + 0.9), sharex=True, squeeze=False)
+    for ax, name in zip(axes[:, 0], panels):
+        t, v = env.series(col[name])
+        label = " = ".join([name] + copies.get(name, []))
+        if rec.types[name] != "Real":
+            ax.step(t, v, where="post", lw=0.8, label=label)
+            ax.yaxis.set_major_locator(MaxNLocator(integer=True))
+        else:
+            ax.plot(t, v, lw=0.8, label=label)
+        ax.set_ylabel(f"{name.split('.', 1)[1]} [{rec.units.get(name) or '-'}]")
+        ax.legend(loc="upper right", fontsize=7, handlelength=1)
         ax.grid(True, alpha=0.3)
     axes[-1, 0].set_xlabel("time [s]")
     fig.suptitle(title, fontsize=10)
+    fig.align_ylabels(axes[:, 0])
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    return fig
+
+
+def plot(rec, path: Path, title: str, connections=()):
+    """:func:`figure` written to ``path`` (PNG)."""
+    import matplotlib.pyplot as plt
+
+    fig = figure(rec, title, connections)
+    try:
+        fig.savefig(path, dpi=110)
+    finally:
+        plt.close(fig)
     return path
 
 
+def prepare_out(out: Path, *files: Path):
+    """The output folder, created, and proven writable before the first step (never after the run)."""
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise SSPError(f"output folder {str(out)!r} (--out) is an existing file, not a folder")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=out):
+            pass
+    except OSError as exc:
+        raise SSPError(f"output folder {str(out)!r} (--out) cannot be written: {exc.strerror or exc}") from None
+    for f in files:
+        if f.is_dir():
+            raise SSPError(f"output file {str(f)!r} is a folder: remove it or choose another --out")
+
+
 def run(ssp, parameters=None, stop_time=None, step=1e-3, out=None, algorithm="gauss-seidel", progress=True):
-    """The ``run`` command: simulate, write ``<out>/<set>.csv`` and ``<out>/<set>.png``."""
+    """The ``run`` command: simulate, streaming ``<out>/<set>.csv``, then draw ``<out>/<set>.png``.
+
+    The package, the numbers and the output folder are all checked before the first step."""
     ssp = Path(ssp)
-    res = simulate(ssp, parameters, stop_time, step, algorithm=algorithm, progress=progress)
     out = Path(out) if out is not None else Path("results") / ssp.stem
-    out.mkdir(parents=True, exist_ok=True)
     tag = parameters or "default"
     csv_path, png_path = out / f"{tag}.csv", out / f"{tag}.png"
-    res.write_csv(csv_path)
-    plot(res, png_path, f"{res.system} ({res.parameter_set}): {algorithm}, step {step:g} s")
-    print(f"{res.system}: simulated to t = {res['time'][-1]:.6g} s -> {csv_path}, {png_path}")
-    return res, csv_path, png_path
+    opened = []
+
+    def open_csv(names, types, units, n_rows):  # called once the package and the numbers are valid
+        prepare_out(out, csv_path, png_path)
+        try:
+            opened.append(CSVStream(csv_path, names, types, units, n_rows))
+        except OSError as exc:
+            raise SSPError(f"cannot write {csv_path}: {exc.strerror or exc}") from None
+        return opened[0]
+
+    try:
+        rec = simulate(ssp, parameters, stop_time, step, algorithm=algorithm, progress=progress, sink=open_csv)
+    except SSPError as exc:
+        if opened and opened[0].rows:
+            s = opened[0]
+            raise SSPError(f"{exc}\n  the {s.rows} rows up to t = {s.last_time:.10g} s are in {s.incomplete}") from None
+        raise
+    try:
+        plot(rec, png_path, f"{rec.system} ({rec.parameter_set}): {algorithm}, step {step:g} s", rec.connections)
+    except OSError as exc:
+        raise SSPError(f"cannot write {png_path}: {exc.strerror or exc} (the results are in {csv_path})") from None
+    print(f"{rec.system}: simulated to t = {rec.last_time:.6g} s -> {csv_path}, {png_path}")
+    return rec, csv_path, png_path
 
 
-def main(argv=None):
-    ap = argparse.ArgumentParser(prog="python -m pogofmu.ssp", description="SSP master built on fmpy")
+def main(argv=None, prog="python -m pogofmu.ssp"):
+    """The command line (``run`` / ``check``); returns the exit status. ``prog`` names the command
+    in the usage text (a console command forwarding here may pass its own)."""
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("--debug", action="store_true",
+                        help="show the Python traceback of an unexpected error (also: POGOFMU_DEBUG=1)")
+    ap = argparse.ArgumentParser(prog=prog, description="SSP master built on fmpy")
     sub = ap.add_subparsers(dest="command", required=True)
-    r = sub.add_parser("run", help="simulate an .ssp with a fixed communication step")
+    r = sub.add_parser("run", parents=[common], help="simulate an .ssp with a fixed communication step")
     r.add_argument("ssp")
     r.add_argument("--parameters", help="parameter set: resources/NAME.ssv (default: the .ssd's bindings)")
     r.add_argument("--stop-time", type=float, help="default: the .ssd's DefaultExperiment stopTime")
@@ -683,7 +937,8 @@ def main(argv=None):
     r.add_argument("--algorithm", choices=ALGORITHMS, default="gauss-seidel")
     r.add_argument("--out", help="output folder (default results/<SSP name>)")
     r.add_argument("--quiet", action="store_true", help="no progress lines")
-    c = sub.add_parser("check", help="validate an .ssp (structure, FMUs, units, parameter sets) without running")
+    c = sub.add_parser("check", parents=[common],
+                       help="validate an .ssp (structure, FMUs, units, parameter sets) without running")
     c.add_argument("ssp")
     c.add_argument("--parameters")
     args = ap.parse_args(argv)
@@ -700,6 +955,15 @@ def main(argv=None):
     except SSPError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:  # noqa: BLE001 - the last resort: one line, never a traceback by default
+        if args.debug or os.environ.get("POGOFMU_DEBUG", "") not in ("", "0"):
+            raise
+        print(f"error: unexpected {type(exc).__name__}: {exc} -- this is a bug of pogofmu, please report it "
+              f"(run again with --debug or POGOFMU_DEBUG=1 for the traceback)", file=sys.stderr)
+        return 2
     return 0
 
 

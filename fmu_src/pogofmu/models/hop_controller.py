@@ -24,6 +24,8 @@ plant's names so that one SSP parameter set (.ssv) sets both components consiste
 """
 from __future__ import annotations
 
+import math
+
 from ..engine import solver_parameters
 from ..model import HybridModel, Parameter, Variable, require, require_finite, require_nonnegative, \
     require_positive
@@ -101,6 +103,37 @@ def _outputs(t, x, q, u, p):
     return {"F_ext": F, "E_est": E, "E_err": p.m * p.g * p.h_target - E, "phase": phase(y, ydot, s)}
 
 
+def demo_hop(t, p):
+    """Inputs of the default experiment: the stick's (y, ydot, s) over repeated hops of the
+    controller's own plant model without dashpot and without thrust (an open loop: the thrust
+    does not act back), from an apex 10 % of ``h_target - x_i`` below the target, so the law is
+    swept over flight, compression and extension with an energy deficit to make up (the thrust
+    saturates at ``F_max`` where ``ydot`` is small and falls off as the leg extends faster).
+
+    Flight: the parabola from the apex; contact: the spring-mass oscillation about
+    ``x_i - m g/k`` entered at ``y = x_i`` with the touchdown speed, left at ``y = x_i`` with the
+    opposite speed (closed form; each hop the same, period ``2 t_fall + T_contact``).
+    """
+    apex = p.h_target - 0.1 * (p.h_target - p.x_i)
+    if not (p.k > 0 and p.g > 0 and apex > p.x_i):
+        return {"y": apex, "ydot": 0.0, "s": 0}  # no hop without a spring and gravity: rest at the apex
+    t_fall = math.sqrt(2.0 * (apex - p.x_i) / p.g)
+    v_td = p.g * t_fall
+    w = math.sqrt(p.k / p.m)
+    sag = p.m * p.g / p.k  # static deflection
+    phi = math.atan2(v_td / w, sag)
+    amp = math.hypot(sag, v_td / w)
+    t_contact = (2.0 * math.pi - 2.0 * phi) / w
+    tau = math.fmod(t, 2.0 * t_fall + t_contact)
+    if tau < t_fall:  # falling from the apex
+        return {"y": apex - 0.5 * p.g * tau * tau, "ydot": -p.g * tau, "s": 0}
+    tau -= t_fall
+    if tau < t_contact:  # leg on the ground
+        return {"y": p.x_i - sag + amp * math.cos(w * tau + phi), "ydot": -amp * w * math.sin(w * tau + phi), "s": 1}
+    tau -= t_contact  # rising to the next apex
+    return {"y": p.x_i + v_td * tau - 0.5 * p.g * tau * tau, "ydot": v_td - p.g * tau, "s": 0}
+
+
 MODEL = HybridModel(
     name="HopController",
     description="Hop-height regulator for the pogo stick: thrust during leg extension that drives the "
@@ -116,7 +149,9 @@ MODEL = HybridModel(
     check=_check,
     integer_inputs=frozenset({"s"}),
     integer_outputs=frozenset({"phase"}),
-    plots=((("F_ext",), ("E_est", "E_err"), ("phase",)),),
+    # the law swept over the hops of demo_hop: the inputs it sees, the thrust and energies it returns
+    plots=((("y",), ("ydot",), ("s", "phase"), ("F_ext",)),),  # (E_est is constant: a lossless hop)
+    default_input=demo_hop,
     default_stop_time=2.0,
     default_step=1e-3,
 )

@@ -90,7 +90,8 @@ PARAMETERS = (
 
 PLOTS = (
     (("y",), ("delta", "delta_max"), ("F_soil",), ("s",)),  # penetration and soil force vs time
-    (("vs", "delta", "F_soil"),),  # the Hunt-Crossley hysteresis loop
+    # the Hunt-Crossley hysteresis loop: loading (penetrating) above unloading
+    (("vs", "delta", "F_soil", "delta_dot", "loading (delta_dot > 0)", "unloading (delta_dot < 0)"),),
     (("E", "W_leg", "W_soil"),),  # energy book-keeping
 )
 
