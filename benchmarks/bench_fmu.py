@@ -51,7 +51,6 @@ import tempfile
 import time
 from pathlib import Path
 
-import scipy.integrate  # noqa: F401  (before any FMU is loaded: avoids a teardown crash, README "Known issues")
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent

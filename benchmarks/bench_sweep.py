@@ -32,7 +32,6 @@ import tempfile
 import time
 from pathlib import Path
 
-import scipy.integrate  # noqa: F401  (before any FMU is loaded: avoids a teardown crash, README "Known issues")
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -73,7 +72,6 @@ def _cpu(pids):
 
 def _import_worker_side():
     import fmpy.simulation  # noqa: F401
-    import scipy.integrate  # noqa: F401
 
     import pogofmu.sweep  # noqa: F401
 
