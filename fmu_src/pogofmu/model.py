@@ -107,7 +107,12 @@ class HybridModel:
     ``bind(q, u, p) -> f(t, x)`` (optional) returns the flow for fixed ``(q, u, p)``, equal to
     ``flow(t, x, q, u, p)`` but free to hoist lookups out of the hot loop;
     ``plots`` lists the figures the master script draws: each a tuple of panels, a panel being a
-    tuple of output names against time, or ``("x", "r")`` style pairs marked ``vs``.
+    tuple of output names against time, or ``("x", "r")`` style pairs marked ``vs``;
+    ``time_scales(p)`` (optional) lists the model's physical time scales as
+    ``(label, parameter names, seconds)``: the engine refuses parameters that make one faster than
+    it can resolve and names the fastest ones when the model turns out stiff; ``error_scales(p)``
+    (optional) lists the smallest magnitudes of the motion the error control must resolve
+    (e.g. a static deflection), in the same form: ``abs_tol`` must be well below them.
     """
 
     name: str
@@ -128,6 +133,8 @@ class HybridModel:
     plots: tuple = ()
     default_stop_time: float = 10.0
     default_step: float = 1e-3
+    time_scales: Optional[Callable] = None  # p -> ((label, parameter names, seconds), ...)
+    error_scales: Optional[Callable] = None  # p -> ((label, parameter names, magnitude), ...)
 
     def engine_outputs(self) -> Tuple[Variable, ...]:
         """Outputs every model has, kept by the engine: event counter, time and kind of the latest."""
