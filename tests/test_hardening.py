@@ -102,17 +102,20 @@ def test_item2_budget_is_a_parameter_a_larger_one_lets_the_run_finish():
 
 def test_item2_tiny_max_step_is_refused_with_the_budget_rule():
     assert_parameter_rejected("PogoStick", {"max_step": 1e-8}, "max_step", "max_step >= 2/max_steps_per_second")
-    assert_parameter_rejected("HopController", {"max_step": 1e-6}, "max_step", "max_steps_per_second")
 
 
 def test_item2_a_model_without_states_takes_no_internal_steps():
-    """HopController (no states) with max_step = 2e-5 over 1e4 s: before, 5e8 internal steps."""
+    """HopController (no states) with max_step = 1e-6: before, 8 s of CPU per simulated second
+    (internal steps of max_step on nothing).  Its max_step is unused, so it is not refused, and
+    the engine takes no step: over 1e4 s, n_steps stays 0."""
     from pogofmu.engine import Simulator
     from pogofmu.models.hop_controller import MODEL
 
-    sim = Simulator(MODEL, MODEL.params(max_step=2e-5))
+    sim = Simulator(MODEL, MODEL.params(max_step=1e-6))
     sim.advance(1e4)
     assert sim.n_steps == 0 and sim.t_out == 1e4
+    run = simulate("HopController", start_values={"max_step": 1e-6}, stop_time=2.0)  # the FMU, 2000 steps
+    assert not run.errors
 
 
 # ---- item 3: tight tolerances work -----------------------------------------------------------------
@@ -256,3 +259,27 @@ def test_item9_outputs_and_log_agree_without_the_history():
     assert int(quiet["n_events"][-1]) == len(ev) == ev[-1]["index"]
     assert float(quiet["t_last_event"][-1]) == ev[-1]["time"]
     assert int(quiet["last_event"][-1]) == {"touchdown": 1, "liftoff": 2}[ev[-1]["name"]]
+
+
+def test_item6_a_collapse_after_one_event_is_not_called_an_event_storm():
+    """After a single event the dynamics become too fast to resolve (acceleration 1e300 m/s2 once
+    the ball has hit the ground): the message says so, names the event and the time; "event
+    storm" is kept for accumulating events (test_engine.py::test_zeno_ends_in_a_clear_error)."""
+    from pogofmu.engine import Simulator, solver_parameters
+    from pogofmu.model import FALLING, Event, HybridModel, ModelError, Parameter, Variable, ZenoError
+
+    model = HybridModel(
+        name="Ball", description="ball on a hard floor", states=(Variable("y", "m"), Variable("v", "m/s")),
+        parameters=(Parameter("h0", 1.0),) + solver_parameters(), inputs=(), outputs=(),
+        flow=lambda t, x, q, u, p: [x[1], -G if not q["hit"] else 1e300 * (1.0 + x[0] * x[0])],
+        events=(Event("impact", FALLING, lambda x, q, u, p: x[0], lambda x, q, u, p: (x, dict(q, hit=1)),
+                      lambda q: not q["hit"]),),
+        initial=lambda p: ([p.h0, 0.0], {"hit": 0}), output_fn=lambda *a: {})
+    sim = Simulator(model, model.params(max_step=0.0))
+    with pytest.raises(ModelError) as exc:
+        sim.advance(2.0)
+    text = str(exc.value)
+    assert not isinstance(exc.value, ZenoError) and "event storm" not in text, text
+    t_impact = math.sqrt(2 / G)
+    assert "right after event 1 (impact)" in text, text
+    assert float(re.search(r"at t = ([0-9.eE+-]+) s", text).group(1)) == pytest.approx(t_impact, abs=1e-9)

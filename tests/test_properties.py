@@ -248,8 +248,8 @@ def breakers(name):
     out = BREAKERS["common"] + BREAKERS.get(name, [])
     if name in STICKS:
         out += BREAKERS["stick"]
-    if name == "HopController":  # no states: abs_tol has nothing to control, only its sign is a rule
-        out = [b if b[0] != "abs_tol" else ("abs_tol", st.floats(-1.0, 0.0), ("abs_tol",)) for b in out]
+    if name == "HopController":  # no states: abs_tol and max_step are unused, only their signs are rules
+        out = [b if b[0] not in ("abs_tol", "max_step") else (b[0], st.floats(-1.0, -1e-9), b[2]) for b in out]
     out += [(f, BAD_NUMBER, (f,)) for f in FLOAT_PARAMS[name]]
     return out
 

@@ -14,11 +14,18 @@ One :class:`Simulator` integrates any :class:`~pogofmu.model.HybridModel`:
   the step sequence, and so every event time, does not depend on the communication grid.  Only a
   change of input forces a restart at the communication point;
 * an event storm (more than ``zeno_max_events`` events within ``zeno_window`` seconds) and a step
-  size that collapses end in a :class:`~pogofmu.model.ZenoError` / error, never in a hang.
+  size that collapses end in a :class:`~pogofmu.model.ZenoError` / error, never in a hang;
+* a work budget (parameter ``max_steps_per_second``, windows of 1 s of simulated time) ends a
+  run that turns stiff with an error naming the model's fastest time scales, after a warning at
+  20 % of it; a model without states takes no internal steps at all;
+* the event bookkeeping is of constant size (count, last event, times of the latest events); the
+  full history only with ``log_events = 1`` (or ``keep_history=True``).
 
 Restart rule (no re-detection of the event just handled): a guard only fires when its value at
 the start of a step lies strictly on the "before" side (``> 0`` for a falling guard, ``< 0`` for a
-rising one); a guard that is exactly zero after a jump is disarmed until it leaves zero.
+rising one); a guard that is exactly zero after a jump is disarmed until it leaves zero.  At the
+start of the simulation a guard exactly at zero whose motion leaves it towards its "after" side
+fires at the start time (a stick at its free length moving up lifts off at t0).
 """
 from __future__ import annotations
 
@@ -260,7 +267,7 @@ REL_TOL_MAX = 1e-3  # looser relative tolerances do not control the error (issue
 ABS_TOL_MAX_FRACTION = 1e-3  # abs_tol <= this fraction of the states' scale (issue 9 item 7)
 
 
-def check_solver_parameters(p: Params):
+def check_solver_parameters(p: Params, has_states: bool = True):
     from .model import require
 
     for name in SOLVER_PARAMETER_NAMES:
@@ -275,7 +282,8 @@ def check_solver_parameters(p: Params):
     budget = p.max_steps_per_second
     require(budget >= 10 and budget < math.inf, "max_steps_per_second", budget,
             "10 <= max_steps_per_second < inf")
-    require(p.max_step == 0 or p.max_step * budget >= 2, "max_step", p.max_step,
+    # (a model without states takes no internal steps: its max_step is never used)
+    require(not has_states or p.max_step == 0 or p.max_step * budget >= 2, "max_step", p.max_step,
             f"max_step = 0 or max_step >= 2/max_steps_per_second = {2 / budget:.3g} s (a smaller max_step "
             f"alone takes more than half the work budget of {budget:.3g} internal steps per simulated second; "
             f"raise max_steps_per_second to allow it)")
@@ -299,7 +307,7 @@ class Simulator:
 
     def __init__(self, model: HybridModel, p: Params, u=None, t0: float = 0.0, t_stop: float = math.inf,
                  zeno_max_events: int = 200, zeno_window: float = 1e-6, keep_history: Optional[bool] = None):
-        check_solver_parameters(p)
+        check_solver_parameters(p, has_states=bool(model.states))
         model.check(p)
         self.model = model
         self.p = p
@@ -340,7 +348,9 @@ class Simulator:
             self._check_domain(self.t, self.x)
             self._bind()
             self._check_initial_rates()
-            self.h = float(p.initial_step) if p.initial_step > 0 else self._initial_step()
+            # a given first step is taken as it is, but never below the collapse limit
+            self.h = (max(float(p.initial_step), START_STEP_ULPS * EPS * max(abs(self.t), 1.0))
+                      if p.initial_step > 0 else self._initial_step())
         except (ArithmeticError, ValueError) as exc:
             if isinstance(exc, ModelError):
                 raise
@@ -637,7 +647,8 @@ class Simulator:
 
     def _arithmetic_error(self, exc, where):
         kind = {ZeroDivisionError: "division by zero", OverflowError: "overflow"}.get(type(exc), "domain error")
-        return DomainError(f"floating-point {kind} in the model at {where} ({exc}): "
+        detail = exc.args[-1] if exc.args and isinstance(exc.args[-1], str) else str(exc)
+        return DomainError(f"floating-point {kind} in the model at {where} ({detail}): "
                            f"{_extreme_parameters(self.p)}")
 
     def _land_on_event(self, seg, ev, te):
