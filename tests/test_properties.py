@@ -142,10 +142,16 @@ def penetrator_params(draw):
     return p
 
 
-def _check_valid_run(name, p, soil=False):
+# a thrust held over each communication step, cycled: upward only (in [0, 2 m g]), so the leg can
+# still not bottom out; it forces liftoffs (F > m g) and restarts the integrator at input changes
+THRUST = st.lists(st.floats(0.0, 2.0), min_size=1, max_size=8)
+
+
+def _check_valid_run(name, p, soil=False, thrust=()):
     scale = p.pop("_scale")
     outputs = ("E", "W_leg", "W_ext") + (("W_soil",) if soil else ())
-    err, rec = _run(name, p, outputs=outputs)
+    inputs = [{"F_ext": f * p["m"] * p["g"]} for f in thrust] or None
+    err, rec = _run(name, p, outputs=outputs, inputs=inputs)
     if os.environ.get("POGOFMU_FUZZ_TRACE"):
         print(name, len(rec["E"]), p)
     assert err is None, f"{name} {p}: {err}"
@@ -170,10 +176,20 @@ def test_valid_stick_parameters_give_a_result(name):
     check()
 
 
+@pytest.mark.parametrize("name", STICKS)
+def test_valid_stick_parameters_with_thrust_give_a_result(name):
+    @FUZZ
+    @given(stick_params(name), THRUST)
+    def check(p, thrust):
+        _check_valid_run(name, p, thrust=thrust)
+
+    check()
+
+
 @FUZZ
-@given(penetrator_params())
-def test_valid_penetrator_parameters_give_a_result(p):
-    _check_valid_run("Penetrator", p, soil=True)
+@given(penetrator_params(), st.just(()) | THRUST)
+def test_valid_penetrator_parameters_give_a_result(p, thrust):
+    _check_valid_run("Penetrator", p, soil=True, thrust=thrust)
 
 
 HOP_INPUTS = st.lists(st.fixed_dictionaries({"y": st.floats(0.1, 3.0), "ydot": st.floats(-5.0, 5.0),

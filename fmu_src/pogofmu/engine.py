@@ -48,6 +48,8 @@ START_STEP_ULPS = 100  # the automatic first step is never smaller than this (Ha
 BUDGET_WINDOW = 1.0  # s of simulated time over which max_steps_per_second is counted
 BUDGET_WARN_FRACTION = 0.2  # warn when a window has used this fraction of its budget
 MIN_TIME_SCALE = 1e-9  # s: faster physical time scales are refused at initialization
+UNBOUNDED_STEP_FACTOR = 10.0  # max_step = 0: steps still <= this x max(|t|, 1) s (an exactly integrated
+#                               parabola, err = 0, grew the step tenfold per step to 1e151 s, issue 9)
 STORM_EVENTS = 5  # a collapsed step after an event is an event storm if this many events lie in zeno_window
 
 
@@ -154,7 +156,7 @@ class DOP853(_Pair):
             f"        b = ({e3}) / sc\n"
             f"        n5 += a*a\n"
             f"        n3 += b*b\n"
-            f"    if n5 == 0.0 and n3 == 0.0:\n"
+            f"    if n5 == 0.0:  # (also n3 tiny: 0.01*n3 may underflow to 0)\n"
             f"        return 0.0\n"
             f"    return abs(h) * n5 / sqrt((n5 + 0.01*n3) * len(y))\n", "error_norm")  # y empty: n5 = 0
         # dense output (Hairer's contd8): three more stages, then seven coefficient vectors
@@ -462,6 +464,9 @@ class Simulator:
         self.u = u
         try:
             self._bind()
+            # a restart like after a jump: the dynamics with the new input may be much faster, and
+            # a step grown on an exactly integrated flight could hold a whole arc of a guard
+            self.h = min(self.h, self._initial_step())
         except ArithmeticError as exc:
             raise self._arithmetic_error(exc, f"the input change at t = {self.t!r} s") from None
 
@@ -481,7 +486,7 @@ class Simulator:
                     continue
                 if t_target <= self.t:
                     break
-                self._step()
+                self._step(t_target)
         except (ArithmeticError, ValueError) as exc:
             if isinstance(exc, ModelError):
                 raise
@@ -523,10 +528,10 @@ class Simulator:
         self._rebind()
 
     # ---- stepping ---------------------------------------------------------------------------
-    def _step(self):
+    def _step(self, t_target=math.inf):
         pair, fun = self.pair, self.fun
         t, y, f = self.t, self.x, self.f
-        h = min(self.h, self.max_step)
+        h = min(self.h, self.max_step, UNBOUNDED_STEP_FACTOR * max(abs(t), 1.0))
         rejected = False
         while True:
             t_new = t + h
@@ -572,8 +577,8 @@ class Simulator:
             if hit is None or te < hit[0]:
                 hit = (te, k)
         if hit is None:
-            self._check_domain(t_new, y_new, seg)
-            self.seg, self.t, self.x, self.f, self.g = seg, t_new, y_new, f_new, g_new
+            if not self._end_step(seg, t_target):
+                self.seg, self.t, self.x, self.f, self.g = seg, t_new, y_new, f_new, g_new
             return
         te, k = hit
         i, ev = self.active[k]
@@ -587,9 +592,9 @@ class Simulator:
             seg = _Segment(t, te, y, y_e, f, K_e, fun, pair)
         else:
             y_e, f_e = y_new, f_new
-        self._check_domain(te, y_e, seg)
-        self.seg, self.t, self.x, self.f = seg, te, y_e, f_e
-        self.pending = (i, y_e)
+        if not self._end_step(seg, t_target):
+            self.seg, self.t, self.x, self.f = seg, te, y_e, f_e
+            self.pending = (i, y_e)
 
     # ---- work budget (issue 9 item 2) ----------------------------------------------------------
     def _spend(self, t, h):
@@ -778,6 +783,13 @@ class Simulator:
                     f"t = {self.t:.15g} s (Zeno behaviour; limit {n} events per {self.zeno_window:g} s)")
 
     def _check_domain(self, t, x, seg=None):
+        violation = self._domain_violation(t, x, seg)
+        if violation is not None:
+            raise DomainError(f"the trajectory left the model's domain at t = {violation[0]:.10g} s: {violation[1]}")
+
+    def _domain_violation(self, t, x, seg=None):
+        """None, or ``(t_v, text)``: the first time in ``seg`` (bisected) where the model's domain
+        condition fails, and the condition's text (with the values at the end of the step)."""
         domain = self.model.domain
         msg = domain(t, x, self.q, self.u, self.p)
         if msg is None:
@@ -785,7 +797,7 @@ class Simulator:
                 bad = ", ".join(f"{v.name} = {a!r}" for v, a in zip(self.model.states, x) if not math.isfinite(a))
                 raise DomainError(f"the state became non-finite at t = {t:.15g} s ({bad}): "
                                   f"{_extreme_parameters(self.p)}")
-            return
+            return None
         if seg is not None:
             # bisect for the first time the condition is violated
             a, b = seg.t0, t
@@ -796,7 +808,24 @@ class Simulator:
                 else:
                     b = c
             t = b
-        raise DomainError(f"the trajectory left the model's domain at t = {t:.10g} s: {msg}")
+        return t, msg
+
+    def _end_step(self, seg, t_target):
+        """Commit the step ``seg`` unless the trajectory leaves the domain in it.  A violation that
+        lies beyond ``t_target`` (the integrator runs ahead of the communication point, with
+        steps up to 1e7 s on an unbounded flight parabola) is not reported before its time: the
+        step is cut exactly at ``t_target`` and the next call goes on from there.  True if cut."""
+        violation = self._domain_violation(seg.t1, seg.y1, seg)
+        if violation is None:
+            return False
+        if violation[0] > t_target > seg.t0:
+            t, y, f = seg.t0, seg.y0, seg.f0
+            y_c, f_c, K_c = self.pair.step(seg.fun, t, y, f, t_target - t)
+            self.seg = _Segment(t, t_target, y, y_c, f, K_c, seg.fun, self.pair)
+            self.t, self.x, self.f = t_target, y_c, f_c
+            self.g = [ev.guard(y_c, self.q, self.u, self.p) for _, ev in self.active]
+            return True
+        raise DomainError(f"the trajectory left the model's domain at t = {violation[0]:.10g} s: {violation[1]}")
 
 
 # =============================================================================================
