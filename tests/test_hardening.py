@@ -283,3 +283,31 @@ def test_item6_a_collapse_after_one_event_is_not_called_an_event_storm():
     t_impact = math.sqrt(2 / G)
     assert "right after event 1 (impact)" in text, text
     assert float(re.search(r"at t = ([0-9.eE+-]+) s", text).group(1)) == pytest.approx(t_impact, abs=1e-9)
+
+
+# ---- found by the property suite ----------------------------------------------------------------
+
+@pytest.mark.parametrize("name, m, k, thrust, method, abs_tol", [
+    ("PogoStick", 1.0, 100.0, (0.0, 2.0), 5, 1e-8), ("PogoStickMem", 10 ** 0.75, 1000.0, (0.0, 1.125), 8, 10 ** -8.5)])
+def test_unbounded_max_step_with_a_switching_thrust(name, m, k, thrust, method, abs_tol):
+    """max_step = 0, c = 0, from rest at the free length, F_ext switching every 10 ms between the
+    fractions `thrust` of m g.  Before: the exactly integrated flight grew the step tenfold per
+    step (to 1e151 s), a domain violation at t = 6e7 s was reported at t = 0.05 s, and a touchdown
+    was missed (the mass fell through the ground).  Now the run completes, the mass stays above
+    the ground, and the energy balance E + W_leg = E(0) + W_ext holds."""
+    linear = dict(spring_law=0, beta=0.0) if name == "PogoStickMem" else {}
+    inst = Instance(name).init(m=m, k=k, c=0.0, max_step=0.0, method=method, rel_tol=1e-4, abs_tol=abs_tol,
+                               xbar_0=1.0, y_0=1.0, z_0=0.0, **linear)
+    try:
+        E0 = inst.get("E")
+        worst, ys = 0.0, []
+        for i in range(200):
+            inst.set(F_ext=thrust[i % 2] * m * G)
+            inst.step(1e-2)
+            E, W_leg, W_ext, y = inst.get("E", "W_leg", "W_ext", "y")
+            worst = max(worst, abs(E + W_leg - W_ext - E0))
+            ys.append(y)
+    finally:
+        inst.close()
+    assert min(ys) > 0
+    assert worst <= 1e-2 * E0
