@@ -120,6 +120,7 @@ def stick_params(draw, name):
     assume(k_low * x_i ** 2 / 2 >= 4 * energy)
     assume(math.sqrt(m / k_fast) >= 1e-4 and (c == 0 or m / c >= 1e-4))
     p["_scale"] = min(x_i, m * g / k_fast, abs(p.get("x3", x_i)))  # smallest length the error control must resolve
+    p["abs_tol"] = min(p["abs_tol"], 1e-3 * p["_scale"])  # the rule (README "Errors")
     return p
 
 
@@ -139,6 +140,7 @@ def penetrator_params(draw):
     K_s = K * n * (m * g / K) ** ((n - 1) / n)  # soil stiffness at the resting depth
     assume(min(p["c"] / k, math.sqrt(m / k), p["c"] / K_s) >= 1e-4)
     p["_scale"] = min(x_i, m * g / k, (m * g / K) ** (1 / n))
+    p["abs_tol"] = min(p["abs_tol"], 1e-3 * p["_scale"])  # the rule (README "Errors")
     return p
 
 

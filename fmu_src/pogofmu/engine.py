@@ -338,7 +338,10 @@ class Simulator:
         self.n_rejected = 0
         self._budget = float(p.max_steps_per_second) * BUDGET_WINDOW
         self._win_t0, self._win_n, self._warned = self.t, 0, False
-        self._at_start = True  # guards exactly at zero at the start fire if the motion leaves to their after side
+        # guards exactly at zero fire if the motion leaves them towards their after side: at the start,
+        # and after a jump every guard but the one of the event just handled (that one stays disarmed)
+        self._at_start = True
+        self._disarmed = -1  # index of the event whose guard stays disarmed at zero
         try:
             _check_time_scales(model, p)
             x, q = model.initial(p)
@@ -451,6 +454,7 @@ class Simulator:
         if u == self.u:
             return
         self._check_input(u)
+        crossed = None
         if self.t > self.t_out:
             # the integrator ran ahead: redo the step exactly up to the communication time
             seg = self.seg
@@ -458,6 +462,7 @@ class Simulator:
                 x = seg.y0
             else:
                 x, _, _ = self.pair.step(seg.fun, seg.t0, seg.y0, seg.f0, self.t_out - seg.t0)
+                crossed = self._crossed_in(seg.y0, x)
             self.t, self.x = self.t_out, x
             self.pending = None
             self.seg = None
@@ -469,6 +474,34 @@ class Simulator:
             self.h = min(self.h, self._initial_step())
         except ArithmeticError as exc:
             raise self._arithmetic_error(exc, f"the input change at t = {self.t!r} s") from None
+        if crossed is not None:
+            self.pending = (crossed, self.x)
+        # a restart: guards exactly at zero are armed as at the start (a foot at z = 0 to the last
+        # bit when the thrust switches off must still touch down), but for the guard of an event
+        # handled at this very instant
+        last = self.last_event
+        self._at_start = True
+        self._disarmed = last.index if last is not None and last.time == self.t else -1
+
+    def _crossed_in(self, y0, y1):
+        """Index of the first active event (in priority order) whose guard is on its "before" side
+        at ``y0`` (the start of the step being redone) and on its "after" side at ``y1``, else None.
+
+        Used when a step that ran ahead is redone up to an input change: the run-ahead step saw
+        the guard touch zero without crossing (a foot whose height reaches exactly 0 with zero
+        speed at the switching instant, found by the property suite), but the exact state at the
+        communication point lies on or beyond the guard.  The event happens there."""
+        q, u, p = self.q, self.u, self.p
+        last = self.last_event
+        disarmed = last.index if last is not None and last.time == self.seg.t0 else -1
+        for i, ev in self.active:
+            sgn = -1.0 if ev.direction == FALLING else 1.0
+            g0, g1 = sgn * ev.guard(y0, q, u, p), sgn * ev.guard(y1, q, u, p)
+            # also a guard exactly at zero at the start of the step (armed: not the event handled
+            # there) that ends beyond zero: a hop of zero length, z = 0 -> 1e-17 -> -3e-18 m
+            if g1 >= 0.0 and (g0 < 0.0 or (g0 == 0.0 < g1 and i != disarmed)):
+                return i
+        return None
 
     def advance(self, t_target: float):
         """Integrate to ``t_target`` (handling every event on the way); return ``(x, q)`` there."""
@@ -557,19 +590,28 @@ class Simulator:
                 h *= max(MIN_FACTOR, SAFETY * err ** pair.error_exponent)
         self.n_steps += 1
         at_start, self._at_start = self._at_start, False
+        disarmed = self._disarmed
         seg = _Segment(t, t_new, y, y_new, f, K, fun, pair)
         # ---- event detection on the accepted step ----
         q, u, p = self.q, self.u, self.p
         g_new = [ev.guard(y_new, q, u, p) for _, ev in self.active]
+        if at_start and any(g0 == 0.0 == g1 for g0, g1 in zip(self.g, g_new)):
+            # a guard still exactly at zero (the first steps are tiny: x = g t^2/2 is below an ulp
+            # of the leg length): it stays armed until the motion leaves zero
+            self._at_start = True
         hit = None
         for k, ((i, ev), g0, g1) in enumerate(zip(self.active, self.g, g_new)):
             sgn = -1.0 if ev.direction == FALLING else 1.0  # before side: sgn*g < 0; after: >= 0
             if sgn * g1 < 0.0:
-                continue
-            if sgn * g0 < 0.0:
+                if sgn * g0 >= 0.0:
+                    continue
+                te = self._hidden_crossing(seg, ev, sgn, g0, g1, f_new)
+                if te is None:
+                    continue
+            elif sgn * g0 < 0.0:
                 te = self._locate(seg, ev, t, g0, g1)
             elif g0 == 0.0:
-                te = self._locate_from_zero(seg, ev, g1, at_start)
+                te = self._locate_from_zero(seg, ev, g1, at_start and i != disarmed)
                 if te is None:
                     continue
             else:
@@ -690,12 +732,14 @@ class Simulator:
 
     def _locate_from_zero(self, seg, ev, g1, at_start=False):
         """A guard that starts the step exactly at zero and ends it on the after side: when did it
-        cross?  After a jump (disarmed guard) only a visit to the before side counts: a large first
-        step after a jump (a flight parabola is integrated exactly, so the step size grows fast)
-        may hold a whole arc, so the dense output is probed near the start; if the guard is on the
-        before side there, the crossing lies between that probe and the end of the step.  At the
-        start of the simulation (``at_start``) a guard at zero whose motion leaves it towards the
-        after side fires at once: the event happens at the start (issue 9 item 1)."""
+        cross?  If it visits the before side first, the crossing is located from there: a large
+        first step after a jump (a flight parabola is integrated exactly, so the step size grows
+        fast) may hold a whole arc, so the dense output is probed near the start.  If the motion
+        leaves zero straight towards the after side, the event happens at the start of the step
+        when ``at_start`` (the start of the simulation, or after a jump for every guard but the one
+        of the event just handled: a stick at its free length moving up lifts off at t0, a liftoff
+        with the mass already moving down touches down at once, issue 9 item 1); else (the guard
+        of the event just handled) it stays disarmed."""
         q, u, p = self.q, self.u, self.p
         sgn = -1.0 if ev.direction == FALLING else 1.0
         h = seg.t1 - seg.t0
@@ -709,8 +753,45 @@ class Simulator:
                 return seg.t0 if at_start else None
         return seg.t0 if at_start and g1 != 0.0 else None
 
-    def _locate(self, seg, ev, a, ga, gb):
-        """Earliest time in ``[a, seg.t1]`` where ``ev``'s guard crosses zero in its direction.
+    def _hidden_crossing(self, seg, ev, sgn, g0, g1, f1):
+        """Both ends of the step on the guard's before side: did the guard cross zero and come back
+        inside the step?  (A flight parabola is integrated exactly, so the error control lets a
+        step hold a foot that dips below the ground and rises again, e.g. under a switching
+        thrust; found by the property suite.)  Only when the guard approaches zero at the start
+        and recedes at the end (slopes by a difference along the flow): the maximum of the cubic
+        Hermite interpolant of the guard is probed on the dense output; if the guard is on its
+        after side there, the crossing is located between the start and that probe."""
+        q, u, p, guard = self.q, self.u, self.p, ev.guard
+        t0, h = seg.t0, seg.t1 - seg.t0
+        eps = 1e-6 * h
+        d0 = sgn * (guard([a + eps * b for a, b in zip(seg.y0, seg.f0)], q, u, p) - g0) / eps * h
+        if not d0 > 0.0:
+            return None
+        d1 = sgn * (guard([a + eps * b for a, b in zip(seg.y1, f1)], q, u, p) - g1) / eps * h
+        if not d1 < 0.0:
+            return None
+        G0, G1 = sgn * g0, sgn * g1
+        # G'(tau) of the Hermite cubic, a quadratic with G'(0) = d0 > 0 > d1 = G'(1): bisect its root
+        A = 6 * G0 + 3 * d0 - 6 * G1 + 3 * d1
+        B = -6 * G0 - 4 * d0 + 6 * G1 - 2 * d1
+        lo, hi = 0.0, 1.0
+        for _ in range(40):
+            mid = 0.5 * (lo + hi)
+            if (A * mid + B) * mid + d0 > 0.0:
+                lo = mid
+            else:
+                hi = mid
+        tp = t0 + lo * h
+        if not t0 < tp < seg.t1:
+            return None
+        gp = guard(seg(tp), q, u, p)
+        if sgn * gp < 0.0:
+            return None
+        return self._locate(seg, ev, t0, g0, gp, b=tp)
+
+    def _locate(self, seg, ev, a, ga, gb, b=None):
+        """Earliest time in ``[a, b]`` (``b`` the end of the step unless given) where ``ev``'s guard
+        crosses zero in its direction.
 
         Illinois iteration keeping a bracket ``[a, b]`` with the guard strictly on the before side
         at ``a`` and on the after side at ``b``; returns ``b`` (the event has happened there).
@@ -718,7 +799,7 @@ class Simulator:
         q, u, p = self.q, self.u, self.p
         guard = ev.guard
         sgn = -1.0 if ev.direction == FALLING else 1.0  # after side: sgn*g >= 0
-        b = seg.t1
+        b = seg.t1 if b is None else b
         fa, fb = sgn * ga, sgn * gb  # fa < 0 <= fb
         side = 0
         tol = 4 * EPS * max(abs(a), abs(b), 1e-300)
@@ -759,7 +840,7 @@ class Simulator:
             self._history.append(record)
             self.new_events.append(record)
         self.pending = None
-        self._at_start = False
+        self._at_start, self._disarmed = True, i
         self.x, self.q = list(x_new), dict(q_new)
         self._check_zeno()
         self._check_domain(self.t, self.x)
