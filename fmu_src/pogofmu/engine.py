@@ -50,6 +50,9 @@ BUDGET_WARN_FRACTION = 0.2  # warn when a window has used this fraction of its b
 MIN_TIME_SCALE = 1e-9  # s: faster physical time scales are refused at initialization
 UNBOUNDED_STEP_FACTOR = 10.0  # max_step = 0: steps still <= this x max(|t|, 1) s (an exactly integrated
 #                               parabola, err = 0, grew the step tenfold per step to 1e151 s, issue 9)
+HIDDEN_CROSSING_ERR = 1e-3  # a guard's excursion beyond zero inside a step is looked for when the error
+#                            estimate of the step is below this: where the motion is integrated (near)
+#                            exactly (a flight parabola) the error control does not limit the step
 STORM_EVENTS = 5  # a collapsed step after an event is an event storm if this many events lie in zeno_window
 
 
@@ -338,6 +341,7 @@ class Simulator:
         self.n_rejected = 0
         self._budget = float(p.max_steps_per_second) * BUDGET_WINDOW
         self._win_t0, self._win_n, self._warned = self.t, 0, False
+        self._warn_n = BUDGET_WARN_FRACTION * self._budget
         # guards exactly at zero fire if the motion leaves them towards their after side: at the start,
         # and after a jump every guard but the one of the event just handled (that one stays disarmed)
         self._at_start = True
@@ -402,6 +406,7 @@ class Simulator:
         self._rebind()
         self.f = self.fun(self.t, self.x)
         self.g = [ev.guard(self.x, self.q, self.u, self.p) for _, ev in self.active]
+        self._g_prev = None  # guards at the start of the previous step (None after a restart)
 
     def _rebind(self):
         model, q, u, p = self.model, self.q, self.u, self.p
@@ -574,7 +579,9 @@ class Simulator:
             if h <= MIN_STEP_ULPS * EPS * max(abs(t), 1.0):
                 raise self._collapse_error(t, h)
             y_new, f_new, K = pair.step(fun, t, y, f, h)
-            self._spend(t, h)
+            n = self._win_n = self._win_n + 1  # the work budget (_spend), fast path inline
+            if n >= self._warn_n or t - self._win_t0 >= BUDGET_WINDOW:
+                self._spend(t, h)
             err = pair.error_norm(K, h, y, y_new, self.atol, self.rtol)
             if err < 1.0:  # False for NaN: a non-finite step is rejected
                 factor = MAX_FACTOR if err == 0.0 else min(MAX_FACTOR, SAFETY * err ** pair.error_exponent)
@@ -600,11 +607,13 @@ class Simulator:
             # of the leg length): it stays armed until the motion leaves zero
             self._at_start = True
         hit = None
-        for k, ((i, ev), g0, g1) in enumerate(zip(self.active, self.g, g_new)):
+        g, g_prev = self.g, self._g_prev
+        for k, ((i, ev), g0, g1) in enumerate(zip(self.active, g, g_new)):
             sgn = -1.0 if ev.direction == FALLING else 1.0  # before side: sgn*g < 0; after: >= 0
             if sgn * g1 < 0.0:
-                if sgn * g0 >= 0.0:
-                    continue
+                if sgn * g0 >= 0.0 or err > HIDDEN_CROSSING_ERR or (
+                        g_prev is not None and sgn * (g0 - g_prev[k]) < 0.0):
+                    continue  # (receding from zero over the previous step: no turn towards it in this one)
                 te = self._hidden_crossing(seg, ev, sgn, g0, g1, f_new)
                 if te is None:
                     continue
@@ -619,8 +628,10 @@ class Simulator:
             if hit is None or te < hit[0]:
                 hit = (te, k)
         if hit is None:
-            if not self._end_step(seg, t_target):
+            if (self.model.domain(t_new, y_new, q, u, p) is None and all(map(math.isfinite, y_new))) \
+                    or not self._end_step(seg, t_target):
                 self.seg, self.t, self.x, self.f, self.g = seg, t_new, y_new, f_new, g_new
+                self._g_prev = g  # guards at the start of the step (the secant's direction)
             return
         te, k = hit
         i, ev = self.active[k]
@@ -640,13 +651,13 @@ class Simulator:
 
     # ---- work budget (issue 9 item 2) ----------------------------------------------------------
     def _spend(self, t, h):
-        """Count one step attempt against ``max_steps_per_second`` (windows of BUDGET_WINDOW s of
-        simulated time); warn at BUDGET_WARN_FRACTION of a window's budget, stop at all of it."""
+        """The work budget, once a step attempt has been counted in ``_win_n`` (in ``_step``) and the
+        window is full or over: windows of BUDGET_WINDOW s of simulated time, a warning at
+        BUDGET_WARN_FRACTION of a window's ``max_steps_per_second``, an error at all of it."""
         if t - self._win_t0 >= BUDGET_WINDOW:
-            self._win_t0, self._win_n = t, 0
-        self._win_n += 1
+            self._win_t0, self._win_n = t, 1  # a new window, with this attempt in it
         n = self._win_n
-        if n < BUDGET_WARN_FRACTION * self._budget:
+        if n < self._warn_n:
             return
         elapsed = max(t + h - self._win_t0, 0.0)
         if n >= self._budget:
@@ -905,6 +916,7 @@ class Simulator:
             self.seg = _Segment(t, t_target, y, y_c, f, K_c, seg.fun, self.pair)
             self.t, self.x, self.f = t_target, y_c, f_c
             self.g = [ev.guard(y_c, self.q, self.u, self.p) for _, ev in self.active]
+            self._g_prev = None
             return True
         raise DomainError(f"the trajectory left the model's domain at t = {violation[0]:.10g} s: {violation[1]}")
 
