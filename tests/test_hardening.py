@@ -337,3 +337,26 @@ def test_switching_thrust_from_rest_at_the_free_length(name, thrust, params):
         inst.close()
     assert min(ys) > 0
     assert worst <= 1e-2 * E0
+
+
+def test_penetration_dipping_below_zero_inside_a_step_is_a_liftoff():
+    """Penetrator under a thrust cycling through (1.20, 1.5, 0.73, 0.5) m g every 10 ms, DOP853,
+    max_step = 0 (found by a scan of such runs): a contact step whose two ends have delta > 0 held
+    a dip to delta = -2.6e-6 m at t = 1.79 s (the foot above the surface in contact).  Now the
+    liftoff/touchdown pair inside the step is found: delta >= 0 in contact, the foot height >= 0
+    in flight at every communication point, and E + W_leg + W_soil = E(0) + W_ext."""
+    thrust = (1.2021019646842688, 1.5, 0.728039827614527, 0.5)
+    inst = Instance("Penetrator").init(rel_tol=1e-6, abs_tol=1e-9, max_step=0.0, method=8, y_0=1.0, c=2.0)
+    try:
+        E0 = inst.get("E")
+        worst = 0.0
+        for i in range(200):
+            inst.set(F_ext=thrust[i % 4] * G)
+            inst.step(1e-2)
+            s, delta, z, E, W_leg, W_soil, W_ext = inst.get("s", "delta", "z", "E", "W_leg", "W_soil", "W_ext")
+            assert (delta if s == 1 else z) >= -1e-9, (inst.t, s, delta, z)
+            worst = max(worst, abs(E + W_leg + W_soil - W_ext - E0))
+        assert inst.get("n_events") > 10
+    finally:
+        inst.close()
+    assert worst <= 1e-5 * E0

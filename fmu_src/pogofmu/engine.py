@@ -50,9 +50,6 @@ BUDGET_WARN_FRACTION = 0.2  # warn when a window has used this fraction of its b
 MIN_TIME_SCALE = 1e-9  # s: faster physical time scales are refused at initialization
 UNBOUNDED_STEP_FACTOR = 10.0  # max_step = 0: steps still <= this x max(|t|, 1) s (an exactly integrated
 #                               parabola, err = 0, grew the step tenfold per step to 1e151 s, issue 9)
-HIDDEN_CROSSING_ERR = 1e-3  # a guard's excursion beyond zero inside a step is looked for when the error
-#                            estimate of the step is below this: where the motion is integrated (near)
-#                            exactly (a flight parabola) the error control does not limit the step
 STORM_EVENTS = 5  # a collapsed step after an event is an event storm if this many events lie in zeno_window
 
 
@@ -611,8 +608,7 @@ class Simulator:
         for k, ((i, ev), g0, g1) in enumerate(zip(self.active, g, g_new)):
             sgn = -1.0 if ev.direction == FALLING else 1.0  # before side: sgn*g < 0; after: >= 0
             if sgn * g1 < 0.0:
-                if sgn * g0 >= 0.0 or err > HIDDEN_CROSSING_ERR or (
-                        g_prev is not None and sgn * (g0 - g_prev[k]) < 0.0):
+                if sgn * g0 >= 0.0 or (g_prev is not None and sgn * (g0 - g_prev[k]) < 0.0):
                     continue  # (receding from zero over the previous step: no turn towards it in this one)
                 te = self._hidden_crossing(seg, ev, sgn, g0, g1, f_new)
                 if te is None:
@@ -768,7 +764,8 @@ class Simulator:
         """Both ends of the step on the guard's before side: did the guard cross zero and come back
         inside the step?  (A flight parabola is integrated exactly, so the error control lets a
         step hold a foot that dips below the ground and rises again, e.g. under a switching
-        thrust; found by the property suite.)  Only when the guard approaches zero at the start
+        thrust; in contact a Penetrator's penetration may dip below 0 and back: found by the
+        property suite and scans of such runs.)  Only when the guard approaches zero at the start
         and recedes at the end (slopes by a difference along the flow): the maximum of the cubic
         Hermite interpolant of the guard is probed on the dense output; if the guard is on its
         after side there, the crossing is located between the start and that probe."""
