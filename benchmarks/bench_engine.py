@@ -40,7 +40,7 @@ SPEED_TARGET = 2.0
 def run_engine(model, p, stop_time):
     from pogofmu.engine import Simulator
 
-    sim = Simulator(model, p, t_stop=stop_time)
+    sim = Simulator(model, p, t_stop=stop_time, keep_history=True)  # the event times are compared
     sim.advance(stop_time)
     return [(ev.time, ev.name) for ev in sim.events]
 

@@ -86,14 +86,14 @@ def reference_events():
 class Instance:
     """One FMU instance stepped by hand through fmpy's FMU2Slave, with its log collected."""
 
-    def __init__(self, name, instance_name="test"):
+    def __init__(self, name, instance_name="test", unzip_dir=None):
         from fmpy import extract, read_model_description
         from fmpy.fmi2 import FMU2Slave
 
         path = fmu_path(name)
         self.md = read_model_description(str(path))
         self.vars = {v.name: v for v in self.md.modelVariables}
-        self.dir = extract(str(path))
+        self.dir = extract(str(path)) if unzip_dir is None else unzip_dir  # reuse one extraction
         self.messages = []
 
         def logger(component, instance, status, category, message):

@@ -45,7 +45,7 @@ def impact_times(e, h0, n):
 @pytest.mark.parametrize("method, rel_tol, tol", [(5, 1e-10, 1e-9), (8, 1e-12, 1e-12)])
 def test_event_times_of_a_bouncing_ball(method, rel_tol, tol):
     model = ball()
-    sim = Simulator(model, model.params(method=method, rel_tol=rel_tol, max_step=0.0))
+    sim = Simulator(model, model.params(method=method, rel_tol=rel_tol, max_step=0.0), keep_history=True)
     sim.advance(3.0)
     got = [e.time for e in sim.events]
     ref = impact_times(0.8, 1.0, len(got))
@@ -56,9 +56,9 @@ def test_event_times_of_a_bouncing_ball(method, rel_tol, tol):
 def test_several_events_in_one_call_and_same_times_as_small_calls():
     model = ball()
     p = model.params(method=8, rel_tol=1e-12)
-    big = Simulator(model, p)
+    big = Simulator(model, p, keep_history=True)
     big.advance(3.0)  # one call, 7 events
-    small = Simulator(model, p)
+    small = Simulator(model, p, keep_history=True)
     t = 0.0
     while t < 3.0:
         t = min(3.0, t + 1e-3)
@@ -83,7 +83,7 @@ def test_direction_is_respected():
     up = Event("up", RISING, lambda x, q, u, p: x[0] - 0.5, mark("up"))
     down = Event("down", FALLING, lambda x, q, u, p: x[0] - 0.5, mark("down"))
     model = ball(events=(bounce, up, down))
-    sim = Simulator(model, model.params(e=0.9))
+    sim = Simulator(model, model.params(e=0.9), keep_history=True)
     sim.advance(1.3)
     # closed form: down at 0.319 s, impact 0.4515 s, up 0.598 s, down 1.118 s, impact 1.264 s
     assert [e.name for e in sim.events] == ["down", "impact", "up", "down", "impact"]
@@ -129,7 +129,7 @@ def test_zeno_ends_in_a_clear_error():
 def test_guard_at_zero_after_a_jump_is_not_detected_again():
     """A jump that leaves the guard exactly at 0 must not fire the same event at once."""
     model = ball()
-    sim = Simulator(model, model.params())
+    sim = Simulator(model, model.params(), keep_history=True)
     sim.advance(1.0)
     times = [e.time for e in sim.events]
     assert all(b - a > 0.1 for a, b in zip(times, times[1:]))

@@ -59,12 +59,41 @@ class Element:
         """Values of the element's own outputs (same order as ``outputs``)."""
         return ()
 
+    def time_scales(self, p: Params):
+        """Physical time scales of the element on the stick's mass ``m``: ``(label, names, s)``."""
+        return ()
+
+    def error_scales(self, p: Params):
+        """Smallest magnitudes of the element's motion the error control must resolve."""
+        return ()
+
     def liftoff_allowed(self, q) -> bool:
         """May the foot leave the ground in this discrete state (e.g. only on the virgin line)?"""
         return True
 
     def check(self, p: Params):
         pass
+
+
+def _spring_time_scale(p, k):
+    """``sqrt(m/k)``: the leg spring's oscillation time scale (1/omega) on the mass."""
+    if p[k] > 0:
+        return ((f"sqrt(m/{k}) (leg spring)", ("m", k), (p.m / p[k]) ** 0.5),)
+    return ()
+
+
+def _static_deflection(p, k):
+    """``m g/k``: the spring's static deflection under the mass."""
+    if p[k] > 0 and p.g > 0:
+        return ((f"m g/{k} (static leg deflection)", ("m", "g", k), p.m * p.g / p[k]),)
+    return ()
+
+
+def _dashpot_time_scale(p):
+    """``m/c``: the dashpot's relaxation time on the mass."""
+    if p.c > 0:
+        return (("m/c (leg dashpot)", ("m", "c"), p.m / p.c),)
+    return ()
 
 
 class LinearSpring(Element):
@@ -74,6 +103,12 @@ class LinearSpring(Element):
 
     def force(self, x, xdot, xi, q, p):
         return p.k * x
+
+    def time_scales(self, p):
+        return _spring_time_scale(p, "k")
+
+    def error_scales(self, p):
+        return _static_deflection(p, "k")
 
     def check(self, p):
         require_nonnegative(p, "k")
@@ -86,6 +121,9 @@ class LinearDashpot(Element):
 
     def force(self, x, xdot, xi, q, p):
         return p.c * xdot
+
+    def time_scales(self, p):
+        return _dashpot_time_scale(p)
 
     def check(self, p):
         require_nonnegative(p, "c")
@@ -144,6 +182,12 @@ class MemSpring(Element):
     def output_values(self, x, xdot, xi, q, p):
         return (xi[0],)
 
+    def time_scales(self, p):
+        return _spring_time_scale(p, "k")  # at zero absement
+
+    def error_scales(self, p):
+        return _static_deflection(p, "k")
+
     def check(self, p):
         require_nonnegative(p, "k", "beta")
         require(p.spring_law in SPRING_LAWS, "spring_law", p.spring_law,
@@ -164,6 +208,9 @@ class MemDashpot(Element):
 
     def force(self, x, xdot, xi, q, p):
         return p.c * (1.0 + p.gamma * x * x) * xdot
+
+    def time_scales(self, p):
+        return _dashpot_time_scale(p)  # at zero deflection
 
     def check(self, p):
         require_nonnegative(p, "c", "gamma")
@@ -233,6 +280,13 @@ class SMAFlag(Element):
     def output_values(self, x, xdot, xi, q, p):
         return (q["branch"], q["H_l"])
 
+    def time_scales(self, p):
+        return _spring_time_scale(p, "k1")
+
+    def error_scales(self, p):
+        return _static_deflection(p, "k1") + (("|x3| (SMA lower corner)", ("x3",), abs(p.x3)),
+                                              ("x3 - x1 (SMA plateau length)", ("x1", "x3"), p.x3 - p.x1))
+
     def liftoff_allowed(self, q):
         return q["branch"] == ELASTIC and q["x_a"] == 0.0 and q["r_a"] == 0.0
 
@@ -266,14 +320,26 @@ def _reload(x, xdot, xi, q, p):
     return xi, dict(q, branch=ELASTIC, x_a=x, r_a=SMAFlag.r_lower(x, p))
 
 
+# The plateau guards r_el(x) - r_U(x) and r_el(x) - r_L(x), written as (k1 - k2)(x - x_a) + (r_a - r_P(x_a)):
+# the same lines, but without the cancellation of two forces of ~k1 |x| that left a noise of ~1e-14 k1 |x|
+# on a guard whose slope is only (k1 - k2) xdot.  With k2 close to k1 that noise fired a false
+# upper_plateau right after a reversal (where the guard starts at 0 and rises with x - x_a), and the leg
+# then extended on the plateau (issue 9 item 4).  Right after a reversal (reload) the constant term is
+# exactly 0, since r_a was computed by r_upper (r_lower) at x_a itself.
+def _upper_guard(x, xdot, xi, q, p):
+    x_a = q["x_a"]
+    return (p.k1 - p.k2) * (x - x_a) + (q["r_a"] - (p.k1 * p.x1 + p.k2 * (x_a - p.x1)))
+
+
+def _lower_guard(x, xdot, xi, q, p):
+    x_a = q["x_a"]
+    return (p.k1 - p.k2) * (x - x_a) + (q["r_a"] - (p.k1 * p.x3 + p.k2 * (x_a - p.x3)))
+
+
 _SMA_EVENTS = (
-    LegEvent("upper_plateau", FALLING,
-             lambda x, xdot, xi, q, p: (q["r_a"] + p.k1 * (x - q["x_a"])) - (p.k1 * p.x1 + p.k2 * (x - p.x1)),
-             _to_upper, lambda q: q["branch"] == ELASTIC),
+    LegEvent("upper_plateau", FALLING, _upper_guard, _to_upper, lambda q: q["branch"] == ELASTIC),
     LegEvent("reversal", RISING, lambda x, xdot, xi, q, p: xdot, _reversal, lambda q: q["branch"] == UPPER),
-    LegEvent("lower_plateau", RISING,
-             lambda x, xdot, xi, q, p: (q["r_a"] + p.k1 * (x - q["x_a"])) - (p.k1 * p.x3 + p.k2 * (x - p.x3)),
-             _to_lower, lambda q: q["branch"] == ELASTIC and q["x_a"] != 0.0),
+    LegEvent("lower_plateau", RISING, _lower_guard, _to_lower, lambda q: q["branch"] == ELASTIC and q["x_a"] != 0.0),
     LegEvent("virgin_line", RISING, lambda x, xdot, xi, q, p: x - p.x3, _to_virgin, lambda q: q["branch"] == LOWER),
     LegEvent("reload", FALLING, lambda x, xdot, xi, q, p: xdot, _reload, lambda q: q["branch"] == LOWER),
 )

@@ -14,16 +14,24 @@ One :class:`Simulator` integrates any :class:`~pogofmu.model.HybridModel`:
   the step sequence, and so every event time, does not depend on the communication grid.  Only a
   change of input forces a restart at the communication point;
 * an event storm (more than ``zeno_max_events`` events within ``zeno_window`` seconds) and a step
-  size that collapses end in a :class:`~pogofmu.model.ZenoError` / error, never in a hang.
+  size that collapses end in a :class:`~pogofmu.model.ZenoError` / error, never in a hang;
+* a work budget (parameter ``max_steps_per_second``, windows of 1 s of simulated time) ends a
+  run that turns stiff with an error naming the model's fastest time scales, after a warning at
+  20 % of it; a model without states takes no internal steps at all;
+* the event bookkeeping is of constant size (count, last event, times of the latest events); the
+  full history only with ``log_events = 1`` (or ``keep_history=True``).
 
 Restart rule (no re-detection of the event just handled): a guard only fires when its value at
 the start of a step lies strictly on the "before" side (``> 0`` for a falling guard, ``< 0`` for a
-rising one); a guard that is exactly zero after a jump is disarmed until it leaves zero.
+rising one); a guard that is exactly zero after a jump is disarmed until it leaves zero.  At the
+start of the simulation a guard exactly at zero whose motion leaves it towards its "after" side
+fires at the start time (a stick at its free length moving up lifts off at t0).
 """
 from __future__ import annotations
 
 import copy
 import math
+from collections import deque
 from dataclasses import dataclass
 from typing import List, Optional
 
@@ -34,6 +42,15 @@ EPS = 2.220446049250313e-16
 SAFETY = 0.9
 MIN_FACTOR = 0.2
 MAX_FACTOR = 10.0
+MIN_STEP_ULPS = 10  # a step of at most this many ulps of max(|t|, 1) has collapsed
+START_STEP_ULPS = 100  # the automatic first step is never smaller than this (Hairer's estimate can be:
+#                        tight abs_tol on a state that starts at 0 with a nonzero rate, issue 9 item 3)
+BUDGET_WINDOW = 1.0  # s of simulated time over which max_steps_per_second is counted
+BUDGET_WARN_FRACTION = 0.2  # warn when a window has used this fraction of its budget
+MIN_TIME_SCALE = 1e-9  # s: faster physical time scales are refused at initialization
+UNBOUNDED_STEP_FACTOR = 10.0  # max_step = 0: steps still <= this x max(|t|, 1) s (an exactly integrated
+#                               parabola, err = 0, grew the step tenfold per step to 1e151 s, issue 9)
+STORM_EVENTS = 5  # a collapsed step after an event is an event storm if this many events lie in zeno_window
 
 
 # =============================================================================================
@@ -139,7 +156,7 @@ class DOP853(_Pair):
             f"        b = ({e3}) / sc\n"
             f"        n5 += a*a\n"
             f"        n3 += b*b\n"
-            f"    if n5 == 0.0 and n3 == 0.0:\n"
+            f"    if n5 == 0.0:  # (also n3 tiny: 0.01*n3 may underflow to 0)\n"
             f"        return 0.0\n"
             f"    return abs(h) * n5 / sqrt((n5 + 0.01*n3) * len(y))\n", "error_norm")  # y empty: n5 = 0
         # dense output (Hairer's contd8): three more stages, then seven coefficient vectors
@@ -239,22 +256,39 @@ def solver_parameters():
         Parameter("abs_tol", 1e-12, "", "absolute error tolerance of the internal solver (state units)"),
         Parameter("max_step", 0.01, "s", "largest internal step (0 or inf: unbounded)"),
         Parameter("initial_step", 0.0, "s", "first internal step (0: chosen automatically)"),
-        Parameter("log_events", 0, "", "1: report every state event through the FMI logger (category logEvents)",
-                  integer=True),
+        Parameter("log_events", 0, "", "1: report every state event through the FMI logger (category logEvents) "
+                  "and keep the full event history", integer=True),
+        Parameter("max_steps_per_second", 1e5, "1/s", "work budget: most internal steps per second of simulated "
+                  "time (counted over windows of 1 s); more end the run with an error naming the stiffness"),
     )
 
 
-def check_solver_parameters(p: Params):
+SOLVER_PARAMETER_NAMES = ("method", "rel_tol", "abs_tol", "max_step", "initial_step", "log_events",
+                          "max_steps_per_second")
+REL_TOL_MAX = 1e-3  # looser relative tolerances do not control the error (issue 9 item 7; ode45's default)
+ABS_TOL_MAX_FRACTION = 1e-3  # abs_tol <= this fraction of the states' scale (issue 9 item 7)
+
+
+def check_solver_parameters(p: Params, has_states: bool = True):
     from .model import require
 
-    for name in ("method", "rel_tol", "abs_tol", "max_step", "initial_step", "log_events"):
+    for name in SOLVER_PARAMETER_NAMES:
         v = p[name]
         if not isinstance(v, (int, float)) or math.isnan(v):
             raise ParameterError(f"parameter {name} = {v!r} violates the rule: {name} must be a number")
     require(p.method in METHODS, "method", p.method, "method must be 5 (DOPRI5) or 8 (DOP853)")
-    require(1e-14 <= p.rel_tol < 1.0, "rel_tol", p.rel_tol, "1e-14 <= rel_tol < 1")
+    require(1e-14 <= p.rel_tol <= REL_TOL_MAX, "rel_tol", p.rel_tol,
+            f"1e-14 <= rel_tol <= {REL_TOL_MAX:g} (a looser relative tolerance does not control the error)")
     require(p.abs_tol > 0 and math.isfinite(p.abs_tol), "abs_tol", p.abs_tol, "0 < abs_tol < inf")
     require(p.max_step >= 0, "max_step", p.max_step, "max_step >= 0 (0 or inf: unbounded)")
+    budget = p.max_steps_per_second
+    require(budget >= 10 and budget < math.inf, "max_steps_per_second", budget,
+            "10 <= max_steps_per_second < inf")
+    # (a model without states takes no internal steps: its max_step is never used)
+    require(not has_states or p.max_step == 0 or p.max_step * budget >= 2, "max_step", p.max_step,
+            f"max_step = 0 or max_step >= 2/max_steps_per_second = {2 / budget:.3g} s (a smaller max_step "
+            f"alone takes more than half the work budget of {budget:.3g} internal steps per simulated second; "
+            f"raise max_steps_per_second to allow it)")
     require(p.log_events in (0, 1), "log_events", p.log_events, "log_events is 0 or 1")
     require(p.initial_step >= 0 and math.isfinite(p.initial_step), "initial_step", p.initial_step,
             "0 <= initial_step < inf (0: automatic)")
@@ -264,11 +298,18 @@ class Simulator:
     """Integrates one :class:`HybridModel` from ``t0`` on; see the module docstring.
 
     ``p`` must hold the model's parameters and the solver knobs (:func:`solver_parameters`).
+
+    Event bookkeeping in constant memory: ``n_events``, ``last_event`` (an :class:`EventRecord`
+    or None) and the times of the latest ``zeno_max_events`` events (for the event-storm bound).
+    The full history ``events`` is kept only with ``keep_history`` (default: the parameter
+    ``log_events = 1``); then ``new_events`` also collects the events a caller has not taken yet
+    (the FMI adapter logs and clears them after every call).  ``new_warnings`` collects warning
+    texts (the work budget) the same way.
     """
 
     def __init__(self, model: HybridModel, p: Params, u=None, t0: float = 0.0, t_stop: float = math.inf,
-                 zeno_max_events: int = 200, zeno_window: float = 1e-6):
-        check_solver_parameters(p)
+                 zeno_max_events: int = 200, zeno_window: float = 1e-6, keep_history: Optional[bool] = None):
+        check_solver_parameters(p, has_states=bool(model.states))
         model.check(p)
         self.model = model
         self.p = p
@@ -282,20 +323,44 @@ class Simulator:
         self.zeno_window = zeno_window
         self.u = tuple(float(v.start) for v in model.inputs) if u is None else tuple(u)
         self._check_input(self.u)
-        x, q = model.initial(p)
         self.t = float(t0)  # integrator time (may be ahead of the communication time)
         self.t_out = float(t0)  # latest time served to the caller
-        self.x = [float(v) for v in x]
-        self.q = dict(q)
-        self.x_out, self.q_out = self.x, self.q  # state served at t_out
-        self.events: List[EventRecord] = []
+        self.n_events = 0
+        self.last_event: Optional[EventRecord] = None
+        keep = bool(p.log_events) if keep_history is None else bool(keep_history)
+        self._history: Optional[List[EventRecord]] = [] if keep else None
+        self.new_events: List[EventRecord] = []  # filled only when the history is kept
+        self.new_warnings: List[str] = []
+        self._recent = deque(maxlen=max(zeno_max_events, STORM_EVENTS))  # (time, name) of the latest events
         self.seg: Optional[_Segment] = None
         self.pending = None  # (event index, x at event) to apply at self.t
         self.n_steps = 0
         self.n_rejected = 0
-        self._check_domain(self.t, self.x)
-        self._bind()
-        self.h = float(p.initial_step) if p.initial_step > 0 else self._initial_step()
+        self._budget = float(p.max_steps_per_second) * BUDGET_WINDOW
+        self._win_t0, self._win_n, self._warned = self.t, 0, False
+        self._warn_n = BUDGET_WARN_FRACTION * self._budget
+        # guards exactly at zero fire if the motion leaves them towards their after side: at the start,
+        # and after a jump every guard but the one of the event just handled (that one stays disarmed)
+        self._at_start = True
+        self._disarmed = -1  # index of the event whose guard stays disarmed at zero
+        try:
+            _check_time_scales(model, p)
+            x, q = model.initial(p)
+            self.x = [float(v) for v in x]
+            self.q = dict(q)
+            self.x_out, self.q_out = self.x, self.q  # state served at t_out
+            self._stateless = not self.x
+            self._check_abs_tol()
+            self._check_domain(self.t, self.x)
+            self._bind()
+            self._check_initial_rates()
+            # a given first step is taken as it is, but never below the collapse limit
+            self.h = (max(float(p.initial_step), START_STEP_ULPS * EPS * max(abs(self.t), 1.0))
+                      if p.initial_step > 0 else self._initial_step())
+        except (ArithmeticError, ValueError) as exc:
+            if isinstance(exc, ModelError):
+                raise
+            raise self._arithmetic_error(exc, "initialization") from None
 
     # ---- setup helpers ----------------------------------------------------------------------
     def _check_input(self, u):
@@ -303,11 +368,42 @@ class Simulator:
             if not math.isfinite(v):
                 raise ParameterError(f"input {var.name} = {v!r} violates the rule: {var.name} must be finite")
 
+    def _check_abs_tol(self):
+        """Issue 9 item 7: an absolute tolerance of the order of the motion itself controls nothing
+        (abs_tol = 1 m on a 1.5 m drop let the energy balance drift by 90 %).  The scale is the
+        smallest of the model's declared magnitudes (``error_scales``: static deflections, the free
+        leg length, ...), else the largest initial state magnitude."""
+        if self.model.error_scales is not None:
+            scales = [s for s in self.model.error_scales(self.p) if s[2] > 0 and math.isfinite(s[2])]
+        else:
+            scales = []
+        if not scales:
+            big = max((abs(v) for v in self.x), default=0.0)
+            scales = [("the largest initial state magnitude", (), big)] if big > 0 else []
+        if not scales:
+            return
+        label, names, scale = min(scales, key=lambda s: s[2])
+        limit = ABS_TOL_MAX_FRACTION * scale
+        if self.atol > limit:
+            of = f" with {', '.join(f'{n} = {self.p[n]!r}' for n in names)}" if names else ""
+            raise ParameterError(
+                f"parameter abs_tol = {self.p.abs_tol!r} violates the rule: abs_tol <= {ABS_TOL_MAX_FRACTION:g} x "
+                f"{label} ({scale:.6g}{of}) = {limit:.3g}; a larger absolute tolerance lets the local error be "
+                f"as large as the motion itself and controls nothing")
+
+    def _check_initial_rates(self):
+        bad = [(v.name, d) for v, d in zip(self.model.states, self.f) if not math.isfinite(d)]
+        if bad:
+            name, d = bad[0]
+            raise DomainError(f"the rate d{name}/dt = {d!r} at the start (t = {self.t!r} s) is not finite: "
+                              f"{_extreme_parameters(self.p)}")
+
     def _bind(self):
         """(Re)bind the right-hand side and the active guards to the current (q, u)."""
         self._rebind()
         self.f = self.fun(self.t, self.x)
         self.g = [ev.guard(self.x, self.q, self.u, self.p) for _, ev in self.active]
+        self._g_prev = None  # guards at the start of the previous step (None after a restart)
 
     def _rebind(self):
         model, q, u, p = self.model, self.q, self.u, self.p
@@ -319,12 +415,20 @@ class Simulator:
         self.active = [(i, ev) for i, ev in enumerate(model.events) if ev.active(q)]
 
     def _initial_step(self):
-        """Hairer's starting step (Solving ODEs I, Sect. II.4)."""
+        """Hairer's starting step (Solving ODEs I, Sect. II.4), never below START_STEP_ULPS ulps
+        of ``max(|t|, 1)`` (with a very tight ``abs_tol`` on a state that starts at 0 with a
+        nonzero rate, the estimate ``100 h0`` is far below what the error control needs) and safe
+        against overflow in the norms."""
         t, y, f = self.t, self.x, self.f
+        floor = min(START_STEP_ULPS * EPS * max(abs(t), 1.0), self.max_step)
+        if not y:
+            return self.max_step if math.isfinite(self.max_step) else 1.0
         scale = [self.atol + abs(v) * self.rtol for v in y]
         d0 = _rms([a / b for a, b in zip(y, scale)])
         d1 = _rms([a / b for a, b in zip(f, scale)])
-        h0 = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
+        h0 = 1e-6 if not (d0 >= 1e-5 and d1 >= 1e-5) else 0.01 * d0 / d1
+        if not h0 >= floor:  # also NaN (inf/inf)
+            h0 = floor
         h0 = min(h0, self.max_step)
         y1 = [a + h0 * b for a, b in zip(y, f)]
         f1 = self.fun(t + h0, y1)
@@ -332,16 +436,27 @@ class Simulator:
         if d1 <= 1e-15 and d2 <= 1e-15:
             h1 = max(1e-6, h0 * 1e-3)
         else:  # exponent 1/(p+1) with p the order of the error estimate: 4 and 7
-            h1 = (0.01 / max(d1, d2)) ** (1.0 / self.pair.order)
-        return min(100 * h0, h1, self.max_step)
+            d = max(d1, d2)
+            h1 = (0.01 / d) ** (1.0 / self.pair.order) if math.isfinite(d) else 0.0
+        h = min(100 * h0, h1, self.max_step)
+        return h if h >= floor else floor
 
     # ---- public API -------------------------------------------------------------------------
+    @property
+    def events(self) -> List[EventRecord]:
+        """The full event history (only with ``keep_history`` / ``log_events = 1``)."""
+        if self._history is None:
+            raise RuntimeError("the full event history is kept only with log_events = 1 (or keep_history=True); "
+                               "n_events and last_event are always available")
+        return self._history
+
     def set_input(self, u):
         """Change the inputs from the latest communication time on."""
         u = tuple(float(v) for v in u)
         if u == self.u:
             return
         self._check_input(u)
+        crossed = None
         if self.t > self.t_out:
             # the integrator ran ahead: redo the step exactly up to the communication time
             seg = self.seg
@@ -349,11 +464,46 @@ class Simulator:
                 x = seg.y0
             else:
                 x, _, _ = self.pair.step(seg.fun, seg.t0, seg.y0, seg.f0, self.t_out - seg.t0)
+                crossed = self._crossed_in(seg.y0, x)
             self.t, self.x = self.t_out, x
             self.pending = None
             self.seg = None
         self.u = u
-        self._bind()
+        try:
+            self._bind()
+            # a restart like after a jump: the dynamics with the new input may be much faster, and
+            # a step grown on an exactly integrated flight could hold a whole arc of a guard
+            self.h = min(self.h, self._initial_step())
+        except ArithmeticError as exc:
+            raise self._arithmetic_error(exc, f"the input change at t = {self.t!r} s") from None
+        if crossed is not None:
+            self.pending = (crossed, self.x)
+        # a restart: guards exactly at zero are armed as at the start (a foot at z = 0 to the last
+        # bit when the thrust switches off must still touch down), but for the guard of an event
+        # handled at this very instant
+        last = self.last_event
+        self._at_start = True
+        self._disarmed = last.index if last is not None and last.time == self.t else -1
+
+    def _crossed_in(self, y0, y1):
+        """Index of the first active event (in priority order) whose guard is on its "before" side
+        at ``y0`` (the start of the step being redone) and on its "after" side at ``y1``, else None.
+
+        Used when a step that ran ahead is redone up to an input change: the run-ahead step saw
+        the guard touch zero without crossing (a foot whose height reaches exactly 0 with zero
+        speed at the switching instant, found by the property suite), but the exact state at the
+        communication point lies on or beyond the guard.  The event happens there."""
+        q, u, p = self.q, self.u, self.p
+        last = self.last_event
+        disarmed = last.index if last is not None and last.time == self.seg.t0 else -1
+        for i, ev in self.active:
+            sgn = -1.0 if ev.direction == FALLING else 1.0
+            g0, g1 = sgn * ev.guard(y0, q, u, p), sgn * ev.guard(y1, q, u, p)
+            # also a guard exactly at zero at the start of the step (armed: not the event handled
+            # there) that ends beyond zero: a hop of zero length, z = 0 -> 1e-17 -> -3e-18 m
+            if g1 >= 0.0 and (g0 < 0.0 or (g0 == 0.0 < g1 and i != disarmed)):
+                return i
+        return None
 
     def advance(self, t_target: float):
         """Integrate to ``t_target`` (handling every event on the way); return ``(x, q)`` there."""
@@ -362,32 +512,57 @@ class Simulator:
             return self.x_out, self.q_out
         if t_target < self.t_out:
             raise ValueError(f"cannot go back in time: t = {t_target} < {self.t_out}")
-        while True:
-            if self.pending is not None and t_target >= self.t:
-                self._apply_pending()
-                continue
-            if t_target <= self.t:
-                break
-            self._step()
+        if self._stateless:
+            # no states: nothing to integrate, and no guard can change between input changes
+            self.t = self.t_out = max(self.t, t_target)
+            self.q_out = self.q
+            return self.x_out, self.q_out
+        try:
+            while True:
+                if self.pending is not None and t_target >= self.t:
+                    self.apply_pending_event()
+                    continue
+                if t_target <= self.t:
+                    break
+                self._step(t_target)
+        except (ArithmeticError, ValueError) as exc:
+            if isinstance(exc, ModelError):
+                raise
+            raise self._arithmetic_error(exc, f"t = {self.t!r} s") from None
         self.t_out = t_target
         self.x_out = self.x if t_target == self.t else self.seg(t_target)
         self.q_out = self.q
         return self.x_out, self.q_out
 
+    # containers whose items are never mutated: copied shallowly by snapshot/restore (a deep copy
+    # of a long event history made fmi2GetFMUstate slow down as events grew, issue 9 item 9)
+    _SHALLOW = ("_history", "new_events", "new_warnings", "_recent")
+
     def snapshot(self):
-        """A deep copy of the whole integrator state (for fmi2GetFMUstate).
+        """A copy of the whole integrator state (for fmi2GetFMUstate), of constant size unless
+        the full history is kept.
 
         The model, the parameters and the method are immutable and shared, not copied; closures
         are rebuilt on restore (the discrete state ``q`` is never mutated in place, so the
         right-hand sides kept in past segments stay valid).
         """
-        shared = {id(self.model): self.model, id(self.p): self.p, id(self.pair): self.pair}
-        state = {k: v for k, v in self.__dict__.items() if k not in ("fun", "active")}
-        return copy.deepcopy(state, shared)
+        shared = {id(self.model): self.model, id(self.p): self.p, id(self.pair): self.pair,
+                  id(self.last_event): self.last_event}
+        skip = ("fun", "active") + self._SHALLOW
+        state = copy.deepcopy({k: v for k, v in self.__dict__.items() if k not in skip}, shared)
+        for k in self._SHALLOW:
+            v = self.__dict__[k]
+            state[k] = None if v is None else copy.copy(v)
+        return state
 
     def restore(self, snap):
-        shared = {id(snap["model"]): snap["model"], id(snap["p"]): snap["p"], id(snap["pair"]): snap["pair"]}
-        self.__dict__.update(copy.deepcopy(snap, shared))
+        shared = {id(snap["model"]): snap["model"], id(snap["p"]): snap["p"], id(snap["pair"]): snap["pair"],
+                  id(snap["last_event"]): snap["last_event"]}
+        state = copy.deepcopy({k: v for k, v in snap.items() if k not in self._SHALLOW}, shared)
+        for k in self._SHALLOW:
+            v = snap[k]
+            state[k] = None if v is None else copy.copy(v)
+        self.__dict__.update(state)
         self._rebind()
 
     def advance_to_event(self, t_target: float) -> bool:
@@ -404,8 +579,13 @@ class Simulator:
         if not self.model.events:  # nothing to stop at
             self.advance(t_target)
             return False
-        while self.pending is None and self.t < t_target:
-            self._step()
+        try:
+            while self.pending is None and self.t < t_target:
+                self._step(t_target)
+        except (ArithmeticError, ValueError) as exc:
+            if isinstance(exc, ModelError):
+                raise
+            raise self._arithmetic_error(exc, f"t = {self.t!r} s") from None
         if self.pending is not None and self.t <= t_target:
             self.t_out, self.x_out, self.q_out = self.t, self.x, self.q
             return True
@@ -420,33 +600,27 @@ class Simulator:
         self.x = [float(v) for v in x]
         self.seg = None
         self.pending = (index, self.x)
-        # the engine's own jump step (named apply_pending_event in the engine with a bounded event
-        # log, see fmi._BOUNDED_LOG)
-        (getattr(self, "apply_pending_event", None) or self._apply_pending)()
+        self.apply_pending_event()
         self.x_out, self.q_out = self.x, self.q
         return self.x
 
     # ---- stepping ---------------------------------------------------------------------------
-    def _step(self):
+    def _step(self, t_target=math.inf):
         pair, fun = self.pair, self.fun
         t, y, f = self.t, self.x, self.f
-        h = min(self.h, self.max_step)
+        h = min(self.h, self.max_step, UNBOUNDED_STEP_FACTOR * max(abs(t), 1.0))
         rejected = False
         while True:
             t_new = t + h
             if t_new >= self.t_stop > t + 10 * EPS * max(abs(t), 1.0):
                 t_new = self.t_stop  # land on the stop time (unless a rounding error away from it)
             h = t_new - t  # the step actually taken: t + h is rounded (found by the benchmark)
-            if h <= 10 * EPS * max(abs(t), 1.0):
-                if self.events and self.events[-1].time == t:
-                    last = self.events[-1]
-                    raise ZenoError(
-                        f"event storm: the step size collapsed to {h:.3g} s right after event "
-                        f"{len(self.events)} ({last.name}) at t = {t:.15g} s: the events accumulate "
-                        f"(Zeno behaviour)")
-                raise ModelError(f"step size collapsed to {h:.3g} s at t = {t:.15g} s "
-                                 f"(the model is stiff or singular here)")
+            if h <= MIN_STEP_ULPS * EPS * max(abs(t), 1.0):
+                raise self._collapse_error(t, h)
             y_new, f_new, K = pair.step(fun, t, y, f, h)
+            n = self._win_n = self._win_n + 1  # the work budget (_spend), fast path inline
+            if n >= self._warn_n or t - self._win_t0 >= BUDGET_WINDOW:
+                self._spend(t, h)
             err = pair.error_norm(K, h, y, y_new, self.atol, self.rtol)
             if err < 1.0:  # False for NaN: a non-finite step is rejected
                 factor = MAX_FACTOR if err == 0.0 else min(MAX_FACTOR, SAFETY * err ** pair.error_exponent)
@@ -461,19 +635,30 @@ class Simulator:
             else:
                 h *= max(MIN_FACTOR, SAFETY * err ** pair.error_exponent)
         self.n_steps += 1
+        at_start, self._at_start = self._at_start, False
+        disarmed = self._disarmed
         seg = _Segment(t, t_new, y, y_new, f, K, fun, pair)
         # ---- event detection on the accepted step ----
         q, u, p = self.q, self.u, self.p
         g_new = [ev.guard(y_new, q, u, p) for _, ev in self.active]
+        if at_start and any(g0 == 0.0 == g1 for g0, g1 in zip(self.g, g_new)):
+            # a guard still exactly at zero (the first steps are tiny: x = g t^2/2 is below an ulp
+            # of the leg length): it stays armed until the motion leaves zero
+            self._at_start = True
         hit = None
-        for k, ((i, ev), g0, g1) in enumerate(zip(self.active, self.g, g_new)):
+        g, g_prev = self.g, self._g_prev
+        for k, ((i, ev), g0, g1) in enumerate(zip(self.active, g, g_new)):
             sgn = -1.0 if ev.direction == FALLING else 1.0  # before side: sgn*g < 0; after: >= 0
             if sgn * g1 < 0.0:
-                continue
-            if sgn * g0 < 0.0:
+                if sgn * g0 >= 0.0 or (g_prev is not None and sgn * (g0 - g_prev[k]) < 0.0):
+                    continue  # (receding from zero over the previous step: no turn towards it in this one)
+                te = self._hidden_crossing(seg, ev, sgn, g0, g1, f_new)
+                if te is None:
+                    continue
+            elif sgn * g0 < 0.0:
                 te = self._locate(seg, ev, t, g0, g1)
             elif g0 == 0.0:
-                te = self._locate_from_zero(seg, ev, g1)
+                te = self._locate_from_zero(seg, ev, g1, at_start and i != disarmed)
                 if te is None:
                     continue
             else:
@@ -481,19 +666,86 @@ class Simulator:
             if hit is None or te < hit[0]:
                 hit = (te, k)
         if hit is None:
-            self._check_domain(t_new, y_new, seg)
-            self.seg, self.t, self.x, self.f, self.g = seg, t_new, y_new, f_new, g_new
+            if (self.model.domain(t_new, y_new, q, u, p) is None and all(map(math.isfinite, y_new))) \
+                    or not self._end_step(seg, t_target):
+                self.seg, self.t, self.x, self.f, self.g = seg, t_new, y_new, f_new, g_new
+                self._g_prev = g  # guards at the start of the step (the secant's direction)
             return
         te, k = hit
         i, ev = self.active[k]
+        if te == t:
+            # a guard exactly at zero at the start, the motion leaving to its after side: the event
+            # happens at the start (e.g. a stick at its free length moving up lifts off at t0)
+            self.seg, self.x, self.f, self.pending = None, y, f, (i, y)
+            return
         if te < t_new:
             te, y_e, f_e, K_e = self._land_on_event(seg, ev, te)
             seg = _Segment(t, te, y, y_e, f, K_e, fun, pair)
         else:
             y_e, f_e = y_new, f_new
-        self._check_domain(te, y_e, seg)
-        self.seg, self.t, self.x, self.f = seg, te, y_e, f_e
-        self.pending = (i, y_e)
+        if not self._end_step(seg, t_target):
+            self.seg, self.t, self.x, self.f = seg, te, y_e, f_e
+            self.pending = (i, y_e)
+
+    # ---- work budget (issue 9 item 2) ----------------------------------------------------------
+    def _spend(self, t, h):
+        """The work budget, once a step attempt has been counted in ``_win_n`` (in ``_step``) and the
+        window is full or over: windows of BUDGET_WINDOW s of simulated time, a warning at
+        BUDGET_WARN_FRACTION of a window's ``max_steps_per_second``, an error at all of it."""
+        if t - self._win_t0 >= BUDGET_WINDOW:
+            self._win_t0, self._win_n = t, 1  # a new window, with this attempt in it
+        n = self._win_n
+        if n < self._warn_n:
+            return
+        elapsed = max(t + h - self._win_t0, 0.0)
+        if n >= self._budget:
+            raise ModelError(
+                f"work budget exhausted: {n} internal steps within {elapsed:.3g} s of simulated time up to "
+                f"t = {t:.10g} s (max_steps_per_second = {self.p.max_steps_per_second:g}; mean step "
+                f"{elapsed / n:.3g} s, latest {h:.3g} s). The model is stiff here: "
+                f"{self._stiffness_text()}. To change: make the fastest time scale slower "
+                f"(the parameters named above), or raise max_steps_per_second to let the run go on slowly")
+        if not self._warned:
+            self._warned = True
+            self.new_warnings.append(
+                f"stiff: {n} internal steps within {elapsed:.3g} s of simulated time up to t = {t:.10g} s "
+                f"(mean step {elapsed / n:.3g} s); the run stops at max_steps_per_second = "
+                f"{self.p.max_steps_per_second:g} steps per simulated second. "
+                f"{self._stiffness_text()}")
+
+    def _stiffness_text(self):
+        parts = []
+        scales = _time_scales(self.model, self.p)
+        if scales:
+            fast = sorted(scales, key=lambda s: s[2])[:2]
+            parts.append("fastest time scales of the model: " + "; ".join(
+                f"{label} = {value:.3g} s ({', '.join(f'{n} = {self.p[n]!r}' for n in names)})"
+                for label, names, value in fast))
+        return "; ".join(parts) if parts else "the error control forces steps this small"
+
+    def _collapse_error(self, t, h):
+        last = self.last_event
+        if last is not None and last.time == t:
+            recent = [e for e in self._recent if t - e[0] <= self.zeno_window]
+            if len(recent) >= STORM_EVENTS:
+                return ZenoError(
+                    f"event storm: the step size collapsed to {h:.3g} s right after event {self.n_events} "
+                    f"({last.name}) at t = {t:.15g} s, the latest {len(recent)} events within "
+                    f"{t - recent[0][0]:.3g} s: the events accumulate (Zeno behaviour)")
+            return ModelError(
+                f"step size collapsed to {h:.3g} s right after event {self.n_events} ({last.name}) at "
+                f"t = {t:.15g} s: the dynamics after the event are too fast to resolve or singular "
+                f"({self._stiffness_text()})")
+        return ModelError(
+            f"step size collapsed to {h:.3g} s at t = {t:.15g} s: the error estimate cannot be met with "
+            f"rel_tol = {self.p.rel_tol!r}, abs_tol = {self.p.abs_tol!r} (the model is stiff or singular here, "
+            f"or the tolerances lie below the rounding error of the states)")
+
+    def _arithmetic_error(self, exc, where):
+        kind = {ZeroDivisionError: "division by zero", OverflowError: "overflow"}.get(type(exc), "domain error")
+        detail = exc.args[-1] if exc.args and isinstance(exc.args[-1], str) else str(exc)
+        return DomainError(f"floating-point {kind} in the model at {where} ({detail}): "
+                           f"{_extreme_parameters(self.p)}")
 
     def _land_on_event(self, seg, ev, te):
         """Redo the step exactly up to the event, so that the state there has the method's full
@@ -527,12 +779,16 @@ class Simulator:
             ta, g_a, tb = tb, g_b, tb - g_b * (tb - ta) / (g_b - g_a)
         return best[1:]
 
-    def _locate_from_zero(self, seg, ev, g1):
-        """A guard that starts the step exactly at zero (disarmed after a jump) and ends it on the
-        after side: did it visit the before side in between?  A large first step after a jump
-        (a flight parabola is integrated exactly, so the step size grows fast) may hold a whole
-        arc: probe the dense output near the start; if the guard is on the before side there,
-        the crossing lies between that probe and the end of the step."""
+    def _locate_from_zero(self, seg, ev, g1, at_start=False):
+        """A guard that starts the step exactly at zero and ends it on the after side: when did it
+        cross?  If it visits the before side first, the crossing is located from there: a large
+        first step after a jump (a flight parabola is integrated exactly, so the step size grows
+        fast) may hold a whole arc, so the dense output is probed near the start.  If the motion
+        leaves zero straight towards the after side, the event happens at the start of the step
+        when ``at_start`` (the start of the simulation, or after a jump for every guard but the one
+        of the event just handled: a stick at its free length moving up lifts off at t0, a liftoff
+        with the mass already moving down touches down at once, issue 9 item 1); else (the guard
+        of the event just handled) it stays disarmed."""
         q, u, p = self.q, self.u, self.p
         sgn = -1.0 if ev.direction == FALLING else 1.0
         h = seg.t1 - seg.t0
@@ -542,11 +798,50 @@ class Simulator:
             if sgn * gp < 0.0:
                 return self._locate(seg, ev, tp, gp, g1)
             if gp != 0.0:
-                return None  # left zero towards the after side: no crossing from the before side
-        return None
+                # left zero towards the after side: no crossing from the before side
+                return seg.t0 if at_start else None
+        return seg.t0 if at_start and g1 != 0.0 else None
 
-    def _locate(self, seg, ev, a, ga, gb):
-        """Earliest time in ``[a, seg.t1]`` where ``ev``'s guard crosses zero in its direction.
+    def _hidden_crossing(self, seg, ev, sgn, g0, g1, f1):
+        """Both ends of the step on the guard's before side: did the guard cross zero and come back
+        inside the step?  (A flight parabola is integrated exactly, so the error control lets a
+        step hold a foot that dips below the ground and rises again, e.g. under a switching
+        thrust; in contact a Penetrator's penetration may dip below 0 and back: found by the
+        property suite and scans of such runs.)  Only when the guard approaches zero at the start
+        and recedes at the end (slopes by a difference along the flow): the maximum of the cubic
+        Hermite interpolant of the guard is probed on the dense output; if the guard is on its
+        after side there, the crossing is located between the start and that probe."""
+        q, u, p, guard = self.q, self.u, self.p, ev.guard
+        t0, h = seg.t0, seg.t1 - seg.t0
+        eps = 1e-6 * h
+        d0 = sgn * (guard([a + eps * b for a, b in zip(seg.y0, seg.f0)], q, u, p) - g0) / eps * h
+        if not d0 > 0.0:
+            return None
+        d1 = sgn * (guard([a + eps * b for a, b in zip(seg.y1, f1)], q, u, p) - g1) / eps * h
+        if not d1 < 0.0:
+            return None
+        G0, G1 = sgn * g0, sgn * g1
+        # G'(tau) of the Hermite cubic, a quadratic with G'(0) = d0 > 0 > d1 = G'(1): bisect its root
+        A = 6 * G0 + 3 * d0 - 6 * G1 + 3 * d1
+        B = -6 * G0 - 4 * d0 + 6 * G1 - 2 * d1
+        lo, hi = 0.0, 1.0
+        for _ in range(40):
+            mid = 0.5 * (lo + hi)
+            if (A * mid + B) * mid + d0 > 0.0:
+                lo = mid
+            else:
+                hi = mid
+        tp = t0 + lo * h
+        if not t0 < tp < seg.t1:
+            return None
+        gp = guard(seg(tp), q, u, p)
+        if sgn * gp < 0.0:
+            return None
+        return self._locate(seg, ev, t0, g0, gp, b=tp)
+
+    def _locate(self, seg, ev, a, ga, gb, b=None):
+        """Earliest time in ``[a, b]`` (``b`` the end of the step unless given) where ``ev``'s guard
+        crosses zero in its direction.
 
         Illinois iteration keeping a bracket ``[a, b]`` with the guard strictly on the before side
         at ``a`` and on the after side at ``b``; returns ``b`` (the event has happened there).
@@ -554,7 +849,7 @@ class Simulator:
         q, u, p = self.q, self.u, self.p
         guard = ev.guard
         sgn = -1.0 if ev.direction == FALLING else 1.0  # after side: sgn*g >= 0
-        b = seg.t1
+        b = seg.t1 if b is None else b
         fa, fb = sgn * ga, sgn * gb  # fa < 0 <= fb
         side = 0
         tol = 4 * EPS * max(abs(a), abs(b), 1e-300)
@@ -579,14 +874,24 @@ class Simulator:
                 break
         return b
 
-    def _apply_pending(self):
+    def apply_pending_event(self):
+        """Apply the jump of the event located at ``self.t`` (the engine does this itself inside
+        :meth:`advance`); records it in constant memory (count, last event, recent times) and in
+        the history when it is kept."""
         i, x_before = self.pending
         ev = self.model.events[i]
         x_new, q_new = ev.jump(self.x, self.q, self.u, self.p)
         x_new = [float(v) for v in x_new]
-        self.events.append(EventRecord(self.t, ev.name, i, list(x_before), list(x_new)))
+        record = EventRecord(self.t, ev.name, i, list(x_before), x_new)
+        self.n_events += 1
+        self.last_event = record
+        self._recent.append((self.t, ev.name))
+        if self._history is not None:
+            self._history.append(record)
+            self.new_events.append(record)
         self.pending = None
-        self.x, self.q = x_new, dict(q_new)
+        self._at_start, self._disarmed = True, i
+        self.x, self.q = list(x_new), dict(q_new)
         self._check_zeno()
         self._check_domain(self.t, self.x)
         self._bind()
@@ -595,23 +900,34 @@ class Simulator:
         # with a step larger than the starting-step estimate for the new state
         self.h = min(self.h, self._initial_step())
 
+
     def _check_zeno(self):
         n = self.zeno_max_events
-        if len(self.events) >= n:
-            first = self.events[-n]
-            if self.t - first.time <= self.zeno_window:
-                names = ", ".join(sorted({e.name for e in self.events[-n:]}))
+        recent = self._recent
+        if self.n_events >= n:
+            first = recent[-n][0]
+            if self.t - first <= self.zeno_window:
+                names = ", ".join(sorted({name for _, name in list(recent)[-n:]}))
                 raise ZenoError(
-                    f"event storm: {n} events ({names}) within {self.t - first.time:.3g} s up to "
+                    f"event storm: {n} events ({names}) within {self.t - first:.3g} s up to "
                     f"t = {self.t:.15g} s (Zeno behaviour; limit {n} events per {self.zeno_window:g} s)")
 
     def _check_domain(self, t, x, seg=None):
+        violation = self._domain_violation(t, x, seg)
+        if violation is not None:
+            raise DomainError(f"the trajectory left the model's domain at t = {violation[0]:.10g} s: {violation[1]}")
+
+    def _domain_violation(self, t, x, seg=None):
+        """None, or ``(t_v, text)``: the first time in ``seg`` (bisected) where the model's domain
+        condition fails, and the condition's text (with the values at the end of the step)."""
         domain = self.model.domain
         msg = domain(t, x, self.q, self.u, self.p)
         if msg is None:
             if not all(map(math.isfinite, x)):
-                raise DomainError(f"the state became non-finite at t = {t:.15g} s")
-            return
+                bad = ", ".join(f"{v.name} = {a!r}" for v, a in zip(self.model.states, x) if not math.isfinite(a))
+                raise DomainError(f"the state became non-finite at t = {t:.15g} s ({bad}): "
+                                  f"{_extreme_parameters(self.p)}")
+            return None
         if seg is not None:
             # bisect for the first time the condition is violated
             a, b = seg.t0, t
@@ -622,7 +938,66 @@ class Simulator:
                 else:
                     b = c
             t = b
-        raise DomainError(f"the trajectory left the model's domain at t = {t:.10g} s: {msg}")
+        return t, msg
+
+    def _end_step(self, seg, t_target):
+        """Commit the step ``seg`` unless the trajectory leaves the domain in it.  A violation that
+        lies beyond ``t_target`` (the integrator runs ahead of the communication point, with
+        steps up to 1e7 s on an unbounded flight parabola) is not reported before its time: the
+        step is cut exactly at ``t_target`` and the next call goes on from there.  True if cut."""
+        violation = self._domain_violation(seg.t1, seg.y1, seg)
+        if violation is None:
+            return False
+        if violation[0] > t_target > seg.t0:
+            t, y, f = seg.t0, seg.y0, seg.f0
+            y_c, f_c, K_c = self.pair.step(seg.fun, t, y, f, t_target - t)
+            self.seg = _Segment(t, t_target, y, y_c, f, K_c, seg.fun, self.pair)
+            self.t, self.x, self.f = t_target, y_c, f_c
+            self.g = [ev.guard(y_c, self.q, self.u, self.p) for _, ev in self.active]
+            self._g_prev = None
+            return True
+        raise DomainError(f"the trajectory left the model's domain at t = {violation[0]:.10g} s: {violation[1]}")
+
+
+# =============================================================================================
+# parameter magnitudes and physical time scales (issue 9 items 2 and 6)
+# =============================================================================================
+
+def _time_scales(model, p):
+    """The model's physical time scales ``(label, parameter names, seconds)`` (may be empty)."""
+    if model.time_scales is None:
+        return ()
+    return tuple(s for s in model.time_scales(p) if s[2] > 0 and math.isfinite(s[2]))
+
+
+def _check_time_scales(model, p):
+    """Every physical time scale must be at least MIN_TIME_SCALE: faster dynamics (g = 1e300,
+    k = 1e300, m = 1e-300, ...) are beyond what an explicit solver can resolve in double precision
+    within any work budget, and used to end in raw ZeroDivisionError/OverflowError texts."""
+    if model.time_scales is None:
+        return
+    for label, names, value in model.time_scales(p):
+        if not value >= MIN_TIME_SCALE:
+            values = ", ".join(f"{n} = {p[n]!r}" for n in names)
+            raise ParameterError(
+                f"parameter{'s' if len(names) > 1 else ''} {values} violate{'' if len(names) > 1 else 's'} "
+                f"the rule: the time scale {label} = {value:.3g} s must be >= {MIN_TIME_SCALE:g} s (faster "
+                f"dynamics are beyond the solver's resolution)")
+
+
+def _extreme_parameters(p):
+    """Text naming the model parameters of the most extreme magnitude (for arithmetic failures)."""
+    solver = set(SOLVER_PARAMETER_NAMES)
+    mags = []
+    for name, v in p.as_dict().items():
+        if name in solver or isinstance(v, bool) or not isinstance(v, (int, float)) or v == 0 or not math.isfinite(v):
+            continue
+        mags.append((abs(math.log10(abs(v))), name, v))
+    mags.sort(reverse=True)
+    named = ", ".join(f"{n} = {v!r}" for _, n, v in mags[:3])
+    return (f"the values exceed floating-point range; parameters of the most extreme magnitude: {named}"
+            if named else "the values exceed floating-point range")
+
 
 
 # =============================================================================================

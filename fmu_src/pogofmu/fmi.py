@@ -128,23 +128,6 @@ def fmi2_variables(model: HybridModel) -> Tuple[FmiVariable, ...]:
     return tuple(out)
 
 
-# ---------------------------------------------------------------------------------------------
-# engine bookkeeping (events, warnings) read after every call
-# ---------------------------------------------------------------------------------------------
-
-_BOUNDED_LOG = hasattr(Simulator, "apply_pending_event")  # engine with n_events / new_events
-
-
-def _event_count(sim):
-    return sim.n_events if _BOUNDED_LOG else len(sim.events)
-
-
-def _last_event(sim):
-    if _BOUNDED_LOG:
-        return sim.last_event
-    return sim.events[-1] if sim.events else None
-
-
 def _values_getter(names):
     """``out -> tuple of out[name] for names`` (itemgetter returns a bare value for one name)."""
     if len(names) == 1:
@@ -213,7 +196,6 @@ class HybridSlave:
         self._t_ok = 0.0  # end of the latest completed step
         self._failed = None  # why the instance cannot step on (after an error in the model)
         self._inputs_changed = True
-        self._events_seen = 0
         self._h_fast = -1.0  # steps up to this size need no detailed check (set at initialization)
         self._ctl[0] = 0
 
@@ -332,8 +314,8 @@ class HybridSlave:
     def _update_outputs(self):
         sim = self._sim
         out = type(self).model.output_fn(sim.t_out, sim.x_out, sim.q_out, sim.u, sim.p)
-        last = _last_event(sim)
-        out["n_events"] = _event_count(sim)
+        last = sim.last_event
+        out["n_events"] = sim.n_events
         if last is None:
             out["t_last_event"], out["last_event"] = self._t_start, 0
         else:
@@ -402,9 +384,7 @@ class HybridSlave:
             self._failed = f"{type(self).model.name}: {exc}"
             self._drain_engine()
             raise FMUError(self._failed, ERROR if self._native else FATAL) from None
-        if sim.new_events if _BOUNDED_LOG else len(sim.events) != self._events_seen:
-            self._drain_engine()
-        elif _BOUNDED_LOG and sim.new_warnings:
+        if sim.new_events or sim.new_warnings:
             self._drain_engine()
         self._update_outputs()
         self._t_ok = sim.t_out
@@ -421,18 +401,13 @@ class HybridSlave:
         """Report what the engine noted during the call: its warnings, and every event when the
         parameter log_events is 1."""
         sim = self._sim
-        if _BOUNDED_LOG:
-            for text in sim.new_warnings:
-                self.log(f"{type(self).model.name}: {text}", WARNING)
-            sim.new_warnings.clear()
-            new = list(sim.new_events)
-            sim.new_events.clear()
-            first = sim.n_events - len(new) + 1
-        else:
-            first = self._events_seen + 1
-            new = sim.events[self._events_seen:]
-            self._events_seen = len(sim.events)
-        if new and self._par.get("log_events"):
+        for text in sim.new_warnings:
+            self.log(f"{type(self).model.name}: {text}", WARNING)
+        sim.new_warnings.clear()
+        new = list(sim.new_events)  # filled only with log_events = 1 (the engine keeps the history then)
+        sim.new_events.clear()
+        first = sim.n_events - len(new) + 1
+        if new:
             names = [v.name for v in type(self).model.states]
             for k, ev in enumerate(new, start=first):
                 state = ", ".join(f"{n}={v!r}" for n, v in zip(names, ev.x_before))
@@ -508,7 +483,6 @@ class HybridSlave:
             if self._sim is None:
                 self._sim = Simulator.__new__(Simulator)
             self._sim.restore(state["sim"])
-            self._events_seen = _event_count(self._sim)
             self._h_fast = self._fast_step_limit()
         if state["out"] is None:
             self._out = None

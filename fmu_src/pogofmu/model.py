@@ -112,7 +112,12 @@ class HybridModel:
     drawn in two colours by the sign of ``rate`` (e.g. loading and unloading);
     ``default_input(t, p) -> {input name: value}`` (optional) gives the inputs of the master
     script's default experiment at time ``t`` (a model that only reacts to its inputs, such as a
-    controller, shows nothing with constant inputs).
+    controller, shows nothing with constant inputs);
+    ``time_scales(p)`` (optional) lists the model's physical time scales as
+    ``(label, parameter names, seconds)``: the engine refuses parameters that make one faster than
+    it can resolve and names the fastest ones when the model turns out stiff; ``error_scales(p)``
+    (optional) lists the smallest magnitudes of the motion the error control must resolve
+    (e.g. a static deflection), in the same form: ``abs_tol`` must be well below them.
     """
 
     name: str
@@ -134,6 +139,8 @@ class HybridModel:
     default_input: Optional[Callable] = None
     default_stop_time: float = 10.0
     default_step: float = 1e-3
+    time_scales: Optional[Callable] = None  # p -> ((label, parameter names, seconds), ...)
+    error_scales: Optional[Callable] = None  # p -> ((label, parameter names, magnitude), ...)
 
     def engine_outputs(self) -> Tuple[Variable, ...]:
         """Outputs every model has, kept by the engine: event counter, time and kind of the latest."""

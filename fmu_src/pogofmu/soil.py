@@ -17,10 +17,12 @@ non-integer power while the integrator probes ``delta`` slightly below 0 around 
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 
 from .model import Parameter, Params, require
 
 
+@lru_cache(maxsize=None)
 def _power(n: float):
     """``d -> max(0, d)^n``, with the common exponents written without ``pow``."""
     if n == 1.0:
@@ -75,12 +77,15 @@ class HuntCrossley:
         return 1.5 * (1.0 - p.c_r) * p.K / d0dot
 
     def force_of(self, p: Params, d0dot: float, delta: float, delta_dot: float) -> float:
-        """The soil force (N, positive up) at penetration ``delta`` and rate ``delta_dot``."""
-        return self.bind(p, d0dot)[0](delta, delta_dot)
+        """The soil force (N, positive up) at penetration ``delta`` and rate ``delta_dot`` (the
+        arithmetic of ``bind``'s closures, without building them: guards call this every step)."""
+        P = _power(float(p.n))(delta)
+        return (float(p.K) + self.damping(p, d0dot) * delta_dot) * P
 
     def rate_of(self, p: Params, d0dot: float, load: float, c_series: float, delta: float) -> float:
         """Penetration rate of a massless foot loaded by ``load - c_series*delta_dot`` (see ``bind``)."""
-        return self.bind(p, d0dot)[1](load, c_series, delta)
+        P = _power(float(p.n))(delta)
+        return (load - float(p.K) * P) / (self.damping(p, d0dot) * P + c_series)
 
     def bind(self, p: Params, d0dot: float):
         """``(force, rate)`` closures for a contact with reference velocity ``d0dot``."""

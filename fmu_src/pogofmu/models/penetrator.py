@@ -120,6 +120,40 @@ def check(p):
     SOIL.check(p)
 
 
+def time_scales(p):
+    """Physical time scales ``(label, parameter names, s)``: the engine refuses one below its
+    resolution and names the fastest when a run turns out stiff."""
+    out = []
+    if p.g > 0:
+        out.append(("sqrt(x_i/g) (fall over the leg length)", ("x_i", "g"), math.sqrt(p.x_i / p.g)))
+    if p.ydot_0 != 0:
+        out.append(("x_i/|ydot_0| (leg length at the initial speed)", ("x_i", "ydot_0"), p.x_i / abs(p.ydot_0)))
+    if p.k > 0:
+        out.append(("sqrt(m/k) (leg spring)", ("m", "k"), math.sqrt(p.m / p.k)))
+        out.append(("c/k (relaxation of the leg)", ("c", "k"), p.c / p.k))
+    # the soil's stiffness at the resting depth delta_s = (m g/K)^(1/n): K_s = n K delta_s^(n-1)
+    # (= K for a linear soil); under the leg dashpot the foot relaxes in c/K_s
+    if p.K > 0 and (p.n == 1 or p.g > 0):
+        K_s = p.K if p.n == 1 else p.n * p.K * (p.m * p.g / p.K) ** ((p.n - 1) / p.n)
+        if K_s > 0:
+            names = ("c", "K") if p.n == 1 else ("c", "K", "n", "m", "g")
+            out.append(("c/K_s (foot in the soil, K_s = n K delta_s^(n-1) at the resting depth "
+                        "delta_s = (m g/K)^(1/n))", names, p.c / K_s))
+    return tuple(out)
+
+
+def error_scales(p):
+    """Smallest magnitudes of the motion the error control must resolve: the free leg length, the
+    leg's static deflection m g/k and the resting depth in the soil (m g/K)^(1/n)."""
+    out = [("x_i (free leg length)", ("x_i",), p.x_i)]
+    if p.g > 0 and p.k > 0:
+        out.append(("m g/k (static leg deflection)", ("m", "g", "k"), p.m * p.g / p.k))
+    if p.g > 0 and p.K > 0:
+        out.append(("(m g/K)^(1/n) (resting depth in the soil)", ("m", "g", "K", "n"),
+                    (p.m * p.g / p.K) ** (1.0 / p.n)))
+    return tuple(out)
+
+
 def initial(p):
     check(p)
     s, x_lift = _initial_mode(p)
@@ -249,5 +283,5 @@ MODEL = HybridModel(
                 "state events located by the internal solver",
     states=STATES, parameters=PARAMETERS, inputs=INPUTS, outputs=OUTPUTS, flow=flow, events=EVENTS,
     initial=initial, output_fn=output_fn, check=check, domain=domain, bind=bind,
-    integer_outputs=frozenset({"s"}), plots=PLOTS,
+    integer_outputs=frozenset({"s"}), plots=PLOTS, time_scales=time_scales, error_scales=error_scales,
 )

@@ -210,6 +210,22 @@ def make_stick_model(name: str, description: str, leg: Sequence[Element], plots=
             return f"leg deflection x = {xbar - p.x_i:.6g} m must stay <= 0 (the spring never extends)"
         return None
 
+    def time_scales(p):
+        out = []
+        if p.g > 0:
+            out.append(("sqrt(x_i/g) (fall over the leg length)", ("x_i", "g"), (p.x_i / p.g) ** 0.5))
+        if p.ydot_0 != 0:
+            out.append(("x_i/|ydot_0| (leg length at the initial speed)", ("x_i", "ydot_0"), p.x_i / abs(p.ydot_0)))
+        for el in leg:
+            out.extend(el.time_scales(p))
+        return tuple(out)
+
+    def error_scales(p):
+        out = [("x_i (free leg length)", ("x_i",), p.x_i)]
+        for el in leg:
+            out.extend(el.error_scales(p))
+        return tuple(out)
+
     reporting = tuple((el, sl, tuple(v.name for v in el.outputs)) for el, sl in parts if el.outputs)
 
     def output_fn(t, X, q, u, p):
@@ -227,7 +243,8 @@ def make_stick_model(name: str, description: str, leg: Sequence[Element], plots=
     return HybridModel(
         name=name, description=description, states=states, parameters=parameters, inputs=INPUTS,
         outputs=outputs, flow=flow, events=tuple(events), initial=initial, output_fn=output_fn,
-        check=check, domain=domain, bind=bind, plots=plots, integer_outputs=INTEGER_OUTPUTS | frozenset(
+        check=check, domain=domain, bind=bind, plots=plots, time_scales=time_scales, error_scales=error_scales,
+        integer_outputs=INTEGER_OUTPUTS | frozenset(
             v.name for el in leg for v in el.outputs if getattr(el, "integer_outputs", None)
             and v.name in el.integer_outputs))
 

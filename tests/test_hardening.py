@@ -1,0 +1,362 @@
+"""Issue 9 (hardening), the engine's items: one regression test per item, each against an
+independent reference (closed form, the closed-form event table, the energy balance, the rule).
+
+Items 8 and 10-13 (SSP master, README usage, figures, packaging) are tested elsewhere.  Item 5's
+test is tests/test_conformance.py::test_bad_step_and_nan_input_are_refused_instance_survives.
+"""
+import math
+import re
+
+import numpy as np
+import pytest
+
+from support import Instance, assert_parameter_rejected, init_failure_text, reference_events, simulate
+
+G = 9.81
+STICKS = ["PogoStick", "PogoStickMem", "PogoStickSMA"]
+RAW = ("ZeroDivisionError", "OverflowError", "division by zero", "Traceback", "event storm")
+
+
+def _energy_residual(run, soil=False):
+    """E + W_leg (+ W_soil) - E(0) - W_ext over the whole run (0 for an exact solution)."""
+    E = np.asarray(run["E"])
+    bal = E + run["W_leg"] + (run["W_soil"] if soil else 0.0) - run["W_ext"]
+    return float(np.max(np.abs(bal - E[0])))
+
+
+# ---- item 1: a start exactly on a guard behaves as the physics says --------------------------------
+
+@pytest.mark.parametrize("name", STICKS)
+def test_item1_stick_at_free_length_moving_up_lifts_off_at_t0(name):
+    """y_0 = xbar_0 = x_i = 1, z_0 = 0, ydot_0 = xdot_0 = 1: contact at the free length with the mass
+    moving up.  Physics: liftoff at t = 0, then a parabola z = t - g t^2/2 (the foot leaves with the
+    leg at its free length), touchdown at 2/g with ydot = -1.  Before: fmi2Error at t = 1e-5 s,
+    "leg deflection x = 4.4e-05 m must stay <= 0"."""
+    run = simulate(name, start_values=dict(y_0=1.0, xbar_0=1.0, z_0=0.0, ydot_0=1.0, xdot_0=1.0, log_events=1,
+                                           method=8, rel_tol=1e-12, abs_tol=1e-14),
+                   stop_time=0.3, output_interval=1e-3)
+    ev = run.events()
+    assert [e["name"] for e in ev[:2]] == ["liftoff", "touchdown"], ev
+    assert ev[0]["time"] == 0.0
+    assert ev[1]["time"] == pytest.approx(2.0 / G, abs=1e-12)
+    i = np.searchsorted(run["time"], 0.1)
+    t = run["time"][i]
+    assert run["y"][i] == pytest.approx(1.0 + t - G * t * t / 2, abs=1e-12)
+    assert run["s"][i] == 0
+
+
+@pytest.mark.parametrize("solver, before_init", [
+    (dict(method=8, rel_tol=1e-12, abs_tol=1e-14), True),
+    # found by the property suite: the first steps (1e-9 s) leave xbar = x_i + g t^2/2 exactly at
+    # x_i (below an ulp), and the guard, still at zero after the first step, was disarmed
+    (dict(c=0.0, rel_tol=1e-4, abs_tol=1e-12, max_step=0.0), False)])
+def test_item1_thrust_above_weight_lifts_off_from_rest_at_t0(solver, before_init):
+    """At rest at the free length (contact), F_ext = 2 m g (set before initialization or at the
+    first step): liftoff at t = 0 (within the first steps, 1e-8 s), then free flight with
+    acceleration F/m - g: y = 1 + (F/m - g) t^2/2 (closed form)."""
+    inst = Instance("PogoStick")
+    try:
+        if before_init:
+            inst.set(F_ext=2 * G)
+        inst.init(y_0=1.0, xbar_0=1.0, z_0=0.0, ydot_0=0.0, xdot_0=0.0, **solver)
+        inst.set(F_ext=2 * G)
+        inst.run_to(0.5, 1e-2)
+        n, t_last, kind, s, y = inst.get("n_events", "t_last_event", "last_event", "s", "y")
+    finally:
+        inst.close()
+    assert (n, kind, s) == (1, 2, 0)  # one liftoff
+    assert 0.0 <= t_last <= 1e-8
+    assert y == pytest.approx(1.0 + G * 0.25 / 2, abs=1e-9)
+
+
+# ---- item 2: a work budget; a model without states takes no steps ---------------------------------
+
+def _run_until_error(name, h=1e-2, t_end=10.0, **params):
+    from fmpy.fmi1 import FMICallException
+
+    inst = Instance(name).init(**params)
+    try:
+        with pytest.raises(FMICallException) as exc:
+            while inst.t < t_end - 1e-12:
+                inst.step(h)
+        assert "(error)" in str(exc.value)
+        return inst.messages, inst.t
+    finally:
+        inst.close()
+
+
+def test_item2_stiff_dashpot_ends_in_a_budget_error_naming_the_stiffness():
+    """c = 1e6 (m/c = 1 us): before, 71 s to more than 90 s of CPU with no word.  Now a warning,
+    then an error naming the work budget, the time scale m/c with c's value, and what to change."""
+    messages, t = _run_until_error("PogoStick", c=1e6)
+    warnings = [m[2] for m in messages if m[0] == 1]
+    errors = [m[2] for m in messages if m[0] >= 3]
+    assert any("stiff" in w and "max_steps_per_second" in w for w in warnings), messages
+    text = errors[-1]
+    assert "work budget exhausted" in text and "max_steps_per_second = 100000" in text, text
+    assert "m/c (leg dashpot) = 1e-06 s" in text and "c = 1000000.0" in text, text
+    assert "raise max_steps_per_second" in text, text
+    assert t < 1.0  # stopped in the first contact (touchdown at 0.319 s)
+
+
+def test_item2_budget_is_a_parameter_a_larger_one_lets_the_run_finish():
+    """c = 3e4 needs ~1e4 steps per second of contact: refused with a budget of 2000, completed with
+    the default 1e5, with the energy balance holding (independent check of the result)."""
+    messages, _ = _run_until_error("PogoStick", t_end=2.0, c=3e4, max_steps_per_second=2000)
+    assert any("max_steps_per_second = 2000" in m[2] for m in messages if m[0] >= 3), messages
+    run = simulate("PogoStick", start_values=dict(c=3e4), stop_time=2.0, output_interval=1e-2)
+    assert not run.errors
+    assert _energy_residual(run) <= 1e-6 * run["E"][0]
+
+
+def test_item2_tiny_max_step_is_refused_with_the_budget_rule():
+    assert_parameter_rejected("PogoStick", {"max_step": 1e-8}, "max_step", "max_step >= 2/max_steps_per_second")
+
+
+def test_item2_a_model_without_states_takes_no_internal_steps():
+    """HopController (no states) with max_step = 1e-6: before, 8 s of CPU per simulated second
+    (internal steps of max_step on nothing).  Its max_step is unused, so it is not refused, and
+    the engine takes no step: over 1e4 s, n_steps stays 0."""
+    from pogofmu.engine import Simulator
+    from pogofmu.models.hop_controller import MODEL
+
+    sim = Simulator(MODEL, MODEL.params(max_step=1e-6))
+    sim.advance(1e4)
+    assert sim.n_steps == 0 and sim.t_out == 1e4
+    run = simulate("HopController", start_values={"max_step": 1e-6}, stop_time=2.0)  # the FMU, 2000 steps
+    assert not run.errors
+
+
+# ---- item 3: tight tolerances work -----------------------------------------------------------------
+
+@pytest.mark.parametrize("abs_tol, rel_tol, tol", [(1e-20, 1e-6, 1e-6), (1e-24, 1e-10, 1e-8), (1e-300, 1e-6, 1e-6)])
+def test_item3_tight_absolute_tolerances_work(abs_tol, rel_tol, tol):
+    """Before: "step size collapsed" at t = 0 (the starting-step estimate was 1e-15 s); and a raw
+    ZeroDivisionError for abs_tol = 1e-300.  Now the 19 closed-form events, each to `tol`."""
+    run = simulate("PogoStick", start_values=dict(abs_tol=abs_tol, rel_tol=rel_tol, log_events=1))
+    got = run.events()
+    ref = reference_events()
+    assert [e["name"] for e in got] == [e["name"] for e in ref]
+    assert max(abs(a["time"] - b["time"]) for a, b in zip(got, ref)) < tol
+
+
+# ---- item 4: SMA with k2 close to k1; Penetrator with a huge K ------------------------------------
+
+def test_item4_sma_with_k2_almost_k1_is_the_linear_stick():
+    """k2 -> k1: both plateaus merge with the elastic lines, the leg is the linear spring k1 = 100 ||
+    c = 0.5, i.e. the default PogoStick: its closed-form touchdowns and liftoffs.  Before, k2 >=
+    0.999 k1 ended in "spring never extends" (a false upper_plateau right after a reversal)."""
+    run = simulate("PogoStickSMA", start_values=dict(k2=100.0 * (1 - 1e-9), log_events=1, method=8,
+                                                     rel_tol=1e-12, abs_tol=1e-14))
+    got = [e for e in run.events() if e["name"] in ("touchdown", "liftoff")]
+    ref = reference_events()
+    assert [e["name"] for e in got] == [e["name"] for e in ref]
+    assert max(abs(a["time"] - b["time"]) for a, b in zip(got, ref)) < 1e-8
+
+
+@pytest.mark.parametrize("ratio", [0.999, 0.9999])
+def test_item4_sma_near_parallel_plateaus_keep_the_energy_balance(ratio):
+    run = simulate("PogoStickSMA", start_values=dict(k2=100.0 * ratio))
+    assert not run.errors
+    assert _energy_residual(run) <= 1e-5 * run["E"][0]
+
+
+def test_item4_penetrator_soil_stiffness_beyond_resolution_is_refused():
+    """K = 1e17 (n = 1.5): the foot's time scale in the soil c/K_s is 7e-13 s.  Before: a missed
+    touchdown after a false liftoff, falling through the ground.  Now a rule naming K."""
+    text = init_failure_text("Penetrator", K=1e17)
+    assert "K = 1e+17" in text and "c/K_s" in text and ">= 1e-09 s" in text, text
+
+
+# ---- item 6: every message names the variable, value and rule ---------------------------------------
+
+@pytest.mark.parametrize("name", STICKS + ["Penetrator"])
+@pytest.mark.parametrize("param, value", [("g", 1e300), ("m", 1e-300), ("k", 1e300)])
+def test_item6_extreme_magnitudes_get_a_rule_not_a_raw_error(name, param, value):
+    if name == "PogoStickSMA" and param == "k":
+        param = "k1"
+    text = init_failure_text(name, **{param: value})
+    assert f"{param} = {value!r}" in text and "violate" in text and "time scale" in text, text
+    assert not any(raw in text for raw in RAW), text
+
+
+# ---- item 7: tolerances that cannot control the error are refused ---------------------------------
+
+def test_item7_loose_abs_tol_is_refused_with_the_scale_it_must_resolve():
+    """abs_tol = 1, max_step = 0.287 completed with the energy balance off by 90 % of E(0)."""
+    text = init_failure_text("PogoStick", abs_tol=1.0, max_step=0.287)
+    assert "parameter abs_tol = 1.0" in text and "m g/k (static leg deflection)" in text, text
+    limit = float(re.search(r"\) = ([0-9.e+-]+);", text).group(1))
+    assert limit == pytest.approx(1e-3 * 1.0 * G / 100.0, rel=1e-3)
+    # at the limit the result is controlled: the energy balance within 1e-3 E(0)
+    run = simulate("PogoStick", start_values=dict(abs_tol=limit, max_step=0.287))
+    assert _energy_residual(run) <= 1e-3 * run["E"][0]
+
+
+def test_item7_loose_rel_tol_is_refused():
+    assert_parameter_rejected("PogoStick", {"rel_tol": 0.01}, "rel_tol", "rel_tol <= 0.001")
+    assert_parameter_rejected("Penetrator", {"abs_tol": 1e-3}, "abs_tol", "resting depth in the soil")
+
+
+# ---- item 9: the event log in constant memory ---------------------------------------------------
+
+def _elastic_ball():
+    from pogofmu.engine import solver_parameters
+    from pogofmu.model import FALLING, Event, HybridModel, Parameter, Variable
+
+    return HybridModel(
+        name="Ball", description="elastic ball", states=(Variable("y", "m"), Variable("v", "m/s")),
+        parameters=(Parameter("h0", 1e-3),) + solver_parameters(), inputs=(), outputs=(),
+        flow=lambda t, x, q, u, p: [x[1], -G],
+        events=(Event("impact", FALLING, lambda x, q, u, p: x[0], lambda x, q, u, p: ([0.0, -x[1]], q)),),
+        initial=lambda p: ([p.h0, 0.0], {}), output_fn=lambda *a: {})
+
+
+def _footprint(obj, seen=None):
+    """Bytes reachable from a snapshot (containers, records, floats), not counting the shared model,
+    parameters, method and functions."""
+    import sys
+    import types
+    from collections import deque
+
+    seen = set() if seen is None else seen
+    if id(obj) in seen or isinstance(obj, (types.FunctionType, type)):
+        return 0
+    seen.add(id(obj))
+    size = sys.getsizeof(obj)
+    if isinstance(obj, dict):
+        items = [v for k, v in obj.items() if k not in ("model", "p", "pair")]
+    elif isinstance(obj, (list, tuple, deque, set)):
+        items = list(obj)
+    elif hasattr(obj, "__dict__"):
+        items = list(vars(obj).values())
+    elif hasattr(obj, "__slots__"):
+        items = [getattr(obj, a) for a in obj.__slots__ if hasattr(obj, a) and a not in ("fun", "pair")]
+    else:
+        items = []
+    return size + sum(_footprint(v, seen) for v in items)
+
+
+def test_item9_state_size_is_constant_as_events_grow():
+    """Before: ~1.9 kB more per event in every fmi2GetFMUstate copy.  Without log_events the
+    snapshot's size is the same after 300 and 3000 events; with it, the history is there."""
+    from pogofmu.engine import Simulator
+
+    model = _elastic_ball()
+    period = 2 * math.sqrt(2e-3 / G)
+    sizes = {}
+    for keep in (False, True):
+        sim = Simulator(model, model.params(max_step=0.0, log_events=int(keep)))
+        for n in (300, 3000):
+            sim.advance((n - 0.25) * period)  # impact k at (k - 1/2) period
+            assert sim.n_events == n
+            sizes[keep, n] = _footprint(sim.snapshot())
+        assert sim.last_event.name == "impact"
+        assert sim.last_event.time == pytest.approx((n - 0.5) * period, abs=1e-9 * n)
+    assert sizes[False, 3000] <= sizes[False, 300] + 64
+    assert sizes[True, 3000] > sizes[True, 300] + 2700 * 50
+
+
+def test_item9_outputs_and_log_agree_without_the_history():
+    """n_events / t_last_event / last_event come from the constant-memory record: equal to the
+    event log of a log_events = 1 run, and a state saved late restores to identical outputs."""
+    sv = dict(c=0.0, k=1e4, y_0=1.01, z_0=0.01)  # elastic hopping: 17 events per second
+    quiet = simulate("PogoStick", start_values=sv, stop_time=30.0, output_interval=1e-2)
+    loud = simulate("PogoStick", start_values=dict(sv, log_events=1), stop_time=30.0, output_interval=1e-2)
+    ev = loud.events()
+    assert len(ev) > 400
+    assert int(quiet["n_events"][-1]) == len(ev) == ev[-1]["index"]
+    assert float(quiet["t_last_event"][-1]) == ev[-1]["time"]
+    assert int(quiet["last_event"][-1]) == {"touchdown": 1, "liftoff": 2}[ev[-1]["name"]]
+
+
+def test_item6_a_collapse_after_one_event_is_not_called_an_event_storm():
+    """After a single event the dynamics become too fast to resolve (acceleration 1e300 m/s2 once
+    the ball has hit the ground): the message says so, names the event and the time; "event
+    storm" is kept for accumulating events (test_engine.py::test_zeno_ends_in_a_clear_error)."""
+    from pogofmu.engine import Simulator, solver_parameters
+    from pogofmu.model import FALLING, Event, HybridModel, ModelError, Parameter, Variable, ZenoError
+
+    model = HybridModel(
+        name="Ball", description="ball on a hard floor", states=(Variable("y", "m"), Variable("v", "m/s")),
+        parameters=(Parameter("h0", 1.0),) + solver_parameters(), inputs=(), outputs=(),
+        flow=lambda t, x, q, u, p: [x[1], -G if not q["hit"] else 1e300 * (1.0 + x[0] * x[0])],
+        events=(Event("impact", FALLING, lambda x, q, u, p: x[0], lambda x, q, u, p: (x, dict(q, hit=1)),
+                      lambda q: not q["hit"]),),
+        initial=lambda p: ([p.h0, 0.0], {"hit": 0}), output_fn=lambda *a: {})
+    sim = Simulator(model, model.params(max_step=0.0))
+    with pytest.raises(ModelError) as exc:
+        sim.advance(2.0)
+    text = str(exc.value)
+    assert not isinstance(exc.value, ZenoError) and "event storm" not in text, text
+    t_impact = math.sqrt(2 / G)
+    assert "right after event 1 (impact)" in text, text
+    assert float(re.search(r"at t = ([0-9.eE+-]+) s", text).group(1)) == pytest.approx(t_impact, abs=1e-9)
+
+
+# ---- found by the property suite ----------------------------------------------------------------
+
+SWITCHING = [
+    # (name, thrust fractions of m g, parameters): each failed before
+    ("PogoStick", (0.0, 2.0), dict(method=5, abs_tol=1e-8, max_step=0.0)),
+    ("PogoStickMem", (0.0, 1.125), dict(m=10 ** 0.75, k=1000.0, method=8, abs_tol=10 ** -8.5, max_step=0.0)),
+    # the foot comes back to exactly z = 0 with zero speed at t = 0.03 s, where the thrust switches
+    # off: the run-ahead step saw z touch 0 without crossing, and the touchdown was never handled
+    ("PogoStick", (1.5, 0.0), dict(method=5, abs_tol=1e-8, max_step=0.0)),
+    # the same with DOP853: a zero-length hop at t = 0.03 left z = -3e-18 m at the input change
+    ("PogoStick", (1.5, 0.0), dict(method=8, abs_tol=1e-8, max_step=0.05)),
+    # a step of 0.05 s holding a foot that dips below the ground and rises again (both ends above)
+    ("PogoStick", (1.5, 0.23818687449414466), dict(method=5, rel_tol=1e-6, abs_tol=1e-8, max_step=0.05)),
+]
+
+
+@pytest.mark.parametrize("name, thrust, params", SWITCHING)
+def test_switching_thrust_from_rest_at_the_free_length(name, thrust, params):
+    """c = 0, from rest at the free length, F_ext switching every 10 ms between the fractions
+    `thrust` of m g (found by the property suite and a scan of such runs).  Before: with
+    max_step = 0 the exactly integrated flight grew the step tenfold per step (to 1e151 s) and a
+    domain violation at t = 6e7 s was reported at t = 0.05 s; touchdowns were missed (a foot
+    touching the ground at an input change, or dipping below it inside one step) and the mass
+    fell through the ground.  Now the run completes, the foot never goes below the ground, and
+    the energy balance E + W_leg = E(0) + W_ext holds."""
+    params = dict(dict(m=1.0, k=100.0, rel_tol=1e-4), **params)
+    m = params["m"]
+    linear = dict(spring_law=0, beta=0.0) if name == "PogoStickMem" else {}
+    inst = Instance(name).init(c=0.0, xbar_0=1.0, y_0=1.0, z_0=0.0, **linear, **params)
+    try:
+        E0 = inst.get("E")
+        worst, ys = 0.0, []
+        for i in range(200):
+            inst.set(F_ext=thrust[i % 2] * m * G)
+            inst.step(1e-2)
+            E, W_leg, W_ext, y, z = inst.get("E", "W_leg", "W_ext", "y", "z")
+            worst = max(worst, abs(E + W_leg - W_ext - E0))
+            ys.append(y)
+            assert z >= -1e-12, (inst.t, z)  # the foot never below the ground
+    finally:
+        inst.close()
+    assert min(ys) > 0
+    assert worst <= 1e-2 * E0
+
+
+def test_penetration_dipping_below_zero_inside_a_step_is_a_liftoff():
+    """Penetrator under a thrust cycling through (1.20, 1.5, 0.73, 0.5) m g every 10 ms, DOP853,
+    max_step = 0 (found by a scan of such runs): a contact step whose two ends have delta > 0 held
+    a dip to delta = -2.6e-6 m at t = 1.79 s (the foot above the surface in contact).  Now the
+    liftoff/touchdown pair inside the step is found: delta >= 0 in contact, the foot height >= 0
+    in flight at every communication point, and E + W_leg + W_soil = E(0) + W_ext."""
+    thrust = (1.2021019646842688, 1.5, 0.728039827614527, 0.5)
+    inst = Instance("Penetrator").init(rel_tol=1e-6, abs_tol=1e-9, max_step=0.0, method=8, y_0=1.0, c=2.0)
+    try:
+        E0 = inst.get("E")
+        worst = 0.0
+        for i in range(200):
+            inst.set(F_ext=thrust[i % 4] * G)
+            inst.step(1e-2)
+            s, delta, z, E, W_leg, W_soil, W_ext = inst.get("s", "delta", "z", "E", "W_leg", "W_soil", "W_ext")
+            assert (delta if s == 1 else z) >= -1e-9, (inst.t, s, delta, z)
+            worst = max(worst, abs(E + W_leg + W_soil - W_ext - E0))
+        assert inst.get("n_events") > 10
+    finally:
+        inst.close()
+    assert worst <= 1e-5 * E0
