@@ -180,28 +180,30 @@ class DOP853(_Pair):
 
 
 class _Dense5:
-    __slots__ = ("t0", "h", "y0", "Q")
+    __slots__ = ("t0", "h", "rows")
 
     def __init__(self, t0, h, y0, Q):
-        self.t0, self.h, self.y0, self.Q = t0, h, y0, Q
+        self.t0, self.h = t0, h
+        self.rows = tuple(zip(y0, *Q))  # per state: (y0, q0, q1, q2, q3), zipped once per step
 
     def __call__(self, t):
         x = (t - self.t0) / self.h
         hx = self.h * x
-        return [y + hx * (a + x * (b + x * (c + x * d))) for y, a, b, c, d in zip(self.y0, *self.Q)]
+        return [y + hx * (a + x * (b + x * (c + x * d))) for y, a, b, c, d in self.rows]
 
 
 class _Dense8:
-    __slots__ = ("t0", "h", "y0", "F")
+    __slots__ = ("t0", "h", "rows")
 
     def __init__(self, t0, h, y0, F):
-        self.t0, self.h, self.y0, self.F = t0, h, y0, F
+        self.t0, self.h = t0, h
+        self.rows = tuple(zip(y0, *F))  # per state: y0 and its seven coefficients
 
     def __call__(self, t):
         x = (t - self.t0) / self.h
         w = 1.0 - x
         return [y + x * (a + w * (b + x * (c + w * (d + x * (e + w * (f + x * g))))))
-                for y, a, b, c, d, e, f, g in zip(self.y0, *self.F)]
+                for y, a, b, c, d, e, f, g in self.rows]
 
 
 METHODS = {5: DOPRI5(), 8: DOP853()}
@@ -241,9 +243,13 @@ class _Segment:
             return self.y1
         if t == self.t0:
             return self.y0
+        return (self._dense or self.dense())(t)
+
+    def dense(self):
+        """The step's continuous extension (built on first use)."""
         if self._dense is None:
             self._dense = self.pair.dense(self.fun, self.t0, self.y0, self.y1, self.t1 - self.t0, self.K)
-        return self._dense(t)
+        return self._dense
 
 
 def solver_parameters():
@@ -508,8 +514,10 @@ class Simulator:
     def advance(self, t_target: float):
         """Integrate to ``t_target`` (handling every event on the way); return ``(x, q)`` there."""
         if self.t_out <= t_target < self.t:  # the common call: inside the step taken ahead
-            self.t_out, self.x_out, self.q_out = t_target, self.seg(t_target), self.q
-            return self.x_out, self.q_out
+            seg = self.seg
+            x = seg.y0 if t_target == seg.t0 else (seg._dense or seg.dense())(t_target)
+            self.t_out, self.x_out, self.q_out = t_target, x, self.q
+            return x, self.q
         if t_target < self.t_out:
             raise ValueError(f"cannot go back in time: t = {t_target} < {self.t_out}")
         if self._stateless:

@@ -157,6 +157,7 @@ class HybridSlave:
         self._native = False
         variables, by_vr, real_out, int_out = self._variable_tables()
         self._vars = by_vr
+        self._output_fn = model.output_fn
         self._real_out_names = [v.name for v in real_out]
         self._int_out_names = [v.name for v in int_out]
         # output values in buffer order, packed into the buffers in one call each
@@ -313,13 +314,12 @@ class HybridSlave:
 
     def _update_outputs(self):
         sim = self._sim
-        out = type(self).model.output_fn(sim.t_out, sim.x_out, sim.q_out, sim.u, sim.p)
+        out = self._output_fn(sim.t_out, sim.x_out, sim.q_out, sim.u, sim.p)
         last = sim.last_event
-        out["n_events"] = sim.n_events
         if last is None:
-            out["t_last_event"], out["last_event"] = self._t_start, 0
+            out["n_events"], out["t_last_event"], out["last_event"] = sim.n_events, self._t_start, 0
         else:
-            out["t_last_event"], out["last_event"] = last.time, last.index + 1
+            out["n_events"], out["t_last_event"], out["last_event"] = sim.n_events, last.time, last.index + 1
         self._complete_outputs(sim.t_out, sim.x_out, sim.q_out, sim.u, sim.p, out)
         self._out = out
         self._pack_reals(self._rview, 0, *self._real_values(out))
@@ -368,16 +368,19 @@ class HybridSlave:
         # fast path, the common call: the next step of a healthy instance with unchanged inputs
         # (NaN fails every comparison and takes the detailed path)
         if not (self._failed is None and sim is not None and not self._inputs_changed
-                and current_time == sim.t_out and 0.0 <= step_size <= self._h_fast < math.inf
+                and current_time == sim.t_out and 0.0 <= step_size <= self._h_fast
                 and current_time + step_size <= self._t_stop):
             problem = self._step_problem(current_time, step_size)
             if problem is not None:
                 return self._refuse(problem)
+        end = current_time + step_size
+        if end < sim.t_out:  # within the tolerance of _step_problem
+            end = sim.t_out
         try:
             if self._inputs_changed:
                 sim.set_input(self._u)
                 self._inputs_changed = False
-            self._advance_engine(sim, max(current_time + step_size, sim.t_out))
+            self._advance_engine(sim, end)
         except ModelError as exc:
             # the model cannot go on (the leg bottomed out, an event storm, ...): Error, so that no
             # master mistakes a truncated run for a result; the state saved before stays usable
@@ -394,7 +397,8 @@ class HybridSlave:
         """Largest step the fast path of do_step takes without the detailed checks: one that surely
         needs no more than MAX_INTERNAL_STEPS_PER_CALL internal steps (and is finite)."""
         if type(self).model.states:
-            return MAX_INTERNAL_STEPS_PER_CALL * self._sim.max_step  # inf for an unbounded max_step
+            limit = MAX_INTERNAL_STEPS_PER_CALL * self._sim.max_step
+            return limit if limit < math.inf else -1.0  # unbounded max_step: always the detailed check
         return 1e300
 
     def _drain_engine(self):
