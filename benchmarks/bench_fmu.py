@@ -103,7 +103,7 @@ def build(dest: Path, names):
     with quiet():
         floor = Path(FmuBuilder.build_FMU(HERE / "pogofmu_bench_floor.py", dest=dest))
         built = build_fmu.main(["--dest", str(dest), *sorted(set(names))])
-    fmus = {Path(p).stem: Path(p) for p in built}
+    fmus = {Path(p).stem: Path(p) for p in built if Path(p).parent == dest}  # FMI 2.0 (FMI 3.0: dest/fmi3/)
     fmus["BenchFloor"] = floor
     return fmus
 
