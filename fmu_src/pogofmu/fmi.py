@@ -158,6 +158,11 @@ class HybridSlave:
         variables, by_vr, real_out, int_out = self._variable_tables()
         self._vars = by_vr
         self._output_fn = model.output_fn
+        # the hooks below, called only where a subclass (FMI 3.0) overrides them: the common step
+        # then costs no extra call
+        cls = type(self)
+        self._completes_outputs = cls._complete_outputs is not HybridSlave._complete_outputs
+        self._own_advance = cls._advance_engine is not HybridSlave._advance_engine
         self._real_out_names = [v.name for v in real_out]
         self._int_out_names = [v.name for v in int_out]
         # output values in buffer order, packed into the buffers in one call each
@@ -320,7 +325,8 @@ class HybridSlave:
             out["n_events"], out["t_last_event"], out["last_event"] = sim.n_events, self._t_start, 0
         else:
             out["n_events"], out["t_last_event"], out["last_event"] = sim.n_events, last.time, last.index + 1
-        self._complete_outputs(sim.t_out, sim.x_out, sim.q_out, sim.u, sim.p, out)
+        if self._completes_outputs:
+            self._complete_outputs(sim.t_out, sim.x_out, sim.q_out, sim.u, sim.p, out)
         self._out = out
         self._pack_reals(self._rview, 0, *self._real_values(out))
         self._pack_ints(self._iview, 0, *self._int_values(out))
@@ -380,7 +386,10 @@ class HybridSlave:
             if self._inputs_changed:
                 sim.set_input(self._u)
                 self._inputs_changed = False
-            self._advance_engine(sim, end)
+            if self._own_advance:
+                self._advance_engine(sim, end)
+            else:
+                sim.advance(end)
         except ModelError as exc:
             # the model cannot go on (the leg bottomed out, an event storm, ...): Error, so that no
             # master mistakes a truncated run for a result; the state saved before stays usable
