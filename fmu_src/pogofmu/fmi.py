@@ -144,6 +144,7 @@ class HybridSlave:
     license = "MIT"
     version = None  # the project version, written into modelDescription.xml by build_fmu.py
     log_categories = LOG_CATEGORIES
+    _api = "fmi2"  # prefix of the FMI function names in messages (fmi3 in the FMI 3.0 adapter)
     _tables = None  # per class: (variables, by vr, real output names/vrs, integer output names/vrs)
 
     def __init__(self, **kwargs):
@@ -206,6 +207,12 @@ class HybridSlave:
         self._ctl[0] = 0
 
     # ---- native launcher --------------------------------------------------------------------
+    def _fn(self, name):
+        """The FMI 2.0 function ``fmi2<name>`` as this FMU's FMI version spells it (for messages)."""
+        if self._api == "fmi2":
+            return "fmi2" + name
+        return "fmi3" + name.replace("FMUstate", "FMUState").replace("DeSerialize", "Deserialize")
+
     def _native_attach(self, mode="cs", event_mode_used=False, early_return_allowed=False):
         """Called by the native launcher right after construction: errors become FMI statuses,
         and the outputs are served from the returned buffers."""
@@ -430,10 +437,10 @@ class HybridSlave:
     def _step_problem(self, current_time, step_size):
         sim = self._sim
         if self._failed is not None:
-            return (f"fmi2DoStep refused: the instance stopped at t = {self._t_ok!r} s ({self._failed}); "
-                    f"restore a saved state (fmi2SetFMUstate) or reset the instance")
+            return (f"{self._api}DoStep refused: the instance stopped at t = {self._t_ok!r} s ({self._failed}); "
+                    f"restore a saved state ({self._fn('SetFMUstate')}) or reset the instance")
         if sim is None:
-            return "fmi2DoStep called before fmi2ExitInitializationMode"
+            return f"{self._api}DoStep called before {self._api}ExitInitializationMode"
         if not math.isfinite(current_time):
             return (f"currentCommunicationPoint = {current_time!r} violates the rule: a finite number "
                     f"equal to the end of the previous step ({sim.t_out!r})")
@@ -513,7 +520,7 @@ class HybridSlave:
             text = json.dumps({"format": _STATE_FORMAT, "model": type(self).model.name, "build": _BUILD,
                                "state": data}, separators=(",", ":"))
         except (TypeError, ValueError) as exc:
-            raise FMUError(f"fmi2SerializeFMUstate: the state cannot be serialized ({exc})") from None
+            raise FMUError(f"{self._fn('SerializeFMUstate')}: the state cannot be serialized ({exc})") from None
         return text.encode()
 
     def _fmu_state_from_bytes(self, data):
@@ -534,5 +541,5 @@ class HybridSlave:
             if state["sim"] is not None:
                 state["sim"] = snapshot_from_data(model, state["sim"])
         except (ValueError, KeyError, TypeError) as exc:
-            raise FMUError(f"fmi2DeSerializeFMUstate refused: {exc}") from None
+            raise FMUError(f"{self._fn('DeSerializeFMUstate')} refused: {exc}") from None
         return state

@@ -118,6 +118,7 @@ class Fmi3Slave(HybridSlave):
     """The FMI 3.0 adapter; use :func:`fmi3_class` to derive it for a slave class."""
 
     _tables = None
+    _api = "fmi3"
 
     @classmethod
     def _variable_tables(cls):
