@@ -146,3 +146,30 @@ def test_stop_time_a_rounding_error_away_is_not_a_collapsed_step():
     x, _ = sim.advance(6.0)
     assert sim.t_out == 6.0
     assert x[1] == pytest.approx(-G * 6.0, abs=1e-9)
+
+
+@pytest.mark.parametrize("method", [5, 8])
+def test_steps_unrolled_for_the_state_count_give_the_same_bits(method, monkeypatch):
+    """The pairs specialized per state count (stage sums and dense output unrolled) perform the
+    generic code's operations in the same order: every served state, every event count is equal
+    bit for bit, for each model."""
+    from pogofmu import engine
+    from pogofmu.models.penetrator import MODEL as PEN
+    from pogofmu.models.pogo_stick import MODEL as POGO
+    from pogofmu.models.pogo_stick_mem import MODEL as MEM
+    from pogofmu.models.pogo_stick_sma import MODEL as SMA
+
+    def run(model):
+        sim = engine.Simulator(model, model.params(method=method))
+        served = [tuple(sim.advance(k * 1e-3)[0]) for k in range(1, 2501)]
+        return served, sim.n_events, sim.n_steps, type(sim.pair.step).__name__, sim.pair
+
+    for model in (POGO, MEM, SMA, PEN):
+        fast = run(model)
+        assert fast[4] is not engine.METHODS[method], "the simulator did not get the specialized pair"
+        with monkeypatch.context() as m:
+            m.setattr(engine._Pair, "specialized", lambda self, n: self)
+            generic = run(model)
+        assert generic[4] is engine.METHODS[method]
+        assert fast[:3] == generic[:3], model.name
+        assert fast[1] > 0

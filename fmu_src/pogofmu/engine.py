@@ -95,12 +95,52 @@ def _gen_step(A, B, C, n_stages):
     return _compile("\n".join(lines) + "\n", "step")
 
 
+def _gen_step_unrolled(A, B, C, n_stages, n):
+    """The step of :func:`_gen_step` for exactly ``n`` states, the state loop unrolled: the same
+    operations in the same order (the same bits), without a comprehension and a zip per stage
+    (about 40 % cheaper for the 5-8 states of these models)."""
+    def combination(coefs, i):
+        terms = [f"{c!r}*k{j}_{i}" for j, c in enumerate(coefs) if c != 0.0]
+        return f"y{i} + h*({' + '.join(terms)})"
+
+    lines = ["def step(fun, t, y, f, h):", "    k0 = f",
+             f"    {', '.join(f'y{i}' for i in range(n))}, = y",
+             f"    {', '.join(f'k0_{i}' for i in range(n))}, = k0"]
+    for s in range(1, n_stages):
+        lines.append(f"    k{s} = fun(t + {C[s]!r}*h, [{', '.join(combination(A[s][:s], i) for i in range(n))}])")
+        lines.append(f"    {', '.join(f'k{s}_{i}' for i in range(n))}, = k{s}")
+    lines.append(f"    y_new = [{', '.join(combination(B, i) for i in range(n))}]")
+    lines.append("    f_new = fun(t + h, y_new)")
+    lines.append(f"    return y_new, f_new, ({', '.join(f'k{j}' for j in range(n_stages))}, f_new)")
+    return _compile("\n".join(lines) + "\n", "step")
+
+
 class _Pair:
     """An embedded explicit Runge-Kutta pair with FSAL and dense output (generated code)."""
 
     name = ""
     order = 0
     error_exponent = 0.0
+    MAX_UNROLLED = 32  # state counts up to this get a step with the state loop unrolled
+
+    def _set_step(self, A, B, C, n_stages):
+        self.step = _gen_step(A, B, C, n_stages)
+        self._tableau = (A, B, C, n_stages)
+        self._specialized = {}
+
+    def specialized(self, n: int) -> "_Pair":
+        """This pair with its step generated for exactly ``n`` states (cached; the pair itself for
+        no states or very many)."""
+        if n <= 0 or n > self.MAX_UNROLLED:
+            return self
+        pair = self._specialized.get(n)
+        if pair is None:
+            pair = copy.copy(self)
+            pair.step = _gen_step_unrolled(*self._tableau, n)
+            pair._dense_eval = _gen_dense_unrolled(self.order, n)
+            pair._specialized = {}
+            self._specialized[n] = pair
+        return pair
 
 
 class DOPRI5(_Pair):
@@ -111,7 +151,8 @@ class DOPRI5(_Pair):
     def __init__(self):
         A, B, C, E, P = tab.DOPRI5_A, tab.DOPRI5_B, tab.DOPRI5_C, tab.DOPRI5_E, tab.DOPRI5_P
         ns = len(B)
-        self.step = _gen_step(A, B, C, ns)
+        self._set_step(A, B, C, ns)
+        self._dense_eval = _dense5_eval
         K = [f"k{j}" for j in range(ns + 1)]
         expr, ks = _lincomb(E, K)
         self.error_norm = _compile(
@@ -130,7 +171,7 @@ class DOPRI5(_Pair):
                                 + "\n    return q0, q1, q2, q3\n", "coeffs")
 
     def dense(self, fun, t0, y0, y1, h, K):
-        return _Dense5(t0, h, y0, self._coeffs(K))
+        return _Dense5(t0, h, y0, self._coeffs(K), self._dense_eval)
 
 
 class DOP853(_Pair):
@@ -141,7 +182,8 @@ class DOP853(_Pair):
     def __init__(self):
         A, B, C = tab.DOP853_A, tab.DOP853_B, tab.DOP853_C
         ns, nx = tab.DOP853_N_STAGES, tab.DOP853_N_STAGES_EXTENDED
-        self.step = _gen_step(A, B, C, ns)
+        self._set_step(A, B, C, ns)
+        self._dense_eval = _dense8_eval
         K = [f"k{j}" for j in range(ns + 1)]
         e5, k5 = _lincomb(tab.DOP853_E5, K)
         e3, k3 = _lincomb(tab.DOP853_E3, K)
@@ -176,34 +218,55 @@ class DOP853(_Pair):
         self._coeffs = _compile("\n".join(lines) + "\n", "coeffs")
 
     def dense(self, fun, t0, y0, y1, h, K):
-        return _Dense8(t0, h, y0, self._coeffs(fun, t0, y0, y1, h, K))
+        return _Dense8(t0, h, y0, self._coeffs(fun, t0, y0, y1, h, K), self._dense_eval)
 
 
 class _Dense5:
-    __slots__ = ("t0", "h", "rows")
+    __slots__ = ("t0", "h", "rows", "ev")
 
-    def __init__(self, t0, h, y0, Q):
-        self.t0, self.h = t0, h
+    def __init__(self, t0, h, y0, Q, ev):
+        self.t0, self.h, self.ev = t0, h, ev
         self.rows = tuple(zip(y0, *Q))  # per state: (y0, q0, q1, q2, q3), zipped once per step
 
     def __call__(self, t):
         x = (t - self.t0) / self.h
-        hx = self.h * x
-        return [y + hx * (a + x * (b + x * (c + x * d))) for y, a, b, c, d in self.rows]
+        return self.ev(x, self.h * x, self.rows)
+
+
+def _dense5_eval(x, hx, rows):
+    return [y + hx * (a + x * (b + x * (c + x * d))) for y, a, b, c, d in rows]
 
 
 class _Dense8:
-    __slots__ = ("t0", "h", "rows")
+    __slots__ = ("t0", "h", "rows", "ev")
 
-    def __init__(self, t0, h, y0, F):
-        self.t0, self.h = t0, h
+    def __init__(self, t0, h, y0, F, ev):
+        self.t0, self.h, self.ev = t0, h, ev
         self.rows = tuple(zip(y0, *F))  # per state: y0 and its seven coefficients
 
     def __call__(self, t):
         x = (t - self.t0) / self.h
-        w = 1.0 - x
-        return [y + x * (a + w * (b + x * (c + w * (d + x * (e + w * (f + x * g))))))
-                for y, a, b, c, d, e, f, g in self.rows]
+        return self.ev(x, 1.0 - x, self.rows)
+
+
+def _dense8_eval(x, w, rows):
+    return [y + x * (a + w * (b + x * (c + w * (d + x * (e + w * (f + x * g))))))
+            for y, a, b, c, d, e, f, g in rows]
+
+
+# the dense evaluators unrolled for n states (the same operations as above, in the same order)
+_DENSE_UNROLLED = {
+    5: ("x, hx", "y{i}, a{i}, b{i}, c{i}, d{i}", "y{i} + hx * (a{i} + x * (b{i} + x * (c{i} + x * d{i})))"),
+    8: ("x, w", "y{i}, a{i}, b{i}, c{i}, d{i}, e{i}, f{i}, g{i}",
+        "y{i} + x * (a{i} + w * (b{i} + x * (c{i} + w * (d{i} + x * (e{i} + w * (f{i} + x * g{i}))))))"),
+}
+
+
+def _gen_dense_unrolled(order, n):
+    args, row, value = _DENSE_UNROLLED[order]
+    rows = ", ".join("(" + row.format(i=i) + ")" for i in range(n))
+    values = ", ".join(value.format(i=i) for i in range(n))
+    return _compile(f"def ev({args}, rows):\n    {rows}, = rows\n    return [{values}]\n", "ev")
 
 
 METHODS = {5: DOPRI5(), 8: DOP853()}
@@ -353,6 +416,7 @@ class Simulator:
             _check_time_scales(model, p)
             x, q = model.initial(p)
             self.x = [float(v) for v in x]
+            self.pair = self.pair.specialized(len(self.x))  # the step unrolled for this many states
             self.q = dict(q)
             self.x_out, self.q_out = self.x, self.q  # state served at t_out
             self._stateless = not self.x
@@ -1076,7 +1140,7 @@ def snapshot_from_data(model: HybridModel, data: dict) -> dict:
     sim.__dict__.update(fields)
     sim.model = model
     sim.p = Params(_decode(data["params"]))
-    sim.pair = METHODS[int(sim.p.method)]
+    sim.pair = METHODS[int(sim.p.method)].specialized(len(sim.x))
     sim._rebind()
     sim.seg = None
     if data["segment"] is not None:
