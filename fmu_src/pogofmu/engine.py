@@ -589,18 +589,7 @@ class Simulator:
             self.t = self.t_out = max(self.t, t_target)
             self.q_out = self.q
             return self.x_out, self.q_out
-        try:
-            while True:
-                if self.pending is not None and t_target >= self.t:
-                    self.apply_pending_event()
-                    continue
-                if t_target <= self.t:
-                    break
-                self._step(t_target)
-        except (ArithmeticError, ValueError) as exc:
-            if isinstance(exc, ModelError):
-                raise
-            raise self._arithmetic_error(exc, f"t = {self.t!r} s") from None
+        self._run(t_target, apply_events=True)
         self.t_out = t_target
         self.x_out = self.x if t_target == self.t else self.seg(t_target)
         self.q_out = self.q
@@ -618,24 +607,22 @@ class Simulator:
         are rebuilt on restore (the discrete state ``q`` is never mutated in place, so the
         right-hand sides kept in past segments stay valid).
         """
-        shared = {id(self.model): self.model, id(self.p): self.p, id(self.pair): self.pair,
-                  id(self.last_event): self.last_event}
-        skip = ("fun", "active") + self._SHALLOW
-        state = copy.deepcopy({k: v for k, v in self.__dict__.items() if k not in skip}, shared)
-        for k in self._SHALLOW:
-            v = self.__dict__[k]
-            state[k] = None if v is None else copy.copy(v)
-        return state
+        return self._copy_state({k: v for k, v in self.__dict__.items() if k not in ("fun", "active")})
 
     def restore(self, snap):
-        shared = {id(snap["model"]): snap["model"], id(snap["p"]): snap["p"], id(snap["pair"]): snap["pair"],
-                  id(snap["last_event"]): snap["last_event"]}
-        state = copy.deepcopy({k: v for k, v in snap.items() if k not in self._SHALLOW}, shared)
-        for k in self._SHALLOW:
-            v = snap[k]
-            state[k] = None if v is None else copy.copy(v)
-        self.__dict__.update(state)
+        self.__dict__.update(self._copy_state(snap))
         self._rebind()
+
+    @classmethod
+    def _copy_state(cls, state):
+        """A copy of a state dict: the shared objects (model, parameters, method, the last event
+        record) kept as they are, the containers of _SHALLOW copied shallowly, the rest deeply."""
+        shared = {id(state[k]): state[k] for k in ("model", "p", "pair", "last_event")}
+        out = copy.deepcopy({k: v for k, v in state.items() if k not in cls._SHALLOW}, shared)
+        for k in cls._SHALLOW:
+            v = state[k]
+            out[k] = None if v is None else copy.copy(v)
+        return out
 
     def advance_to_event(self, t_target: float) -> bool:
         """Like :meth:`advance`, but stop at the first event on the way, *before* its jump.
@@ -651,13 +638,7 @@ class Simulator:
         if not self.model.events:  # nothing to stop at
             self.advance(t_target)
             return False
-        try:
-            while self.pending is None and self.t < t_target:
-                self._step(t_target)
-        except (ArithmeticError, ValueError) as exc:
-            if isinstance(exc, ModelError):
-                raise
-            raise self._arithmetic_error(exc, f"t = {self.t!r} s") from None
+        self._run(t_target, apply_events=False)
         if self.pending is not None and self.t <= t_target:
             self.t_out, self.x_out, self.q_out = self.t, self.x, self.q
             return True
@@ -677,6 +658,26 @@ class Simulator:
         return self.x
 
     # ---- stepping ---------------------------------------------------------------------------
+    def _run(self, t_target, apply_events):
+        """Step until the integrator reaches ``t_target`` — applying every located event's jump on
+        the way (``apply_events``), or stopping at the first one, its jump left pending; an
+        arithmetic failure in the model becomes a :class:`DomainError` naming the time."""
+        try:
+            while True:
+                if self.pending is not None:
+                    if not apply_events:
+                        return
+                    if t_target >= self.t:
+                        self.apply_pending_event()
+                        continue
+                if t_target <= self.t:
+                    return
+                self._step(t_target)
+        except (ArithmeticError, ValueError) as exc:
+            if isinstance(exc, ModelError):
+                raise
+            raise self._arithmetic_error(exc, f"t = {self.t!r} s") from None
+
     def _step(self, t_target=math.inf):
         pair, fun = self.pair, self.fun
         t, y, f = self.t, self.x, self.f
@@ -972,7 +973,6 @@ class Simulator:
         # with a step larger than the starting-step estimate for the new state
         self.h = min(self.h, self._initial_step())
 
-
     def _check_zeno(self):
         n = self.zeno_max_events
         recent = self._recent
@@ -987,7 +987,7 @@ class Simulator:
     def _check_domain(self, t, x, seg=None):
         violation = self._domain_violation(t, x, seg)
         if violation is not None:
-            raise DomainError(f"the trajectory left the model's domain at t = {violation[0]:.10g} s: {violation[1]}")
+            raise _domain_error(violation)
 
     def _domain_violation(self, t, x, seg=None):
         """None, or ``(t_v, text)``: the first time in ``seg`` (bisected) where the model's domain
@@ -1028,7 +1028,12 @@ class Simulator:
             self.g = [ev.guard(y_c, self.q, self.u, self.p) for _, ev in self.active]
             self._g_prev = None
             return True
-        raise DomainError(f"the trajectory left the model's domain at t = {violation[0]:.10g} s: {violation[1]}")
+        raise _domain_error(violation)
+
+
+def _domain_error(violation):
+    t, condition = violation
+    return DomainError(f"the trajectory left the model's domain at t = {t:.10g} s: {condition}")
 
 
 # =============================================================================================
@@ -1069,7 +1074,6 @@ def _extreme_parameters(p):
     named = ", ".join(f"{n} = {v!r}" for _, n, v in mags[:3])
     return (f"the values exceed floating-point range; parameters of the most extreme magnitude: {named}"
             if named else "the values exceed floating-point range")
-
 
 
 # =============================================================================================
