@@ -398,16 +398,33 @@ class HybridSlave:
             else:
                 sim.advance(end)
         except ModelError as exc:
-            # the model cannot go on (the leg bottomed out, an event storm, ...): Error, so that no
-            # master mistakes a truncated run for a result; the state saved before stays usable
-            self._failed = f"{type(self).model.name}: {exc}"
-            self._drain_engine()
-            raise FMUError(self._failed, ERROR if self._native else FATAL) from None
+            raise self._model_failed(exc) from None
         if sim.new_events or sim.new_warnings:
             self._drain_engine()
         self._update_outputs()
         self._t_ok = sim.t_out
         return True
+
+    def _model_failed(self, exc):
+        """The model cannot go on (the leg bottomed out, an event storm, ...): remember why, so that
+        later steps are refused and no master mistakes a truncated run for a result, report what
+        the engine noted, and return the error to raise (Error: the state saved before stays
+        usable)."""
+        self._failed = f"{type(self).model.name}: {exc}"
+        self._drain_engine()
+        return FMUError(self._failed, ERROR if self._native else FATAL)
+
+    def _stopped(self, call, t):
+        """Why ``call`` is refused after the model stopped at ``t``."""
+        return (f"{call} refused: the instance stopped at t = {t!r} s ({self._failed}); "
+                f"restore a saved state ({self._fn('SetFMUstate')}) or reset the instance")
+
+    def _input_problem(self):
+        """The first input that is not a finite number, as a message (None if all are)."""
+        for var, v in zip(type(self).model.inputs, self._u):
+            if not math.isfinite(v):
+                return f"input {var.name} = {v!r} violates the rule: {var.name} must be a finite number"
+        return None
 
     def _fast_step_limit(self):
         """Largest step the fast path of do_step takes without the detailed checks: one that surely
@@ -437,8 +454,7 @@ class HybridSlave:
     def _step_problem(self, current_time, step_size):
         sim = self._sim
         if self._failed is not None:
-            return (f"{self._api}DoStep refused: the instance stopped at t = {self._t_ok!r} s ({self._failed}); "
-                    f"restore a saved state ({self._fn('SetFMUstate')}) or reset the instance")
+            return self._stopped(f"{self._api}DoStep", self._t_ok)
         if sim is None:
             return f"{self._api}DoStep called before {self._api}ExitInitializationMode"
         if not math.isfinite(current_time):
@@ -464,9 +480,7 @@ class HybridSlave:
             return (f"communication step size step_size = {step_size!r} violates the rule: the step must "
                     f"end at or before stopTime = {self._t_stop!r} (it ends at {end!r})")
         if self._inputs_changed:
-            for var, v in zip(type(self).model.inputs, self._u):
-                if not math.isfinite(v):
-                    return f"input {var.name} = {v!r} violates the rule: {var.name} must be a finite number"
+            return self._input_problem()
         return None
 
     def terminate(self):

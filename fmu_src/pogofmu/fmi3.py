@@ -105,6 +105,9 @@ def check_state_outputs(model: HybridModel):
     return None
 
 
+_INTERFACES = {"me": "model-exchange", "cs": "co-simulation"}
+
+
 def _before_side(falling, g):
     return g > 0.0 if falling else g < 0.0
 
@@ -207,12 +210,16 @@ class Fmi3Slave(HybridSlave):
         self._me_t, self._me_x = sim.t_out, list(sim.x_out)
         self._arm()
 
+    def _require_mode(self, mode, what):
+        """Refuse ``what`` (a function of interface ``mode``) on an instance of the other interface."""
+        if self._mode != mode:
+            this, other = (_INTERFACES[mode], _INTERFACES["cs" if mode == "me" else "me"])
+            raise FMUError(f"{what} is a {this} function: this instance is a {other} instance")
+
     def _me_instance(self, what):
-        if self._mode != "me":
-            raise FMUError(f"{what} is a model-exchange function: this instance is a co-simulation instance")
+        self._require_mode("me", what)
         if self._failed is not None:
-            raise FMUError(f"{what} refused: the instance stopped at t = {self._me_t!r} s ({self._failed}); "
-                           f"restore a saved state (fmi3SetFMUState) or reset the instance")
+            raise FMUError(self._stopped(what, self._me_t))
         if self._sim is None:
             raise FMUError(f"{what} called before fmi3ExitInitializationMode")
         if self._inputs_changed:
@@ -220,9 +227,9 @@ class Fmi3Slave(HybridSlave):
         return self._sim
 
     def _me_inputs(self):
-        for var, v in zip(type(self).model.inputs, self._u):
-            if not math.isfinite(v):
-                raise FMUError(f"input {var.name} = {v!r} violates the rule: {var.name} must be a finite number")
+        problem = self._input_problem()
+        if problem is not None:
+            raise FMUError(problem)
         sim = self._sim
         sim.t = sim.t_out = self._me_t
         sim.x = sim.x_out = list(self._me_x)
@@ -256,8 +263,7 @@ class Fmi3Slave(HybridSlave):
 
     # ---- model exchange ---------------------------------------------------------------------
     def set_time(self, t):
-        if self._mode != "me":
-            raise FMUError("fmi3SetTime is a model-exchange function: this instance is a co-simulation instance")
+        self._require_mode("me", "fmi3SetTime")
         t = float(t)
         if not math.isfinite(t):
             raise FMUError(f"time = {t!r} violates the rule: a finite number")
@@ -265,9 +271,7 @@ class Fmi3Slave(HybridSlave):
         self._stale()
 
     def set_continuous_states(self, x):
-        if self._mode != "me":
-            raise FMUError("fmi3SetContinuousStates is a model-exchange function: this instance is a "
-                           "co-simulation instance")
+        self._require_mode("me", "fmi3SetContinuousStates")
         n = len(type(self).model.states)
         if len(x) != n:
             raise FMUError(f"{len(x)} continuous states given, {type(self).model.name} has {n}")
@@ -342,9 +346,7 @@ class Fmi3Slave(HybridSlave):
             try:
                 x_new = sim.apply_event(fired, t, x)
             except ModelError as exc:
-                self._failed = f"{model.name}: {exc}"
-                self._drain_engine()
-                raise FMUError(self._failed, ERROR) from None
+                raise self._model_failed(exc) from None
             changed = x_new != x
             self._me_x = list(x_new)
             self._drain_engine()
@@ -366,8 +368,7 @@ class Fmi3Slave(HybridSlave):
 
     def do_step3(self, current_time, step_size):
         """fmi3DoStep: (eventHandlingNeeded, terminateSimulation, earlyReturn, lastSuccessfulTime)."""
-        if self._mode != "cs":
-            raise FMUError("fmi3DoStep is a co-simulation function: this instance is a model-exchange instance")
+        self._require_mode("cs", "fmi3DoStep")
         self._stop = None
         self.do_step(current_time, step_size)
         stop = self._stop
@@ -382,9 +383,7 @@ class Fmi3Slave(HybridSlave):
             try:
                 sim.advance(sim.t)
             except ModelError as exc:
-                self._failed = f"{type(self).model.name}: {exc}"
-                self._drain_engine()
-                raise FMUError(self._failed, ERROR) from None
+                raise self._model_failed(exc) from None
             self._drain_engine()
             self._update_outputs()
         return False
