@@ -26,7 +26,6 @@ def simulate_default(fmu: Path, start_values=None, model=None, **kwargs):
 
     With a ``model`` that declares ``default_input`` the FMU's inputs follow it (sampled on the
     output grid) and are recorded beside the outputs."""
-    import scipy.integrate  # noqa: F401  (see README: avoids a teardown crash of scipy-using FMUs)
     from fmpy import read_model_description, simulate_fmu
 
     md = read_model_description(str(fmu))

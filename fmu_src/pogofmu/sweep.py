@@ -202,7 +202,6 @@ class Runner:
     """One extracted FMU, run as often as asked; each run in a fresh instance."""
 
     def __init__(self, fmu: str):
-        import scipy.integrate  # noqa: F401  (README "Known issues": avoids a teardown crash)
         from fmpy import extract, read_model_description
 
         self.md = read_model_description(fmu)
