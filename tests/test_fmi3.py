@@ -310,6 +310,11 @@ def test_me_domain_violation_is_an_error_naming_the_condition():
         inst.fmu.completedIntegratorStep()
     assert "(error)" in str(exc.value)
     assert any("mass height y" in m[2] and "must stay > 0" in m[2] for m in inst.messages), inst.messages
+    # the stopped instance refuses further calls, naming them and the remedy as FMI 3.0 spells them
+    with pytest.raises(FMICallException):
+        inst.fmu.completedIntegratorStep()
+    text = inst.messages[-1][2]
+    assert "fmi3CompletedIntegratorStep refused: the instance stopped" in text and "fmi3SetFMUState" in text, text
     inst.fmu.freeInstance()
 
 
