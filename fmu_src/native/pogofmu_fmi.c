@@ -74,6 +74,7 @@ typedef int GIL;
     X(int, PyObject_SetAttrString, (PyObject *, const char *, PyObject *))                      \
     X(PyObject *, PyObject_Call, (PyObject *, PyObject *, PyObject *))                          \
     X(PyObject *, PyObject_CallObject, (PyObject *, PyObject *))                                \
+    X(PyObject *, PyObject_CallFunctionObjArgs, (PyObject *, ...))                              \
     X(PyObject *, Py_VaBuildValue, (const char *, va_list))                                     \
     X(PyObject *, PyObject_Str, (PyObject *))                                                   \
     X(int, PyObject_IsTrue, (PyObject *))                                                       \
@@ -426,7 +427,8 @@ typedef struct {
     int dead;          /* after a fatal error: refuse everything but FreeInstance */
     PyObject *obj;     /* the Python slave */
     PyObject *queue;   /* its log queue (a list) */
-    PyObject *buffers; /* tuple (real vrs, real array, int vrs, int array, control array) */
+    PyObject *buffers; /* tuple (real vrs, int vrs, output array, control array) */
+    PyObject *step_fn; /* the slave's bound step method (looked up at the first step) */
     double *real_out;
     int *int_out;
     int *control;      /* control[0]: outputs in the buffers are current */
@@ -581,24 +583,52 @@ static const char *status_category(int status)
  * call return Warning. */
 typedef int (*UseResult)(Inst *in, PyObject *result, void *ctx);
 
+static int refused_when_dead(Inst *in)
+{
+    if (in->dead)
+        emit(in, ST_ERROR, "logStatusError",
+             "the instance ended with a fatal error: only the free-instance function may be called");
+    return in->dead;
+}
+
+static Status finish_call(Inst *in, GIL g, PyObject *r, UseResult use, void *ctx);
+
+/* obj.method(*args), args built from `fmt` */
 static Status vcall(Inst *in, PyObject *target, const char *method, UseResult use, void *ctx,
                     const char *fmt, va_list ap)
 {
-    if (in->dead) {
-        emit(in, ST_ERROR, "logStatusError",
-             "the instance ended with a fatal error: only the free-instance function may be called");
-        return ST_ERROR;
-    }
+    if (refused_when_dead(in)) return ST_ERROR;
     GIL g = py.PyGILState_Ensure();
-    Status status = ST_OK;
-    char *error = NULL;
     PyObject *args = fmt ? py.Py_VaBuildValue(fmt, ap) : py.PyTuple_New(0);
     PyObject *fn = py.PyObject_GetAttrString(target ? target : in->obj, method);
     PyObject *r = (fn && args) ? py.PyObject_CallObject(fn, args) : NULL;
+    if (fn) py.Py_DecRef(fn);
+    if (args) py.Py_DecRef(args);
+    return finish_call(in, g, r, use, ctx);
+}
+
+/* The step, the call made most often: the slave's bound method looked up once per instance and
+ * its two floats passed without a format string; otherwise as vcall. */
+static Status step_call(Inst *in, const char *method, UseResult use, void *ctx, double t, double h)
+{
+    if (refused_when_dead(in)) return ST_ERROR;
+    GIL g = py.PyGILState_Ensure();
+    if (!in->step_fn) in->step_fn = py.PyObject_GetAttrString(in->obj, method);
+    PyObject *a = py.PyFloat_FromDouble(t), *b = py.PyFloat_FromDouble(h);
+    PyObject *r = (in->step_fn && a && b) ? py.PyObject_CallFunctionObjArgs(in->step_fn, a, b, NULL) : NULL;
+    if (a) py.Py_DecRef(a);
+    if (b) py.Py_DecRef(b);
+    return finish_call(in, g, r, use, ctx);
+}
+
+/* After the call (GIL held): read the result, map an exception, drain the log, release the GIL,
+ * hand the messages to the host. */
+static Status finish_call(Inst *in, GIL g, PyObject *r, UseResult use, void *ctx)
+{
+    Status status = ST_OK;
+    char *error = NULL;
     if (r && use) status = (Status)use(in, r, ctx);
-    PyObject *refs[] = {r, fn, args};
-    for (size_t i = 0; i < sizeof refs / sizeof *refs; ++i)
-        if (refs[i]) py.Py_DecRef(refs[i]);
+    if (r) py.Py_DecRef(r);
     if (py.PyErr_Occurred()) status = take_exception(&error);
     size_t count = 0;
     int worst = ST_OK;
@@ -845,19 +875,21 @@ static int fill_slots(PyObject *vrs, int *table, size_t n_slots)
     return 1;
 }
 
-/* Ask the Python side for its output buffers: (real vrs, array('d'), int vrs, array('i'),
- * array('i') control).  GIL held.  Without them every getter goes through Python. */
+/* Ask the Python side for its output buffer: (real vrs, int vrs, array('d') holding the reals
+ * as doubles followed by the integers as int32 -- one struct call fills it --, array('i')
+ * control).  GIL held.  Without it every getter goes through Python. */
 static void attach_buffers(Inst *in, PyObject *buffers)
 {
-    if (!buffers || buffers == py.none || py.PySequence_Size(buffers) != 5) {
+    if (!buffers || buffers == py.none || py.PySequence_Size(buffers) != 4) {
         py.PyErr_Clear();
         return;
     }
-    PyObject *item[5];
-    for (int i = 0; i < 5; ++i) item[i] = py.PySequence_GetItem(buffers, i);
-    void *r = NULL, *iv = NULL, *c = NULL;
+    PyObject *item[4];
+    for (int i = 0; i < 4; ++i) item[i] = py.PySequence_GetItem(buffers, i);
+    void *r = NULL, *c = NULL;
+    Py_ssize_t_ n_real = py.PySequence_Size(item[0]);
     size_t max_vr = 0;
-    for (int k = 0; k < 3; k += 2) {
+    for (int k = 0; k < 2; ++k) {
         Py_ssize_t_ n = py.PySequence_Size(item[k]);
         for (Py_ssize_t_ i = 0; i < n; ++i) {
             PyObject *o = py.PySequence_GetItem(item[k], i);
@@ -866,15 +898,15 @@ static void attach_buffers(Inst *in, PyObject *buffers)
             if (vr >= 0 && (size_t)vr + 1 > max_vr) max_vr = (size_t)vr + 1;
         }
     }
-    if (max_vr && max_vr < 1000000 && map_buffer(item[1], &r) && map_buffer(item[3], &iv) && map_buffer(item[4], &c)) {
+    if (n_real >= 0 && max_vr && max_vr < 1000000 && map_buffer(item[2], &r) && map_buffer(item[3], &c)) {
         in->n_slots = max_vr;
         in->real_slot = malloc(max_vr * sizeof(int));
         in->int_slot = malloc(max_vr * sizeof(int));
         if (in->real_slot && in->int_slot) {
             for (size_t i = 0; i < max_vr; ++i) in->real_slot[i] = in->int_slot[i] = -1;
-            if (fill_slots(item[0], in->real_slot, max_vr) && fill_slots(item[2], in->int_slot, max_vr)) {
+            if (fill_slots(item[0], in->real_slot, max_vr) && fill_slots(item[1], in->int_slot, max_vr)) {
                 in->real_out = r;
-                in->int_out = iv;
+                in->int_out = (int *)((char *)r + (size_t)n_real * sizeof(double));
                 in->control = c;
                 in->buffers = buffers;
                 py.Py_IncRef(buffers);
@@ -887,7 +919,7 @@ static void attach_buffers(Inst *in, PyObject *buffers)
             in->n_slots = 0;
         }
     }
-    for (int i = 0; i < 5; ++i)
+    for (int i = 0; i < 4; ++i)
         if (item[i]) py.Py_DecRef(item[i]);
     py.PyErr_Clear();
 }
@@ -895,10 +927,10 @@ static void attach_buffers(Inst *in, PyObject *buffers)
 static void free_inst(Inst *in)
 {
     if (!in) return;
-    if (python_ready && (in->obj || in->queue || in->buffers || in->strings)) {
+    if (python_ready && (in->obj || in->queue || in->buffers || in->strings || in->step_fn)) {
         GIL g = py.PyGILState_Ensure();
-        PyObject *refs[] = {in->strings, in->buffers, in->queue, in->obj};
-        for (size_t i = 0; i < 4; ++i)
+        PyObject *refs[] = {in->strings, in->buffers, in->queue, in->step_fn, in->obj};
+        for (size_t i = 0; i < sizeof refs / sizeof *refs; ++i)
             if (refs[i]) py.Py_DecRef(refs[i]);
         py.PyErr_Clear();
         py.PyGILState_Release(g);
@@ -1273,7 +1305,7 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
                       fmi2Boolean noSetFMUStatePriorToCurrentPoint)
 {
     CHECK(c);
-    return call(INST, "do_step", step_result, NULL, "(dd)", currentCommunicationPoint, communicationStepSize);
+    return step_call(INST, "do_step", step_result, NULL, currentCommunicationPoint, communicationStepSize);
 }
 
 fmi2Status fmi2CancelStep(fmi2Component c)
@@ -1723,7 +1755,7 @@ fmi3Status fmi3DoStep(fmi3Instance c, fmi3Float64 currentCommunicationPoint, fmi
 {
     CHECK(c);
     Flags f = {3, {eventHandlingNeeded, terminateSimulation, earlyReturn}, lastSuccessfulTime};
-    return call(INST, "do_step3", read_flags, &f, "(dd)", currentCommunicationPoint, communicationStepSize);
+    return step_call(INST, "do_step3", read_flags, &f, currentCommunicationPoint, communicationStepSize);
 }
 
 #endif /* POGOFMU_FMI == 3 */

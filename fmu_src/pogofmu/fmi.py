@@ -166,17 +166,16 @@ class HybridSlave:
         self._own_advance = cls._advance_engine is not HybridSlave._advance_engine
         self._real_out_names = [v.name for v in real_out]
         self._int_out_names = [v.name for v in int_out]
-        # output values in buffer order, packed into the buffers in one call each
-        self._real_values = _values_getter(self._real_out_names)
-        self._int_values = _values_getter(self._int_out_names)
+        # one output buffer: the real outputs (doubles), then the integer ones (int32), filled by
+        # one struct call per step in this order
+        nr, ni = len(real_out), len(int_out)
+        self._out_values = _values_getter(self._real_out_names + self._int_out_names)
         self._real_out_vrs = tuple(v.vr for v in real_out)
         self._int_out_vrs = tuple(v.vr for v in int_out)
-        self._rbuf = array("d", bytes(8 * len(real_out)))
-        self._ibuf = array("i", [0] * len(int_out))
-        self._ctl = array("i", [0])  # _ctl[0] = 1: the buffers hold the current outputs
-        self._rview, self._iview = memoryview(self._rbuf).cast("B"), memoryview(self._ibuf).cast("B")
-        self._pack_reals = struct.Struct(f"={len(real_out)}d").pack_into
-        self._pack_ints = struct.Struct(f"={len(int_out)}i").pack_into
+        self._obuf = array("d", bytes(8 * (nr + (ni + 1) // 2)))
+        self._oview = memoryview(self._obuf).cast("B")
+        self._ctl = array("i", [0])  # _ctl[0] = 1: the buffer holds the current outputs
+        self._pack_outputs = struct.Struct(f"={nr}d{ni}i").pack_into
         self._reset_state()
 
     @classmethod
@@ -215,9 +214,10 @@ class HybridSlave:
 
     def _native_attach(self, mode="cs", event_mode_used=False, early_return_allowed=False):
         """Called by the native launcher right after construction: errors become FMI statuses,
-        and the outputs are served from the returned buffers."""
+        and the outputs are served from the returned buffer (the reals as doubles, then the
+        integers as int32, in the order of the value references given)."""
         self._native = True
-        return (self._real_out_vrs, self._rbuf, self._int_out_vrs, self._ibuf, self._ctl)
+        return (self._real_out_vrs, self._int_out_vrs, self._obuf, self._ctl)
 
     def _get_log_queue(self):  # pythonfmu's binary
         return self.log_queue
@@ -335,8 +335,7 @@ class HybridSlave:
         if self._completes_outputs:
             self._complete_outputs(sim.t_out, sim.x_out, sim.q_out, sim.u, sim.p, out)
         self._out = out
-        self._pack_reals(self._rview, 0, *self._real_values(out))
-        self._pack_ints(self._iview, 0, *self._int_values(out))
+        self._pack_outputs(self._oview, 0, *self._out_values(out))
         self._ctl[0] = 1
 
     def _complete_outputs(self, t, x, q, u, p, out):
@@ -378,17 +377,17 @@ class HybridSlave:
 
     def do_step(self, current_time, step_size):
         sim = self._sim
+        end = current_time + step_size
         # fast path, the common call: the next step of a healthy instance with unchanged inputs
         # (NaN fails every comparison and takes the detailed path)
         if not (self._failed is None and sim is not None and not self._inputs_changed
                 and current_time == sim.t_out and 0.0 <= step_size <= self._h_fast
-                and current_time + step_size <= self._t_stop):
+                and end <= self._t_stop):
             problem = self._step_problem(current_time, step_size)
             if problem is not None:
                 return self._refuse(problem)
-        end = current_time + step_size
-        if end < sim.t_out:  # within the tolerance of _step_problem
-            end = sim.t_out
+            if end < sim.t_out:  # within the tolerance of _step_problem
+                end = sim.t_out
         try:
             if self._inputs_changed:
                 sim.set_input(self._u)
