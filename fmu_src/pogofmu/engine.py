@@ -122,7 +122,6 @@ class _Pair:
     order = 0
     error_exponent = 0.0
     MAX_UNROLLED = 32  # state counts up to this get a step with the state loop unrolled
-    _dense_closure = None  # set for a specialized pair: the dense output as one generated closure
 
     def _set_step(self, A, B, C, n_stages):
         self.step = _gen_step(A, B, C, n_stages)
@@ -138,11 +137,14 @@ class _Pair:
         if pair is None:
             pair = copy.copy(self)
             pair.step = _gen_step_unrolled(*self._tableau, n)
-            pair._dense_eval = _gen_dense_unrolled(self.order, n)
-            pair._dense_closure = _gen_dense_closure(self.order, n)
+            self._specialize(pair, n)
             pair._specialized = {}
             self._specialized[n] = pair
         return pair
+
+    def _specialize(self, pair, n):
+        """Hook: more of the method's code unrolled for ``n`` states (set on ``pair``): the error
+        norm, the dense output."""
 
 
 class DOPRI5(_Pair):
@@ -155,6 +157,7 @@ class DOPRI5(_Pair):
         ns = len(B)
         self._set_step(A, B, C, ns)
         self._dense_eval = _dense5_eval
+        self._E, self._P = E, P
         K = [f"k{j}" for j in range(ns + 1)]
         expr, ks = _lincomb(E, K)
         self.error_norm = _compile(
@@ -172,9 +175,38 @@ class DOPRI5(_Pair):
         self._coeffs = _compile(f"def coeffs(K):\n    {', '.join(K)} = K\n" + "\n".join(qs)
                                 + "\n    return q0, q1, q2, q3\n", "coeffs")
 
+    def _specialize(self, pair, n):
+        """The error norm, and the dense output built straight from the stages, unrolled for ``n``
+        states: the same operations in the same order as the loops above (the same bits), without
+        a zip and a list per coefficient (the dense output of a step costs about a third)."""
+        E, P = self._E, self._P
+        stages = len(E)
+
+        def term_sum(coefs, i):
+            return " + ".join(f"{c!r}*k{j}_{i}" for j, c in enumerate(coefs) if c != 0.0)
+
+        used = sorted({j for j, c in enumerate(E) if c != 0.0} | {j for row in P for j, c in enumerate(row) if c != 0.0})
+        unpack = [f"    {', '.join(f'k{j}' for j in range(stages))}, = K"]
+        unpack += [f"    {', '.join(f'k{j}_{i}' for i in range(n))}, = k{j}" for j in used]
+        state = lambda v, name: f"    {', '.join(f'{name}{i}' for i in range(n))}, = {v}"
+        norm = ["def error_norm(K, h, y, y_new, atol, rtol):", *unpack, state("y", "y"),
+                state("y_new", "yn"), "    acc = 0.0"]
+        for i in range(n):
+            norm += [f"    ay, an = abs(y{i}), abs(yn{i})",
+                     f"    e = h*({term_sum(E, i)}) / (atol + rtol*(an if an > ay else ay))",  # = max(ay, an)
+                     "    acc += e*e"]
+        norm.append(f"    return sqrt(acc/{n})")
+        pair.error_norm = _compile("\n".join(norm) + "\n", "error_norm")
+        make = ["def make(t0, h, Y, K):", *unpack, state("Y", "y")]  # the names of _DENSE_UNROLLED[5]
+        make += [f"    {'abcd'[r]}{i} = {term_sum([P[j][r] for j in range(stages)], i)}"
+                 for r in range(4) for i in range(n)]
+        pair._dense_from_stages = _compile("\n".join(make + _dense_ev_lines(5, n)) + "\n", "make")
+
+    _dense_from_stages = None
+
     def dense(self, fun, t0, y0, y1, h, K):
-        if self._dense_closure is not None:
-            return self._dense_closure(t0, h, y0, self._coeffs(K))
+        if self._dense_from_stages is not None:
+            return self._dense_from_stages(t0, h, y0, K)
         return _Dense5(t0, h, y0, self._coeffs(K), self._dense_eval)
 
 
@@ -221,6 +253,11 @@ class DOP853(_Pair):
         ]
         self._coeffs = _compile("\n".join(lines) + "\n", "coeffs")
 
+    _dense_closure = None
+
+    def _specialize(self, pair, n):
+        pair._dense_closure = _gen_dense_closure(8, n)  # (its coefficients need three more stages)
+
     def dense(self, fun, t0, y0, y1, h, K):
         if self._dense_closure is not None:
             return self._dense_closure(t0, h, y0, self._coeffs(fun, t0, y0, y1, h, K))
@@ -260,35 +297,33 @@ def _dense8_eval(x, w, rows):
             for y, a, b, c, d, e, f, g in rows]
 
 
-# the dense evaluators unrolled for n states (the same operations as above, in the same order)
+# the dense evaluators unrolled for n states, as closures over one step's coefficients: the same
+# operations as above in the same order, t -> state in one call, no unpacking of rows per
+# evaluation (the common communication step evaluates once).  Per order: the line after
+# x = (t - t0)/h, the names of state i's start value and coefficients, its value.
 _DENSE_UNROLLED = {
-    5: ("x, hx", "y{i}, a{i}, b{i}, c{i}, d{i}", "y{i} + hx * (a{i} + x * (b{i} + x * (c{i} + x * d{i})))"),
-    8: ("x, w", "y{i}, a{i}, b{i}, c{i}, d{i}, e{i}, f{i}, g{i}",
+    5: ("hx = h * x", "y{i}, a{i}, b{i}, c{i}, d{i}", "y{i} + hx * (a{i} + x * (b{i} + x * (c{i} + x * d{i})))"),
+    8: ("w = 1.0 - x", "y{i}, a{i}, b{i}, c{i}, d{i}, e{i}, f{i}, g{i}",
         "y{i} + x * (a{i} + w * (b{i} + x * (c{i} + w * (d{i} + x * (e{i} + w * (f{i} + x * g{i}))))))"),
 }
 
 
-def _gen_dense_unrolled(order, n):
-    args, row, value = _DENSE_UNROLLED[order]
-    rows = ", ".join("(" + row.format(i=i) + ")" for i in range(n))
-    values = ", ".join(value.format(i=i) for i in range(n))
-    return _compile(f"def ev({args}, rows):\n    {rows}, = rows\n    return [{values}]\n", "ev")
-
-
-# the same evaluators as closures over the step's coefficients: t -> state, one call instead of
-# two and no unpacking of the rows per evaluation (the common communication step evaluates once)
-_DENSE_PREAMBLE = {5: "hx = h * x", 8: "w = 1.0 - x"}
+def _dense_ev_lines(order, n):
+    """Source of the inner ``ev(t)`` (and ``return ev``) of a closure factory over the names of
+    ``_DENSE_UNROLLED[order]`` for ``n`` states."""
+    preamble, _, value = _DENSE_UNROLLED[order]
+    return ["    def ev(t):", "        x = (t - t0) / h", f"        {preamble}",
+            f"        return [{', '.join(value.format(i=i) for i in range(n))}]", "    return ev"]
 
 
 def _gen_dense_closure(order, n):
-    _, row, value = _DENSE_UNROLLED[order]
+    """``make(t0, h, y0, Q) -> ev``: Q the coefficient vectors, as the _Dense classes take them."""
+    row = _DENSE_UNROLLED[order][1]
     names = [row.format(i=i).split(", ") for i in range(n)]  # per state: y, then its coefficients
     lines = ["def make(t0, h, y0, Q):", f"    {', '.join(r[0] for r in names)}, = y0"]
     for j in range(len(names[0]) - 1):
         lines.append(f"    {', '.join(r[j + 1] for r in names)}, = Q[{j}]")
-    lines += ["    def ev(t):", "        x = (t - t0) / h", f"        {_DENSE_PREAMBLE[order]}",
-              f"        return [{', '.join(value.format(i=i) for i in range(n))}]", "    return ev"]
-    return _compile("\n".join(lines) + "\n", "make")
+    return _compile("\n".join(lines + _dense_ev_lines(order, n)) + "\n", "make")
 
 
 METHODS = {5: DOPRI5(), 8: DOP853()}
