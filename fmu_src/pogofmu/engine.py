@@ -115,6 +115,25 @@ def _gen_step_unrolled(A, B, C, n_stages, n):
     return _compile("\n".join(lines) + "\n", "step")
 
 
+def _term_sum(coefs, i):
+    """``c0*k0_i + c2*k2_i + ...``: state i's terms of a combination of the stages (zero
+    coefficients skipped, the order of _lincomb)."""
+    return " + ".join(f"{c!r}*k{j}_{i}" for j, c in enumerate(coefs) if c != 0.0)
+
+
+def _unpack_lines(combinations, n):
+    """Source lines unpacking ``K`` into the stage vectors ``k<j>``, and those that the
+    ``combinations`` use into their ``n`` components ``k<j>_<i>``."""
+    stages = max(len(c) for c in combinations)
+    used = sorted({j for c in combinations for j, v in enumerate(c) if v != 0.0})
+    return [f"    {', '.join(f'k{j}' for j in range(stages))}, = K",
+            *(f"    {', '.join(f'k{j}_{i}' for i in range(n))}, = k{j}" for j in used)]
+
+
+def _unpack_state(vector, name, n):
+    return f"    {', '.join(f'{name}{i}' for i in range(n))}, = {vector}"
+
+
 class _Pair:
     """An embedded explicit Runge-Kutta pair with FSAL and dense output (generated code)."""
 
@@ -180,26 +199,17 @@ class DOPRI5(_Pair):
         states: the same operations in the same order as the loops above (the same bits), without
         a zip and a list per coefficient (the dense output of a step costs about a third)."""
         E, P = self._E, self._P
-        stages = len(E)
-
-        def term_sum(coefs, i):
-            return " + ".join(f"{c!r}*k{j}_{i}" for j, c in enumerate(coefs) if c != 0.0)
-
-        used = sorted({j for j, c in enumerate(E) if c != 0.0} | {j for row in P for j, c in enumerate(row) if c != 0.0})
-        unpack = [f"    {', '.join(f'k{j}' for j in range(stages))}, = K"]
-        unpack += [f"    {', '.join(f'k{j}_{i}' for i in range(n))}, = k{j}" for j in used]
-        state = lambda v, name: f"    {', '.join(f'{name}{i}' for i in range(n))}, = {v}"
-        norm = ["def error_norm(K, h, y, y_new, atol, rtol):", *unpack, state("y", "y"),
-                state("y_new", "yn"), "    acc = 0.0"]
+        unpack = _unpack_lines([E, *zip(*P)], n)
+        norm = ["def error_norm(K, h, y, y_new, atol, rtol):", *unpack, _unpack_state("y", "y", n),
+                _unpack_state("y_new", "yn", n), "    acc = 0.0"]
         for i in range(n):
             norm += [f"    ay, an = abs(y{i}), abs(yn{i})",
-                     f"    e = h*({term_sum(E, i)}) / (atol + rtol*(an if an > ay else ay))",  # = max(ay, an)
+                     f"    e = h*({_term_sum(E, i)}) / (atol + rtol*(an if an > ay else ay))",  # = max(ay, an)
                      "    acc += e*e"]
         norm.append(f"    return sqrt(acc/{n})")
         pair.error_norm = _compile("\n".join(norm) + "\n", "error_norm")
-        make = ["def make(t0, h, Y, K):", *unpack, state("Y", "y")]  # the names of _DENSE_UNROLLED[5]
-        make += [f"    {'abcd'[r]}{i} = {term_sum([P[j][r] for j in range(stages)], i)}"
-                 for r in range(4) for i in range(n)]
+        make = ["def make(t0, h, Y, K):", *unpack, _unpack_state("Y", "y", n)]  # names of _DENSE_UNROLLED[5]
+        make += [f"    {'abcd'[r]}{i} = {_term_sum([row[r] for row in P], i)}" for r in range(4) for i in range(n)]
         pair._dense_from_stages = _compile("\n".join(make + _dense_ev_lines(5, n)) + "\n", "make")
 
     _dense_from_stages = None
@@ -256,7 +266,19 @@ class DOP853(_Pair):
     _dense_closure = None
 
     def _specialize(self, pair, n):
-        pair._dense_closure = _gen_dense_closure(8, n)  # (its coefficients need three more stages)
+        """The error norm unrolled for ``n`` states (as DOPRI5's: the same operations in the same
+        order), and the dense evaluator as a closure (its coefficients need three more stages)."""
+        E5, E3 = tab.DOP853_E5, tab.DOP853_E3
+        norm = ["def error_norm(K, h, y, y_new, atol, rtol):", *_unpack_lines([E5, E3], n),
+                _unpack_state("y", "y", n), _unpack_state("y_new", "yn", n), "    n5 = n3 = 0.0"]
+        for i in range(n):
+            norm += [f"    ay, an = abs(y{i}), abs(yn{i})",
+                     "    sc = atol + rtol*(an if an > ay else ay)",  # = max(ay, an)
+                     f"    a = ({_term_sum(E5, i)}) / sc", f"    b = ({_term_sum(E3, i)}) / sc",
+                     "    n5 += a*a", "    n3 += b*b"]
+        norm += ["    if n5 == 0.0:", "        return 0.0", f"    return abs(h) * n5 / sqrt((n5 + 0.01*n3) * {n})"]
+        pair.error_norm = _compile("\n".join(norm) + "\n", "error_norm")
+        pair._dense_closure = _gen_dense_closure(8, n)
 
     def dense(self, fun, t0, y0, y1, h, K):
         if self._dense_closure is not None:
