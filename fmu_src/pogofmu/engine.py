@@ -175,7 +175,6 @@ class DOPRI5(_Pair):
         A, B, C, E, P = tab.DOPRI5_A, tab.DOPRI5_B, tab.DOPRI5_C, tab.DOPRI5_E, tab.DOPRI5_P
         ns = len(B)
         self._set_step(A, B, C, ns)
-        self._dense_eval = _dense5_eval
         self._E, self._P = E, P
         K = [f"k{j}" for j in range(ns + 1)]
         expr, ks = _lincomb(E, K)
@@ -208,16 +207,12 @@ class DOPRI5(_Pair):
                      "    acc += e*e"]
         norm.append(f"    return sqrt(acc/{n})")
         pair.error_norm = _compile("\n".join(norm) + "\n", "error_norm")
-        make = ["def make(t0, h, Y, K):", *unpack, _unpack_state("Y", "y", n)]  # names of _DENSE_UNROLLED[5]
+        make = ["def dense(fun, t0, Y, y1, h, K):", *unpack, _unpack_state("Y", "y", n)]  # names of _DENSE_UNROLLED[5]
         make += [f"    {'abcd'[r]}{i} = {_term_sum([row[r] for row in P], i)}" for r in range(4) for i in range(n)]
-        pair._dense_from_stages = _compile("\n".join(make + _dense_ev_lines(5, n)) + "\n", "make")
-
-    _dense_from_stages = None
+        pair.dense = _compile("\n".join(make + _dense_ev_lines(5, n)) + "\n", "dense")
 
     def dense(self, fun, t0, y0, y1, h, K):
-        if self._dense_from_stages is not None:
-            return self._dense_from_stages(t0, h, y0, K)
-        return _Dense5(t0, h, y0, self._coeffs(K), self._dense_eval)
+        return _Dense5(t0, h, y0, self._coeffs(K))
 
 
 class DOP853(_Pair):
@@ -229,7 +224,6 @@ class DOP853(_Pair):
         A, B, C = tab.DOP853_A, tab.DOP853_B, tab.DOP853_C
         ns, nx = tab.DOP853_N_STAGES, tab.DOP853_N_STAGES_EXTENDED
         self._set_step(A, B, C, ns)
-        self._dense_eval = _dense8_eval
         K = [f"k{j}" for j in range(ns + 1)]
         e5, k5 = _lincomb(tab.DOP853_E5, K)
         e3, k3 = _lincomb(tab.DOP853_E3, K)
@@ -263,8 +257,6 @@ class DOP853(_Pair):
         ]
         self._coeffs = _compile("\n".join(lines) + "\n", "coeffs")
 
-    _dense_closure = None
-
     def _specialize(self, pair, n):
         """The error norm unrolled for ``n`` states (as DOPRI5's: the same operations in the same
         order), and the dense evaluator as a closure (its coefficients need three more stages)."""
@@ -278,24 +270,26 @@ class DOP853(_Pair):
                      "    n5 += a*a", "    n3 += b*b"]
         norm += ["    if n5 == 0.0:", "        return 0.0", f"    return abs(h) * n5 / sqrt((n5 + 0.01*n3) * {n})"]
         pair.error_norm = _compile("\n".join(norm) + "\n", "error_norm")
-        pair._dense_closure = _gen_dense_closure(8, n)
+        make, coeffs = _gen_dense_closure(8, n), self._coeffs
+
+        def dense(fun, t0, y0, y1, h, K):
+            return make(t0, h, y0, coeffs(fun, t0, y0, y1, h, K))
+        pair.dense = dense
 
     def dense(self, fun, t0, y0, y1, h, K):
-        if self._dense_closure is not None:
-            return self._dense_closure(t0, h, y0, self._coeffs(fun, t0, y0, y1, h, K))
-        return _Dense8(t0, h, y0, self._coeffs(fun, t0, y0, y1, h, K), self._dense_eval)
+        return _Dense8(t0, h, y0, self._coeffs(fun, t0, y0, y1, h, K))
 
 
 class _Dense5:
-    __slots__ = ("t0", "h", "rows", "ev")
+    __slots__ = ("t0", "h", "rows")
 
-    def __init__(self, t0, h, y0, Q, ev):
-        self.t0, self.h, self.ev = t0, h, ev
+    def __init__(self, t0, h, y0, Q):
+        self.t0, self.h = t0, h
         self.rows = tuple(zip(y0, *Q))  # per state: (y0, q0, q1, q2, q3), zipped once per step
 
     def __call__(self, t):
         x = (t - self.t0) / self.h
-        return self.ev(x, self.h * x, self.rows)
+        return _dense5_eval(x, self.h * x, self.rows)
 
 
 def _dense5_eval(x, hx, rows):
@@ -303,15 +297,15 @@ def _dense5_eval(x, hx, rows):
 
 
 class _Dense8:
-    __slots__ = ("t0", "h", "rows", "ev")
+    __slots__ = ("t0", "h", "rows")
 
-    def __init__(self, t0, h, y0, F, ev):
-        self.t0, self.h, self.ev = t0, h, ev
+    def __init__(self, t0, h, y0, F):
+        self.t0, self.h = t0, h
         self.rows = tuple(zip(y0, *F))  # per state: y0 and its seven coefficients
 
     def __call__(self, t):
         x = (t - self.t0) / self.h
-        return self.ev(x, 1.0 - x, self.rows)
+        return _dense8_eval(x, 1.0 - x, self.rows)
 
 
 def _dense8_eval(x, w, rows):
