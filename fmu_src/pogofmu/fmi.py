@@ -164,12 +164,10 @@ class HybridSlave:
         cls = type(self)
         self._completes_outputs = cls._complete_outputs is not HybridSlave._complete_outputs
         self._own_advance = cls._advance_engine is not HybridSlave._advance_engine
-        self._real_out_names = [v.name for v in real_out]
-        self._int_out_names = [v.name for v in int_out]
         # one output buffer: the real outputs (doubles), then the integer ones (int32), filled by
         # one struct call per step in this order
         nr, ni = len(real_out), len(int_out)
-        self._out_values = _values_getter(self._real_out_names + self._int_out_names)
+        self._out_values = _values_getter([v.name for v in (*real_out, *int_out)])
         self._real_out_vrs = tuple(v.vr for v in real_out)
         self._int_out_vrs = tuple(v.vr for v in int_out)
         self._obuf = array("d", bytes(8 * (nr + (ni + 1) // 2)))
