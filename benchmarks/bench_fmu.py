@@ -198,8 +198,8 @@ def main(argv=None):
               f"brackets).\n    like for like (the target): FMU vs floor-io, a do-nothing FMU with the "
               f"same outputs, every output recorded;\n    1-out vs floor, one output recorded from "
               f"each. FMU/floor (all outputs vs one) for information only")
-        print(f"    C host: the same FMU in a C importer (no Python in the process); per-step CPU time "
-              f"of fmpy and of the C host, fixed costs subtracted")
+        print("    C host: the same FMU in a C importer (no Python in the process); per-step CPU time "
+              "of fmpy and of the C host, fixed costs subtracted")
         head = (f"{'case':<14} {'steps':>6} {'outputs':>7} {'FMU s':>15} {'floor-io s':>15} "
                 f"{'FMU/floor-io':>12} {'floor s':>15} {'1-out/floor':>11} {'C host s':>8} "
                 f"{'fmpy us/st':>10} {'C us/st':>7} {'fmpy/C':>6}  {'met':>4} {'FMU/floor':>9} {'events':>6}")

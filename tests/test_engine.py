@@ -7,8 +7,8 @@ import math
 
 import pytest
 
-from pogofmu.engine import Simulator, solver_parameters
-from pogofmu.model import FALLING, RISING, Event, HybridModel, Parameter, Variable, ZenoError
+from pogofmu.runtime.engine import Simulator
+from pogofmu.runtime.model import FALLING, RISING, Event, HybridModel, Parameter, Variable, ZenoError
 
 G = 9.81
 
@@ -23,7 +23,7 @@ def ball(restitution=0.8, h0=1.0, events=None):
     return HybridModel(
         name="Ball", description="bouncing ball",
         states=(Variable("y", "m"), Variable("v", "m/s")),
-        parameters=(Parameter("e", restitution), Parameter("h0", h0)) + solver_parameters(),
+        parameters=(Parameter("e", restitution), Parameter("h0", h0)),
         inputs=(Variable("F", "N"),), outputs=(),
         flow=lambda t, x, q, u, p: [x[1], -G + u[0]],
         events=evs, initial=lambda p: ([p.h0, 0.0], {"n": 0}), output_fn=lambda *a: {},
@@ -45,7 +45,7 @@ def impact_times(e, h0, n):
 @pytest.mark.parametrize("method, rel_tol, tol", [(5, 1e-10, 1e-9), (8, 1e-12, 1e-12)])
 def test_event_times_of_a_bouncing_ball(method, rel_tol, tol):
     model = ball()
-    sim = Simulator(model, model.params(method=method, rel_tol=rel_tol, max_step=0.0), keep_history=True)
+    sim = Simulator(model, dict(method=method, rel_tol=rel_tol, max_step=0.0), keep_history=True)
     sim.advance(3.0)
     got = [e.time for e in sim.events]
     ref = impact_times(0.8, 1.0, len(got))
@@ -55,7 +55,7 @@ def test_event_times_of_a_bouncing_ball(method, rel_tol, tol):
 
 def test_several_events_in_one_call_and_same_times_as_small_calls():
     model = ball()
-    p = model.params(method=8, rel_tol=1e-12)
+    p = dict(method=8, rel_tol=1e-12)
     big = Simulator(model, p, keep_history=True)
     big.advance(3.0)  # one call, 7 events
     small = Simulator(model, p, keep_history=True)
@@ -92,7 +92,7 @@ def test_direction_is_respected():
 def test_input_change_restarts_exactly():
     """Free fall, then thrust F from t = 0.2: y(t) is a piecewise parabola."""
     model = ball(h0=10.0)
-    sim = Simulator(model, model.params(rel_tol=1e-12))
+    sim = Simulator(model, dict(rel_tol=1e-12))
     sim.advance(0.2)
     sim.set_input((15.0,))
     x, _ = sim.advance(0.5)
@@ -104,7 +104,7 @@ def test_input_change_restarts_exactly():
 
 def test_step_size_is_kept_across_calls():
     model = ball(h0=1e3)
-    sim = Simulator(model, model.params(rel_tol=1e-6, max_step=0.0))
+    sim = Simulator(model, dict(rel_tol=1e-6, max_step=0.0))
     sim.advance(1.0)
     h = sim.h
     steps = sim.n_steps
@@ -116,7 +116,7 @@ def test_step_size_is_kept_across_calls():
 def test_zeno_ends_in_a_clear_error():
     """A ball with restitution 0.5 bounces infinitely often before t = 1.35 s (Zeno)."""
     model = ball(restitution=0.5)
-    sim = Simulator(model, model.params(rel_tol=1e-10, max_step=0.0))
+    sim = Simulator(model, dict(rel_tol=1e-10, max_step=0.0))
     with pytest.raises(ZenoError) as exc:
         sim.advance(5.0)
     text = str(exc.value)
@@ -153,14 +153,14 @@ def test_steps_unrolled_for_the_state_count_give_the_same_bits(method, monkeypat
     """The pairs specialized per state count (stage sums and dense output unrolled) perform the
     generic code's operations in the same order: every served state, every event count is equal
     bit for bit, for each model."""
-    from pogofmu import engine
-    from pogofmu.models.penetrator import MODEL as PEN
-    from pogofmu.models.pogo_stick import MODEL as POGO
-    from pogofmu.models.pogo_stick_mem import MODEL as MEM
-    from pogofmu.models.pogo_stick_sma import MODEL as SMA
+    from pogofmu.runtime import engine
+    from pogofmu.runtime.models.penetrator import MODEL as PEN
+    from pogofmu.runtime.models.pogo_stick import MODEL as POGO
+    from pogofmu.runtime.models.pogo_stick_mem import MODEL as MEM
+    from pogofmu.runtime.models.pogo_stick_sma import MODEL as SMA
 
     def run(model):
-        sim = engine.Simulator(model, model.params(method=method))
+        sim = engine.Simulator(model, dict(method=method))
         served = [tuple(sim.advance(k * 1e-3)[0]) for k in range(1, 2501)]
         return served, sim.n_events, sim.n_steps, type(sim.pair.step).__name__, sim.pair
 
@@ -168,7 +168,7 @@ def test_steps_unrolled_for_the_state_count_give_the_same_bits(method, monkeypat
         fast = run(model)
         assert fast[4] is not engine.METHODS[method], "the simulator did not get the specialized pair"
         with monkeypatch.context() as m:
-            m.setattr(engine._Pair, "specialized", lambda self, n: self)
+            m.setattr(engine.pairs._Pair, "specialized", lambda self, n: self)
             generic = run(model)
         assert generic[4] is engine.METHODS[method]
         assert fast[:3] == generic[:3], model.name

@@ -20,7 +20,7 @@ import pytest
 import build_fmu
 from support import DIST, ROOT, compile_c_host, fmu_path, parse_event_log, reference_events, simulate
 
-MODELS = {build_fmu.slave_class(s).__name__: build_fmu.slave_class(s).model for s in build_fmu.slave_files()}
+MODELS = {name: build_fmu.slave_class(name).model for name in build_fmu.model_names()}
 FMUS = sorted(MODELS)
 WITH_EVENTS = sorted(name for name, model in MODELS.items() if model.events)
 C_HOST_SOURCE = ROOT / "tests" / "c_host" / "fmi3_host.c"

@@ -117,10 +117,10 @@ def test_item2_a_model_without_states_takes_no_internal_steps():
     """HopController (no states) with max_step = 1e-6: before, 8 s of CPU per simulated second
     (internal steps of max_step on nothing).  Its max_step is unused, so it is not refused, and
     the engine takes no step: over 1e4 s, n_steps stays 0."""
-    from pogofmu.engine import Simulator
-    from pogofmu.models.hop_controller import MODEL
+    from pogofmu.runtime.engine import Simulator
+    from pogofmu.runtime.models.hop_controller import MODEL
 
-    sim = Simulator(MODEL, MODEL.params(max_step=1e-6))
+    sim = Simulator(MODEL, dict(max_step=1e-6))
     sim.advance(1e4)
     assert sim.n_steps == 0 and sim.t_out == 1e4
     run = simulate("HopController", start_values={"max_step": 1e-6}, stop_time=2.0)  # the FMU, 2000 steps
@@ -201,12 +201,11 @@ def test_item7_loose_rel_tol_is_refused():
 # ---- item 9: the event log in constant memory ---------------------------------------------------
 
 def _elastic_ball():
-    from pogofmu.engine import solver_parameters
-    from pogofmu.model import FALLING, Event, HybridModel, Parameter, Variable
+    from pogofmu.runtime.model import FALLING, Event, HybridModel, Parameter, Variable
 
     return HybridModel(
         name="Ball", description="elastic ball", states=(Variable("y", "m"), Variable("v", "m/s")),
-        parameters=(Parameter("h0", 1e-3),) + solver_parameters(), inputs=(), outputs=(),
+        parameters=(Parameter("h0", 1e-3),), inputs=(), outputs=(),
         flow=lambda t, x, q, u, p: [x[1], -G],
         events=(Event("impact", FALLING, lambda x, q, u, p: x[0], lambda x, q, u, p: ([0.0, -x[1]], q)),),
         initial=lambda p: ([p.h0, 0.0], {}), output_fn=lambda *a: {})
@@ -240,13 +239,13 @@ def _footprint(obj, seen=None):
 def test_item9_state_size_is_constant_as_events_grow():
     """Before: ~1.9 kB more per event in every fmi2GetFMUstate copy.  Without log_events the
     snapshot's size is the same after 300 and 3000 events; with it, the history is there."""
-    from pogofmu.engine import Simulator
+    from pogofmu.runtime.engine import Simulator
 
     model = _elastic_ball()
     period = 2 * math.sqrt(2e-3 / G)
     sizes = {}
     for keep in (False, True):
-        sim = Simulator(model, model.params(max_step=0.0, log_events=int(keep)))
+        sim = Simulator(model, dict(max_step=0.0, log_events=int(keep)))
         for n in (300, 3000):
             sim.advance((n - 0.25) * period)  # impact k at (k - 1/2) period
             assert sim.n_events == n
@@ -274,17 +273,17 @@ def test_item6_a_collapse_after_one_event_is_not_called_an_event_storm():
     """After a single event the dynamics become too fast to resolve (acceleration 1e300 m/s2 once
     the ball has hit the ground): the message says so, names the event and the time; "event
     storm" is kept for accumulating events (test_engine.py::test_zeno_ends_in_a_clear_error)."""
-    from pogofmu.engine import Simulator, solver_parameters
-    from pogofmu.model import FALLING, Event, HybridModel, ModelError, Parameter, Variable, ZenoError
+    from pogofmu.runtime.engine import Simulator
+    from pogofmu.runtime.model import FALLING, Event, HybridModel, ModelError, Parameter, Variable, ZenoError
 
     model = HybridModel(
         name="Ball", description="ball on a hard floor", states=(Variable("y", "m"), Variable("v", "m/s")),
-        parameters=(Parameter("h0", 1.0),) + solver_parameters(), inputs=(), outputs=(),
+        parameters=(Parameter("h0", 1.0),), inputs=(), outputs=(),
         flow=lambda t, x, q, u, p: [x[1], -G if not q["hit"] else 1e300 * (1.0 + x[0] * x[0])],
         events=(Event("impact", FALLING, lambda x, q, u, p: x[0], lambda x, q, u, p: (x, dict(q, hit=1)),
                       lambda q: not q["hit"]),),
         initial=lambda p: ([p.h0, 0.0], {"hit": 0}), output_fn=lambda *a: {})
-    sim = Simulator(model, model.params(max_step=0.0))
+    sim = Simulator(model, dict(max_step=0.0))
     with pytest.raises(ModelError) as exc:
         sim.advance(2.0)
     text = str(exc.value)

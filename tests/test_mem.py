@@ -4,7 +4,6 @@ References are independent of the code under test: the closed-form event times o
 (shared/reference/pogo_basic_events.csv), a solve_ivp model of the mem-stick written here, the
 energy balance, and the geometry of the pinched loop.
 """
-import math
 import re
 
 import numpy as np

@@ -17,7 +17,7 @@ import pytest
 import build_fmu
 from support import DIST, ROOT, compile_c_host, fmu_path, simulate
 
-FMUS = sorted(build_fmu.slave_class(s).__name__ for s in build_fmu.slave_files())
+FMUS = build_fmu.model_names()
 C_HOST_SOURCE = ROOT / "tests" / "c_host" / "fmi2_host.c"
 CLEAN_SCRIPT = ROOT / "tests" / "_clean_venv_script.py"
 TEARDOWN_PROCESSES = int(os.environ.get("POGOFMU_TEARDOWN_PROCESSES", "100"))  # per host
@@ -203,7 +203,7 @@ def other_version_fmu(tmp_path_factory):
     copy = tmp_path_factory.mktemp("project_copy")
     shutil.copytree(ROOT / "fmu_src", copy / "fmu_src", ignore=shutil.ignore_patterns("__pycache__"))
     shutil.copy2(ROOT / "build_fmu.py", copy / "build_fmu.py")
-    init = copy / "fmu_src" / "pogofmu" / "__init__.py"
+    init = copy / "fmu_src" / "pogofmu" / "runtime" / "__init__.py"
     text = init.read_text()
     version = text.split('__version__ = "')[1].split('"')[0]
     init.write_text(text.replace(f'__version__ = "{version}"', f'__version__ = "{version}+other"'))

@@ -268,7 +268,9 @@ def breakers(name):
         out += BREAKERS["stick"]
     if name == "HopController":  # no states: abs_tol and max_step are unused, only their signs are rules
         out = [b if b[0] not in ("abs_tol", "max_step") else (b[0], st.floats(-1.0, -1e-9), b[2]) for b in out]
-    out += [(f, BAD_NUMBER, (f,)) for f in FLOAT_PARAMS[name]]
+    # max_step = inf is valid (unbounded, as 0): only NaN and -inf break its rules
+    out += [(f, st.sampled_from([math.nan, -math.inf]) if f == "max_step" else BAD_NUMBER, (f,))
+            for f in FLOAT_PARAMS[name]]
     return out
 
 

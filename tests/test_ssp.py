@@ -7,7 +7,6 @@ delay), and libcosim (a second, independent FMI/SSP importer).
 """
 import json
 import math
-import shutil
 import subprocess
 import sys
 import zipfile

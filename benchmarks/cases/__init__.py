@@ -8,7 +8,7 @@ How to add a case (e.g. ``pogostick_mem.py`` for PogoStickMem)
 1. Copy ``pogostick.py`` to ``<your_model>.py`` in this folder.
 2. Set ``name`` (row label), ``fmu`` (the FMU's name, i.e. the slave class that ``build_fmu.py``
    builds, e.g. ``"PogoStickMem"``), ``model`` (``"module:ATTRIBUTE"`` of the
-   :class:`~pogofmu.model.HybridModel`, e.g. ``"pogofmu.models.pogo_stick_mem:MODEL"``) and
+   :class:`~pogofmu.runtime.model.HybridModel`, e.g. ``"pogofmu.runtime.models.pogo_stick_mem:MODEL"``) and
    ``params`` (overrides of the model's parameter defaults; ``{}`` = the default experiment; do
    not put solver knobs here, the benchmarks set them).
 3. Rewrite ``scipy_loop``: the same model written *as a Python user would* with
@@ -62,7 +62,7 @@ class Case:
 
     name: str  # row label
     fmu: str  # FMU built by build_fmu.py (the slave class name), e.g. "PogoStick"
-    model: str  # "module:ATTRIBUTE" of the HybridModel, e.g. "pogofmu.models.pogo_stick:MODEL"
+    model: str  # "module:ATTRIBUTE" of the HybridModel, e.g. "pogofmu.runtime.models.pogo_stick:MODEL"
     scipy_loop: Callable[..., Events]  # (p, stop_time, method, rtol, atol, max_step) -> events
     reference: Callable[["Case"], Events]  # (case) -> exact events [(time, name), ...] up to stop_time
     reference_label: str  # where the reference comes from (printed with the results)

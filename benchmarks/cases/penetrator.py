@@ -1,6 +1,6 @@
 """Benchmark case Penetrator (MODELS.md Sect. 4): the stick driven into a Hunt-Crossley soil, defaults.
 
-The scipy peer integrates the same 7 states as ``pogofmu.models.penetrator.MODEL`` --
+The scipy peer integrates the same 7 states as ``pogofmu.runtime.models.penetrator.MODEL`` --
 ``[y, ydot, delta, tau, W_leg, W_soil, W_ext]`` -- with one right-hand side per mode (Eq. 50 in
 contact), the guards as terminal events with a direction (touchdown: the foot height
 ``y - x_i - x_lift exp(-(k/c) tau)`` falling; liftoff: ``delta`` falling; max_penetration: a new
@@ -83,7 +83,7 @@ def scipy_loop(p, stop_time, method, rtol, atol, max_step):
 CASE = Case(
     name="Penetrator",
     fmu="Penetrator",
-    model="pogofmu.models.penetrator:MODEL",
+    model="pogofmu.runtime.models.penetrator:MODEL",
     params={},  # default drop into K = 1e4 N/m^1.5, n = 1.5 soil: 19 contact events + 1 record
     scipy_loop=scipy_loop,
     reference=tight_scipy_reference(),

@@ -3,7 +3,7 @@
 The scipy peer below is the basic pogo stick written as a Python user would write it with
 ``solve_ivp``: one right-hand side per mode, the guards as terminal events with a direction, and a
 restart loop that applies the jump.  It integrates the same 7 states as
-``pogofmu.models.pogo_stick.MODEL`` -- ``[xbar, xdot, y, ydot, z, W_leg, W_ext]`` -- so that both
+``pogofmu.runtime.models.pogo_stick.MODEL`` -- ``[xbar, xdot, y, ydot, z, W_leg, W_ext]`` -- so that both
 solvers' error control sees the same vector (``F_ext = 0``, so ``W_ext`` stays 0).
 """
 from __future__ import annotations
@@ -62,7 +62,7 @@ def scipy_loop(p, stop_time, method, rtol, atol, max_step):
 CASE = Case(
     name="PogoStick",
     fmu="PogoStick",
-    model="pogofmu.models.pogo_stick:MODEL",
+    model="pogofmu.runtime.models.pogo_stick:MODEL",
     params={},  # the default experiment: drop from y = 1.5 m, 19 events, settles after t = 7.07 s
     scipy_loop=scipy_loop,
     reference=csv_reference(SHARED_REFERENCE / "pogo_basic_events.csv"),

@@ -1,6 +1,6 @@
 """Benchmark case PogoStickMem (MODELS.md Sect. 2): softening mem-spring + linear dashpot (the defaults).
 
-The scipy peer integrates the same 8 states as ``pogofmu.models.pogo_stick_mem.MODEL`` --
+The scipy peer integrates the same 8 states as ``pogofmu.runtime.models.pogo_stick_mem.MODEL`` --
 ``[xbar, xdot, y, ydot, z, a, W_leg, W_ext]`` (absement ``a' = x``) -- with one right-hand side
 per mode, terminal events and a restart loop (``F_ext = 0``, so ``W_ext`` stays 0).
 No closed form: the reference is the same loop at DOP853, rtol 1e-13.
@@ -69,7 +69,7 @@ def scipy_loop(p, stop_time, method, rtol, atol, max_step):
 CASE = Case(
     name="PogoStickMem",
     fmu="PogoStickMem",
-    model="pogofmu.models.pogo_stick_mem:MODEL",
+    model="pogofmu.runtime.models.pogo_stick_mem:MODEL",
     params={},  # default: softening mem-spring, beta = 1; 11 events, then drifts down in contact
     scipy_loop=scipy_loop,
     reference=tight_scipy_reference(),

@@ -10,7 +10,7 @@ from .pogostick_mem import scipy_loop
 CASE = Case(
     name="PogoStickMem-linear",
     fmu="PogoStickMem",
-    model="pogofmu.models.pogo_stick_mem:MODEL",
+    model="pogofmu.runtime.models.pogo_stick_mem:MODEL",
     params={"spring_law": 0, "gamma": 0.0},
     scipy_loop=scipy_loop,
     reference=csv_reference(SHARED_REFERENCE / "pogo_basic_events.csv"),

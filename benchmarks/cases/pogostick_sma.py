@@ -1,6 +1,6 @@
 """Benchmark case PogoStickSMA (MODELS.md Sect. 3): superelastic SMA flag + linear dashpot, defaults.
 
-The scipy peer integrates the same 7 states as ``pogofmu.models.pogo_stick_sma.MODEL`` --
+The scipy peer integrates the same 7 states as ``pogofmu.runtime.models.pogo_stick_sma.MODEL`` --
 ``[xbar, xdot, y, ydot, z, W_leg, W_ext]`` -- with one right-hand side per (mode, SMA branch),
 the contact and branch guards as terminal events with a direction, and a restart loop that applies
 the jump (branch, anchor).  No closed form for the event times: the reference is the same loop at
@@ -97,7 +97,7 @@ def scipy_loop(p, stop_time, method, rtol, atol, max_step):
 CASE = Case(
     name="PogoStickSMA",
     fmu="PogoStickSMA",
-    model="pogofmu.models.pogo_stick_sma:MODEL",
+    model="pogofmu.runtime.models.pogo_stick_sma:MODEL",
     params={},  # default drop: 3 full flags and a small one, 23 events, settles in contact
     scipy_loop=scipy_loop,
     reference=tight_scipy_reference(),

@@ -1,8 +1,10 @@
-"""pogofmu: hybrid pogo-stick models (Pei, Quadrelli & Wright 2020) exported as FMI 2.0 co-simulation FMUs.
+"""pogofmu: hybrid pogo-stick models (Pei, Quadrelli & Wright 2020) exported as FMI 2.0
+co-simulation and FMI 3.0 model-exchange/co-simulation FMUs with exact state-event location.
 
-Layers: :mod:`pogofmu.model` (a model is plain data and pure functions), :mod:`pogofmu.engine`
-(one integrator with state-event location for every model), :mod:`pogofmu.elements` (leg
-elements composed in parallel), :mod:`pogofmu.models` (the model variants) and
-:mod:`pogofmu.fmi` (one adapter from any model to an FMI 2.0 slave).
+Two floors: :mod:`pogofmu.runtime` is the code that goes into every FMU (models, engine, FMI
+adapters; standard library only); the host-side tools beside it — :mod:`pogofmu.master`
+(default experiments), :mod:`pogofmu.ssp` (the SSP master), :mod:`pogofmu.sweep`,
+:mod:`pogofmu.studies` and :mod:`pogofmu.cli` (the ``pogofmu`` command) — drive the built FMUs
+through fmpy and never go into an FMU.
 """
-__version__ = "0.1.0"
+from .runtime import __version__  # noqa: F401 (one place for the version: the FMUs carry it)

@@ -13,10 +13,10 @@ from __future__ import annotations
 
 import argparse
 import csv
-import importlib
 import math
-import sys
 from pathlib import Path
+
+from pogofmu.runtime.status import status_name
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -60,7 +60,7 @@ def default_input_signals(model, stop: float, step: float, start_values=None):
 def print_problems(component, instance, status, category, message):
     """fmpy logger callback: print warnings and errors only (not the logEvents chatter)."""
     if status >= 1:
-        label = ["OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING"][min(status, 5)]
+        label = status_name(status)
         text = message.decode(errors="replace") if message else ""
         print(f"[{label}] {instance.decode(errors='replace') if instance else ''}: {text}", flush=True)
 
@@ -105,7 +105,6 @@ def _label(names, units):
 def draw_panel(ax, res, panel, units, integers):
     """One panel of a model's figure: a loop ``("vs", x, y[, rate, label+, label-])`` or signals
     against time; every y-axis labelled with its unit, integer signals with integer ticks."""
-    import numpy as np
     from matplotlib.ticker import MaxNLocator
 
     if panel[0] == "vs":
@@ -207,18 +206,17 @@ def plot_figures(res, model, out_dir: Path, title: str):
 
 
 def model_of(fmu: Path):
-    """The HybridModel behind an FMU built by this project (from its slave class)."""
-    src = ROOT / "fmu_src"
-    if str(src) not in sys.path:
-        sys.path.insert(0, str(src))
-    from pogofmu.fmi import HybridSlave
+    """The HybridModel behind an FMU built by this project (its modelName in the registry), or
+    None for any other FMU."""
+    from fmpy import read_model_description
 
-    for script in sorted(src.glob("slave_*.py")):
-        module = importlib.import_module(script.stem)
-        for obj in vars(module).values():
-            if isinstance(obj, type) and issubclass(obj, HybridSlave) and obj.__name__ == fmu.stem:
-                return obj.model
-    return None
+    from pogofmu.runtime.models import all_models
+
+    try:
+        name = read_model_description(str(fmu), validate=False).modelName
+    except Exception:  # noqa: BLE001 - not an FMU of this project: no model
+        return None
+    return all_models().get(name)
 
 
 def run(dist: Path, out: Path, names=()):

@@ -441,8 +441,7 @@ def validate(system: System, parameters: Optional[str] = None) -> Dict[str, Opti
 # the master
 # =============================================================================================
 
-def _label(status):
-    return ["OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING"][min(int(status), 5)]
+from pogofmu.runtime.status import status_name as _label  # noqa: E402
 
 
 class _Instance:

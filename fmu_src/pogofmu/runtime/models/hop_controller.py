@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import math
 
-from ..engine import solver_parameters
+from ..plant import DAMPING, FREE_LENGTH, GRAVITY, MASS, STIFFNESS, known_to_controller
 from ..model import HybridModel, Parameter, Variable, require, require_finite, require_nonnegative, \
     require_positive
 
@@ -35,12 +35,9 @@ PARAMETERS = (
     Parameter("tau_E", 0.02, "s", "time constant of the energy-deficit decay during leg extension (> 0)"),
     Parameter("K_D", 1.0, "", "fraction of the dashpot loss c*ydot fed forward (1: full compensation, 0: none)"),
     Parameter("F_max", 20.0, "N", "largest thrust (the thrust is clipped to [0, F_max])"),
-    Parameter("m", 1.0, "kg", "mass of the hopper (controller's model of the plant)"),
-    Parameter("g", 9.81, "m/s2", "gravitational acceleration (Earth 9.81, Moon 1.62, Ceres 0.28)"),
-    Parameter("k", 100.0, "N/m", "leg stiffness (controller's model of the plant)"),
-    Parameter("c", 0.5, "N.s/m", "leg damping (controller's model of the plant)"),
-    Parameter("x_i", 1.0, "m", "free leg length (controller's model of the plant)"),
-) + solver_parameters()  # required by the engine; meaningless for a model without states
+    known_to_controller(MASS), GRAVITY, known_to_controller(STIFFNESS), known_to_controller(DAMPING),
+    known_to_controller(FREE_LENGTH),
+)
 
 INPUTS = (
     Variable("y", "m", "height of the hopper's mass (from the stick)", 1.5),

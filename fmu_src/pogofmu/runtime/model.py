@@ -1,9 +1,9 @@
 """A hybrid dynamical system as plain data and pure functions.
 
-Nothing here knows about FMI: :mod:`pogofmu.engine` integrates any :class:`HybridModel`,
-:mod:`pogofmu.fmi` maps any of them onto an FMI 2.0 co-simulation slave.
+Nothing here knows about FMI or the solver: the engine (:mod:`.engine`) integrates any
+:class:`HybridModel`, the adapters (:mod:`.fmi2`, :mod:`.fmi3`) map any of them onto FMI.
 
-Conventions (MODELS.md):
+Conventions (docs/models.md):
 
 * continuous states ``x`` (a list of floats; ``flow`` returns a list too), a discrete state ``q`` (a ``dict`` of
   numbers: the mode ``s`` and any memory such as an SMA branch), parameters ``p`` (a read-only
@@ -98,8 +98,10 @@ class HybridModel:
     """Everything the engine and the FMI adapter need to know about one model variant.
 
     ``initial(p) -> (x0, q0)`` derives the initial state from the parameters (it may raise
-    :class:`ParameterError`); ``check(p)`` validates the parameters; ``domain(t, x, q, u, p)``
-    returns ``None`` or the text of the violated domain condition;
+    :class:`ParameterError`); ``check(p)`` validates the parameters; ``domain(t, x, q, u, p,
+    slack)`` returns ``None`` or the text of the violated domain condition, where
+    ``slack(scale)`` (given by the engine) is how far the integration error alone may carry a
+    state of magnitude ``scale`` beyond a bound;
     ``output_fn(t, x, q, u, p)`` returns a dict of the model's output values (the engine adds
     ``n_events``, ``t_last_event`` and ``last_event``, see :meth:`engine_outputs`);
     ``integer_outputs`` / ``integer_inputs`` name the outputs / inputs that are integers (modes,
@@ -131,7 +133,7 @@ class HybridModel:
     initial: Callable
     output_fn: Callable
     check: Callable = lambda p: None
-    domain: Callable = lambda t, x, q, u, p: None
+    domain: Callable = lambda t, x, q, u, p, slack: None
     integer_outputs: frozenset = frozenset()
     integer_inputs: frozenset = frozenset()
     bind: Optional[Callable] = None

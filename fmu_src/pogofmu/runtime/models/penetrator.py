@@ -2,7 +2,7 @@
 Appendix A.3, Eqs. 49-50).
 
 A mass ``m`` on a massless leg (linear spring ``k`` parallel to a linear dashpot ``c``, free length
-``x_i``) whose massless foot penetrates a compliant soil (:class:`~pogofmu.soil.HuntCrossley`).
+``x_i``) whose massless foot penetrates a compliant soil (:class:`~pogofmu.runtime.soil.HuntCrossley`).
 The foot's penetration ``delta`` (positive into the soil) is a state: the leg and the soil are in
 series, and the force balance on the massless foot gives its rate.
 
@@ -36,9 +36,9 @@ from __future__ import annotations
 
 import math
 
-from ..engine import solver_parameters
 from ..model import (FALLING, Event, HybridModel, Parameter, Variable, require,
                      require_finite, require_nonnegative, require_positive)
+from ..plant import DAMPING, F_EXT, FREE_LENGTH, GRAVITY, MASS, STIFFNESS
 from ..soil import HuntCrossley
 
 SOIL = HuntCrossley()
@@ -75,18 +75,14 @@ OUTPUTS = (
              "E + W_leg + W_soil = E(0) + W_ext"),
 )
 
-INPUTS = (Variable("F_ext", "N", "external vertical force on the mass (positive up)", 0.0),)
+INPUTS = (F_EXT,)
 
 PARAMETERS = (
-    Parameter("m", 1.0, "kg", "mass of the body"),
-    Parameter("k", 100.0, "N/m", "stiffness of the leg spring"),
-    Parameter("c", 0.5, "N.s/m", "damping coefficient of the leg dashpot (> 0: it sets the foot's rate)"),
-    Parameter("x_i", 1.0, "m", "free length of the leg"),
-    Parameter("g", 9.81, "m/s2", "gravitational acceleration (Earth 9.81, Moon 1.62, Ceres 0.28)"),
+    MASS, STIFFNESS, DAMPING, FREE_LENGTH, GRAVITY,
 ) + SOIL.parameters + (
     Parameter("y_0", 1.5, "m", "initial height of the mass (flight if y_0 > x_i, else contact)"),
     Parameter("ydot_0", 0.0, "m/s", "initial velocity of the mass"),
-) + solver_parameters()
+)
 
 PLOTS = (
     (("y",), ("delta", "delta_max"), ("F_soil",), ("s",)),  # penetration and soil force vs time
@@ -242,7 +238,7 @@ EVENTS = (
 )
 
 
-def domain(t, X, q, u, p):
+def domain(t, X, q, u, p, slack):
     y, d = X[I_Y], X[I_DELTA]
     if y <= 0:
         return f"mass height y = {y:.6g} m must stay > 0 (the body reached the soil surface)"

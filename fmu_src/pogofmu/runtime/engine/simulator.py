@@ -1,6 +1,6 @@
 """The hybrid engine: embedded Runge-Kutta integration with exact state-event location.
 
-One :class:`Simulator` integrates any :class:`~pogofmu.model.HybridModel`:
+One :class:`Simulator` integrates any :class:`~pogofmu.runtime.model.HybridModel`:
 
 * Dormand-Prince 5(4) (``method=5``, the pair behind ode45) or 8(5,3) (``method=8``, DOP853),
   with the usual error control (``rel_tol``, ``abs_tol``, ``max_step``, ``initial_step``);
@@ -14,7 +14,7 @@ One :class:`Simulator` integrates any :class:`~pogofmu.model.HybridModel`:
   the step sequence, and so every event time, does not depend on the communication grid.  Only a
   change of input forces a restart at the communication point;
 * an event storm (more than ``zeno_max_events`` events within ``zeno_window`` seconds) and a step
-  size that collapses end in a :class:`~pogofmu.model.ZenoError` / error, never in a hang;
+  size that collapses end in a :class:`~pogofmu.runtime.model.ZenoError` / error, never in a hang;
 * a work budget (parameter ``max_steps_per_second``, windows of 1 s of simulated time) ends a
   run that turns stiff with an error naming the model's fastest time scales, after a warning at
   20 % of it; a model without states takes no internal steps at all;
@@ -28,6 +28,7 @@ start of the simulation a guard exactly at zero whose motion leaves it towards i
 fires at the start time (a stick at its free length moving up lifts off at t0).
 """
 from __future__ import annotations
+from __future__ import annotations
 
 import copy
 import math
@@ -35,8 +36,9 @@ from collections import deque
 from dataclasses import dataclass
 from typing import List, Optional
 
-from . import _tableaux as tab
-from .model import DomainError, HybridModel, ModelError, ParameterError, Params, ZenoError, FALLING
+from ..model import DomainError, HybridModel, ModelError, ParameterError, ZenoError, FALLING
+from .pairs import METHODS
+from .settings import ABS_TOL_MAX_FRACTION, check_solver_parameters, domain_slack, split_parameters
 
 EPS = 2.220446049250313e-16
 SAFETY = 0.9
@@ -51,298 +53,6 @@ MIN_TIME_SCALE = 1e-9  # s: faster physical time scales are refused at initializ
 UNBOUNDED_STEP_FACTOR = 10.0  # max_step = 0: steps still <= this x max(|t|, 1) s (an exactly integrated
 #                               parabola, err = 0, grew the step tenfold per step to 1e151 s, issue 9)
 STORM_EVENTS = 5  # a collapsed step after an event is an event storm if this many events lie in zeno_window
-
-
-# =============================================================================================
-# Runge-Kutta pairs
-# =============================================================================================
-#
-# States are plain lists of floats: for the handful of states of these models, Python float
-# arithmetic is several times cheaper than numpy's per-call overhead on tiny arrays.  The stage
-# sums are generated once per pair from the tableau (zero coefficients skipped) and compiled.
-
-def _lincomb(coefs, names, scale="h"):
-    """Source of ``[base + h*(c0*k0_ + ...) ...]`` pieces: (expression, zipped names, vectors)."""
-    terms = [(c, k) for c, k in zip(coefs, names) if c != 0.0]
-    expr = " + ".join(f"{c!r}*{k}_" for c, k in terms)
-    return expr, [k for _, k in terms]
-
-
-def _gen_stages(A, C, first, last, y="y", t="t"):
-    """Source lines computing stages ``k{first}..k{last-1}`` from ``k0..``."""
-    lines = []
-    for s in range(first, last):
-        expr, ks = _lincomb(A[s][:s], [f"k{j}" for j in range(s)])
-        it = ", ".join(f"{k}_" for k in ks)
-        zs = ", ".join(ks)
-        lines.append(f"    k{s} = fun({t} + {C[s]!r}*h, [y_ + h*({expr}) for y_, {it} in zip({y}, {zs})])")
-    return lines
-
-
-def _compile(src, name):
-    ns = {"sqrt": math.sqrt}
-    exec(compile(src, f"<pogofmu.engine:{name}>", "exec"), ns)
-    return ns[name]
-
-
-def _gen_step(A, B, C, n_stages):
-    lines = ["def step(fun, t, y, f, h):", "    k0 = f"]
-    lines += _gen_stages(A, C, 1, n_stages)
-    expr, ks = _lincomb(B, [f"k{j}" for j in range(n_stages)])
-    lines.append(f"    y_new = [y_ + h*({expr}) for y_, {', '.join(k + '_' for k in ks)} in zip(y, {', '.join(ks)})]")
-    lines.append("    f_new = fun(t + h, y_new)")
-    lines.append(f"    return y_new, f_new, ({', '.join(f'k{j}' for j in range(n_stages))}, f_new)")
-    return _compile("\n".join(lines) + "\n", "step")
-
-
-def _gen_step_unrolled(A, B, C, n_stages, n):
-    """The step of :func:`_gen_step` for exactly ``n`` states, the state loop unrolled: the same
-    operations in the same order (the same bits), without a comprehension and a zip per stage
-    (about 40 % cheaper for the 5-8 states of these models)."""
-    def combination(coefs, i):
-        terms = [f"{c!r}*k{j}_{i}" for j, c in enumerate(coefs) if c != 0.0]
-        return f"y{i} + h*({' + '.join(terms)})"
-
-    lines = ["def step(fun, t, y, f, h):", "    k0 = f",
-             f"    {', '.join(f'y{i}' for i in range(n))}, = y",
-             f"    {', '.join(f'k0_{i}' for i in range(n))}, = k0"]
-    for s in range(1, n_stages):
-        lines.append(f"    k{s} = fun(t + {C[s]!r}*h, [{', '.join(combination(A[s][:s], i) for i in range(n))}])")
-        lines.append(f"    {', '.join(f'k{s}_{i}' for i in range(n))}, = k{s}")
-    lines.append(f"    y_new = [{', '.join(combination(B, i) for i in range(n))}]")
-    lines.append("    f_new = fun(t + h, y_new)")
-    lines.append(f"    return y_new, f_new, ({', '.join(f'k{j}' for j in range(n_stages))}, f_new)")
-    return _compile("\n".join(lines) + "\n", "step")
-
-
-def _term_sum(coefs, i):
-    """``c0*k0_i + c2*k2_i + ...``: state i's terms of a combination of the stages (zero
-    coefficients skipped, the order of _lincomb)."""
-    return " + ".join(f"{c!r}*k{j}_{i}" for j, c in enumerate(coefs) if c != 0.0)
-
-
-def _unpack_lines(combinations, n):
-    """Source lines unpacking ``K`` into the stage vectors ``k<j>``, and those that the
-    ``combinations`` use into their ``n`` components ``k<j>_<i>``."""
-    stages = max(len(c) for c in combinations)
-    used = sorted({j for c in combinations for j, v in enumerate(c) if v != 0.0})
-    return [f"    {', '.join(f'k{j}' for j in range(stages))}, = K",
-            *(f"    {', '.join(f'k{j}_{i}' for i in range(n))}, = k{j}" for j in used)]
-
-
-def _unpack_state(vector, name, n):
-    return f"    {', '.join(f'{name}{i}' for i in range(n))}, = {vector}"
-
-
-class _Pair:
-    """An embedded explicit Runge-Kutta pair with FSAL and dense output (generated code)."""
-
-    name = ""
-    order = 0
-    error_exponent = 0.0
-    MAX_UNROLLED = 32  # state counts up to this get a step with the state loop unrolled
-
-    def _set_step(self, A, B, C, n_stages):
-        self.step = _gen_step(A, B, C, n_stages)
-        self._tableau = (A, B, C, n_stages)
-        self._specialized = {}
-
-    def specialized(self, n: int) -> "_Pair":
-        """This pair with its step generated for exactly ``n`` states (cached; the pair itself for
-        no states or very many)."""
-        if n <= 0 or n > self.MAX_UNROLLED:
-            return self
-        pair = self._specialized.get(n)
-        if pair is None:
-            pair = copy.copy(self)
-            pair.step = _gen_step_unrolled(*self._tableau, n)
-            self._specialize(pair, n)
-            pair._specialized = {}
-            self._specialized[n] = pair
-        return pair
-
-    def _specialize(self, pair, n):
-        """Hook: more of the method's code unrolled for ``n`` states (set on ``pair``): the error
-        norm, the dense output."""
-
-
-class DOPRI5(_Pair):
-    name = "DOPRI5"
-    order = 5
-    error_exponent = -1.0 / 5.0
-
-    def __init__(self):
-        A, B, C, E, P = tab.DOPRI5_A, tab.DOPRI5_B, tab.DOPRI5_C, tab.DOPRI5_E, tab.DOPRI5_P
-        ns = len(B)
-        self._set_step(A, B, C, ns)
-        self._E, self._P = E, P
-        K = [f"k{j}" for j in range(ns + 1)]
-        expr, ks = _lincomb(E, K)
-        self.error_norm = _compile(
-            f"def error_norm(K, h, y, y_new, atol, rtol):\n"
-            f"    {', '.join(K)} = K\n"
-            f"    acc = 0.0\n"
-            f"    for y_, yn_, {', '.join(k + '_' for k in ks)} in zip(y, y_new, {', '.join(ks)}):\n"
-            f"        e = h*({expr}) / (atol + rtol*max(abs(y_), abs(yn_)))\n"
-            f"        acc += e*e\n"
-            f"    return sqrt(acc/len(y)) if y else 0.0\n", "error_norm")
-        qs = []
-        for r in range(4):
-            expr, ks = _lincomb([P[j][r] for j in range(ns + 1)], K)
-            qs.append(f"    q{r} = [{expr} for {', '.join(k + '_' for k in ks)}, in zip({', '.join(ks)})]")
-        self._coeffs = _compile(f"def coeffs(K):\n    {', '.join(K)} = K\n" + "\n".join(qs)
-                                + "\n    return q0, q1, q2, q3\n", "coeffs")
-
-    def _specialize(self, pair, n):
-        """The error norm, and the dense output built straight from the stages, unrolled for ``n``
-        states: the same operations in the same order as the loops above (the same bits), without
-        a zip and a list per coefficient (the dense output of a step costs about a third)."""
-        E, P = self._E, self._P
-        unpack = _unpack_lines([E, *zip(*P)], n)
-        norm = ["def error_norm(K, h, y, y_new, atol, rtol):", *unpack, _unpack_state("y", "y", n),
-                _unpack_state("y_new", "yn", n), "    acc = 0.0"]
-        for i in range(n):
-            norm += [f"    ay, an = abs(y{i}), abs(yn{i})",
-                     f"    e = h*({_term_sum(E, i)}) / (atol + rtol*(an if an > ay else ay))",  # = max(ay, an)
-                     "    acc += e*e"]
-        norm.append(f"    return sqrt(acc/{n})")
-        pair.error_norm = _compile("\n".join(norm) + "\n", "error_norm")
-        make = ["def dense(fun, t0, Y, y1, h, K):", *unpack, _unpack_state("Y", "y", n)]  # names of _DENSE_UNROLLED[5]
-        make += [f"    {'abcd'[r]}{i} = {_term_sum([row[r] for row in P], i)}" for r in range(4) for i in range(n)]
-        pair.dense = _compile("\n".join(make + _dense_ev_lines(5, n)) + "\n", "dense")
-
-    def dense(self, fun, t0, y0, y1, h, K):
-        return _Dense5(t0, h, y0, self._coeffs(K))
-
-
-class DOP853(_Pair):
-    name = "DOP853"
-    order = 8
-    error_exponent = -1.0 / 8.0
-
-    def __init__(self):
-        A, B, C = tab.DOP853_A, tab.DOP853_B, tab.DOP853_C
-        ns, nx = tab.DOP853_N_STAGES, tab.DOP853_N_STAGES_EXTENDED
-        self._set_step(A, B, C, ns)
-        K = [f"k{j}" for j in range(ns + 1)]
-        e5, k5 = _lincomb(tab.DOP853_E5, K)
-        e3, k3 = _lincomb(tab.DOP853_E3, K)
-        assert k5 == k3
-        self.error_norm = _compile(
-            f"def error_norm(K, h, y, y_new, atol, rtol):\n"
-            f"    {', '.join(K)} = K\n"
-            f"    n5 = n3 = 0.0\n"
-            f"    for y_, yn_, {', '.join(k + '_' for k in k5)} in zip(y, y_new, {', '.join(k5)}):\n"
-            f"        sc = atol + rtol*max(abs(y_), abs(yn_))\n"
-            f"        a = ({e5}) / sc\n"
-            f"        b = ({e3}) / sc\n"
-            f"        n5 += a*a\n"
-            f"        n3 += b*b\n"
-            f"    if n5 == 0.0:  # (also n3 tiny: 0.01*n3 may underflow to 0)\n"
-            f"        return 0.0\n"
-            f"    return abs(h) * n5 / sqrt((n5 + 0.01*n3) * len(y))\n", "error_norm")  # y empty: n5 = 0
-        # dense output (Hairer's contd8): three more stages, then seven coefficient vectors
-        lines = ["def coeffs(fun, t0, y0, y1, h, K):", f"    {', '.join(K)} = K"]
-        # stage ns (index 12) of the extended tableau is f_new = K[ns]
-        lines += _gen_stages(A, C, ns + 1, nx, y="y0", t="t0")
-        KX = [f"k{j}" for j in range(nx)]
-        for r in range(4):
-            expr, ks = _lincomb(tab.DOP853_D[r], KX)
-            lines.append(f"    d{r} = [h*({expr}) for {', '.join(k + '_' for k in ks)}, in zip({', '.join(ks)})]")
-        lines += [
-            "    f0 = [b - a for a, b in zip(y0, y1)]",
-            "    f1 = [h*a - b for a, b in zip(k0, f0)]",
-            f"    f2 = [2.0*b - h*(a + c) for a, b, c in zip(k0, f0, k{ns})]",
-            "    return f0, f1, f2, d0, d1, d2, d3",
-        ]
-        self._coeffs = _compile("\n".join(lines) + "\n", "coeffs")
-
-    def _specialize(self, pair, n):
-        """The error norm unrolled for ``n`` states (as DOPRI5's: the same operations in the same
-        order), and the dense evaluator as a closure (its coefficients need three more stages)."""
-        E5, E3 = tab.DOP853_E5, tab.DOP853_E3
-        norm = ["def error_norm(K, h, y, y_new, atol, rtol):", *_unpack_lines([E5, E3], n),
-                _unpack_state("y", "y", n), _unpack_state("y_new", "yn", n), "    n5 = n3 = 0.0"]
-        for i in range(n):
-            norm += [f"    ay, an = abs(y{i}), abs(yn{i})",
-                     "    sc = atol + rtol*(an if an > ay else ay)",  # = max(ay, an)
-                     f"    a = ({_term_sum(E5, i)}) / sc", f"    b = ({_term_sum(E3, i)}) / sc",
-                     "    n5 += a*a", "    n3 += b*b"]
-        norm += ["    if n5 == 0.0:", "        return 0.0", f"    return abs(h) * n5 / sqrt((n5 + 0.01*n3) * {n})"]
-        pair.error_norm = _compile("\n".join(norm) + "\n", "error_norm")
-        make, coeffs = _gen_dense_closure(8, n), self._coeffs
-
-        def dense(fun, t0, y0, y1, h, K):
-            return make(t0, h, y0, coeffs(fun, t0, y0, y1, h, K))
-        pair.dense = dense
-
-    def dense(self, fun, t0, y0, y1, h, K):
-        return _Dense8(t0, h, y0, self._coeffs(fun, t0, y0, y1, h, K))
-
-
-class _Dense5:
-    __slots__ = ("t0", "h", "rows")
-
-    def __init__(self, t0, h, y0, Q):
-        self.t0, self.h = t0, h
-        self.rows = tuple(zip(y0, *Q))  # per state: (y0, q0, q1, q2, q3), zipped once per step
-
-    def __call__(self, t):
-        x = (t - self.t0) / self.h
-        return _dense5_eval(x, self.h * x, self.rows)
-
-
-def _dense5_eval(x, hx, rows):
-    return [y + hx * (a + x * (b + x * (c + x * d))) for y, a, b, c, d in rows]
-
-
-class _Dense8:
-    __slots__ = ("t0", "h", "rows")
-
-    def __init__(self, t0, h, y0, F):
-        self.t0, self.h = t0, h
-        self.rows = tuple(zip(y0, *F))  # per state: y0 and its seven coefficients
-
-    def __call__(self, t):
-        x = (t - self.t0) / self.h
-        return _dense8_eval(x, 1.0 - x, self.rows)
-
-
-def _dense8_eval(x, w, rows):
-    return [y + x * (a + w * (b + x * (c + w * (d + x * (e + w * (f + x * g))))))
-            for y, a, b, c, d, e, f, g in rows]
-
-
-# the dense evaluators unrolled for n states, as closures over one step's coefficients: the same
-# operations as above in the same order, t -> state in one call, no unpacking of rows per
-# evaluation (the common communication step evaluates once).  Per order: the line after
-# x = (t - t0)/h, the names of state i's start value and coefficients, its value.
-_DENSE_UNROLLED = {
-    5: ("hx = h * x", "y{i}, a{i}, b{i}, c{i}, d{i}", "y{i} + hx * (a{i} + x * (b{i} + x * (c{i} + x * d{i})))"),
-    8: ("w = 1.0 - x", "y{i}, a{i}, b{i}, c{i}, d{i}, e{i}, f{i}, g{i}",
-        "y{i} + x * (a{i} + w * (b{i} + x * (c{i} + w * (d{i} + x * (e{i} + w * (f{i} + x * g{i}))))))"),
-}
-
-
-def _dense_ev_lines(order, n):
-    """Source of the inner ``ev(t)`` (and ``return ev``) of a closure factory over the names of
-    ``_DENSE_UNROLLED[order]`` for ``n`` states."""
-    preamble, _, value = _DENSE_UNROLLED[order]
-    return ["    def ev(t):", "        x = (t - t0) / h", f"        {preamble}",
-            f"        return [{', '.join(value.format(i=i) for i in range(n))}]", "    return ev"]
-
-
-def _gen_dense_closure(order, n):
-    """``make(t0, h, y0, Q) -> ev``: Q the coefficient vectors, as the _Dense classes take them."""
-    row = _DENSE_UNROLLED[order][1]
-    names = [row.format(i=i).split(", ") for i in range(n)]  # per state: y, then its coefficients
-    lines = ["def make(t0, h, y0, Q):", f"    {', '.join(r[0] for r in names)}, = y0"]
-    for j in range(len(names[0]) - 1):
-        lines.append(f"    {', '.join(r[j + 1] for r in names)}, = Q[{j}]")
-    return _compile("\n".join(lines + _dense_ev_lines(order, n)) + "\n", "make")
-
-
-METHODS = {5: DOPRI5(), 8: DOP853()}
 
 
 def _rms(v):
@@ -388,77 +98,37 @@ class _Segment:
         return self._dense
 
 
-def solver_parameters():
-    """The solver knobs every FMU exposes (name, default, unit, description, integer)."""
-    from .model import Parameter
-
-    return (
-        Parameter("method", 5, "", "Runge-Kutta pair: 5 = Dormand-Prince 5(4) (ode45), 8 = DOP853", integer=True),
-        Parameter("rel_tol", 1e-6, "", "relative error tolerance of the internal solver"),
-        Parameter("abs_tol", 1e-12, "", "absolute error tolerance of the internal solver (state units)"),
-        Parameter("max_step", 0.01, "s", "largest internal step (0 or inf: unbounded)"),
-        Parameter("initial_step", 0.0, "s", "first internal step (0: chosen automatically)"),
-        Parameter("log_events", 0, "", "1: report every state event through the FMI logger (category logEvents) "
-                  "and keep the full event history", integer=True),
-        Parameter("max_steps_per_second", 1e5, "1/s", "work budget: most internal steps per second of simulated "
-                  "time (counted over windows of 1 s); more end the run with an error naming the stiffness"),
-    )
-
-
-SOLVER_PARAMETER_NAMES = ("method", "rel_tol", "abs_tol", "max_step", "initial_step", "log_events",
-                          "max_steps_per_second")
-REL_TOL_MAX = 1e-3  # looser relative tolerances do not control the error (issue 9 item 7; ode45's default)
-ABS_TOL_MAX_FRACTION = 1e-3  # abs_tol <= this fraction of the states' scale (issue 9 item 7)
-
-
-def check_solver_parameters(p: Params, has_states: bool = True):
-    from .model import require
-
-    for name in SOLVER_PARAMETER_NAMES:
-        v = p[name]
-        if not isinstance(v, (int, float)) or math.isnan(v):
-            raise ParameterError(f"parameter {name} = {v!r} violates the rule: {name} must be a number")
-    require(p.method in METHODS, "method", p.method, "method must be 5 (DOPRI5) or 8 (DOP853)")
-    require(1e-14 <= p.rel_tol <= REL_TOL_MAX, "rel_tol", p.rel_tol,
-            f"1e-14 <= rel_tol <= {REL_TOL_MAX:g} (a looser relative tolerance does not control the error)")
-    require(p.abs_tol > 0 and math.isfinite(p.abs_tol), "abs_tol", p.abs_tol, "0 < abs_tol < inf")
-    require(p.max_step >= 0, "max_step", p.max_step, "max_step >= 0 (0 or inf: unbounded)")
-    budget = p.max_steps_per_second
-    require(budget >= 10 and budget < math.inf, "max_steps_per_second", budget,
-            "10 <= max_steps_per_second < inf")
-    # (a model without states takes no internal steps: its max_step is never used)
-    require(not has_states or p.max_step == 0 or p.max_step * budget >= 2, "max_step", p.max_step,
-            f"max_step = 0 or max_step >= 2/max_steps_per_second = {2 / budget:.3g} s (a smaller max_step "
-            f"alone takes more than half the work budget of {budget:.3g} internal steps per simulated second; "
-            f"raise max_steps_per_second to allow it)")
-    require(p.log_events in (0, 1), "log_events", p.log_events, "log_events is 0 or 1")
-    require(p.initial_step >= 0 and math.isfinite(p.initial_step), "initial_step", p.initial_step,
-            "0 <= initial_step < inf (0: automatic)")
-
 
 class Simulator:
     """Integrates one :class:`HybridModel` from ``t0`` on; see the module docstring.
 
-    ``p`` must hold the model's parameters and the solver knobs (:func:`solver_parameters`).
+    ``p`` holds the model's parameters (missing ones take their defaults) and may hold solver
+    settings too (an FMU's parameter table holds both); ``solver`` overrides settings
+    (:mod:`.settings`).  ``self.p`` is the model's own parameters, the only ones its functions see;
+    ``self.solver`` the settings.
 
     Event bookkeeping in constant memory: ``n_events``, ``last_event`` (an :class:`EventRecord`
     or None) and the times of the latest ``zeno_max_events`` events (for the event-storm bound).
-    The full history ``events`` is kept only with ``keep_history`` (default: the parameter
+    The full history ``events`` is kept only with ``keep_history`` (default: the setting
     ``log_events = 1``); then ``new_events`` also collects the events a caller has not taken yet
     (the FMI adapter logs and clears them after every call).  ``new_warnings`` collects warning
     texts (the work budget) the same way.
     """
 
-    def __init__(self, model: HybridModel, p: Params, u=None, t0: float = 0.0, t_stop: float = math.inf,
-                 zeno_max_events: int = 200, zeno_window: float = 1e-6, keep_history: Optional[bool] = None):
-        check_solver_parameters(p, has_states=bool(model.states))
+    def __init__(self, model: HybridModel, p=None, u=None, t0: float = 0.0, t_stop: float = math.inf,
+                 zeno_max_events: int = 200, zeno_window: float = 1e-6, keep_history: Optional[bool] = None,
+                 solver=None):
+        p, s = split_parameters(model, {} if p is None else p, solver)
+        check_solver_parameters(s, has_states=bool(model.states))
         model.check(p)
         self.model = model
         self.p = p
-        self.pair = METHODS[int(p.method)]
-        self.rtol = float(p.rel_tol)
-        self.atol = float(p.abs_tol)
-        ms = float(p.max_step)
+        self.solver = s
+        self.pair = METHODS[int(s.method)]
+        self.rtol = float(s.rel_tol)
+        self.atol = float(s.abs_tol)
+        self._slack = domain_slack(s)
+        ms = float(s.max_step)
         self.max_step = math.inf if ms == 0.0 else ms
         self.t_stop = float(t_stop)
         self.zeno_max_events = zeno_max_events
@@ -469,7 +139,7 @@ class Simulator:
         self.t_out = float(t0)  # latest time served to the caller
         self.n_events = 0
         self.last_event: Optional[EventRecord] = None
-        keep = bool(p.log_events) if keep_history is None else bool(keep_history)
+        keep = bool(s.log_events) if keep_history is None else bool(keep_history)
         self._history: Optional[List[EventRecord]] = [] if keep else None
         self.new_events: List[EventRecord] = []  # filled only when the history is kept
         self.new_warnings: List[str] = []
@@ -478,7 +148,7 @@ class Simulator:
         self.pending = None  # (event index, x at event) to apply at self.t
         self.n_steps = 0
         self.n_rejected = 0
-        self._budget = float(p.max_steps_per_second) * BUDGET_WINDOW
+        self._budget = float(s.max_steps_per_second) * BUDGET_WINDOW
         self._win_t0, self._win_n, self._warned = self.t, 0, False
         self._warn_n = BUDGET_WARN_FRACTION * self._budget
         # guards exactly at zero fire if the motion leaves them towards their after side: at the start,
@@ -498,8 +168,8 @@ class Simulator:
             self._bind()
             self._check_initial_rates()
             # a given first step is taken as it is, but never below the collapse limit
-            self.h = (max(float(p.initial_step), START_STEP_ULPS * EPS * max(abs(self.t), 1.0))
-                      if p.initial_step > 0 else self._initial_step())
+            self.h = (max(float(s.initial_step), START_STEP_ULPS * EPS * max(abs(self.t), 1.0))
+                      if s.initial_step > 0 else self._initial_step())
         except (ArithmeticError, ValueError) as exc:
             if isinstance(exc, ModelError):
                 raise
@@ -530,7 +200,7 @@ class Simulator:
         if self.atol > limit:
             of = f" with {', '.join(f'{n} = {self.p[n]!r}' for n in names)}" if names else ""
             raise ParameterError(
-                f"parameter abs_tol = {self.p.abs_tol!r} violates the rule: abs_tol <= {ABS_TOL_MAX_FRACTION:g} x "
+                f"parameter abs_tol = {self.solver.abs_tol!r} violates the rule: abs_tol <= {ABS_TOL_MAX_FRACTION:g} x "
                 f"{label} ({scale:.6g}{of}) = {limit:.3g}; a larger absolute tolerance lets the local error be "
                 f"as large as the motion itself and controls nothing")
 
@@ -690,7 +360,7 @@ class Simulator:
     def _copy_state(cls, state):
         """A copy of a state dict: the shared objects (model, parameters, method, the last event
         record) kept as they are, the containers of _SHALLOW copied shallowly, the rest deeply."""
-        shared = {id(state[k]): state[k] for k in ("model", "p", "pair", "last_event")}
+        shared = {id(state[k]): state[k] for k in ("model", "p", "solver", "_slack", "pair", "last_event")}
         out = copy.deepcopy({k: v for k, v in state.items() if k not in cls._SHALLOW}, shared)
         for k in cls._SHALLOW:
             v = state[k]
@@ -729,6 +399,24 @@ class Simulator:
         self.apply_pending_event()
         self.x_out, self.q_out = self.x, self.q
         return self.x
+
+    def restart_at(self, t: float, x, u) -> None:
+        """Go on from the state ``x`` at time ``t`` given from outside (an FMI 3.0 model-exchange
+        importer's solver) with the inputs ``u``: the step taken ahead and any located event are
+        dropped."""
+        self.t = self.t_out = float(t)
+        self.x = self.x_out = [float(v) for v in x]
+        self.seg, self.pending = None, None
+        self.set_input(u)
+
+    @property
+    def event_due(self) -> bool:
+        """A located event's jump is pending at the time served last (after :meth:`advance_to_event`)."""
+        return self.pending is not None and self.t == self.t_out
+
+    def domain_problem(self, t: float, x) -> Optional[str]:
+        """The model's domain condition at ``(t, x)`` in the current mode: None or its text."""
+        return self.model.domain(t, x, self.q, self.u, self.p, self._slack)
 
     # ---- stepping ---------------------------------------------------------------------------
     def _run(self, t_target, apply_events):
@@ -812,7 +500,7 @@ class Simulator:
             if hit is None or te < hit[0]:
                 hit = (te, k)
         if hit is None:
-            if (self.model.domain(t_new, y_new, q, u, p) is None and all(map(math.isfinite, y_new))) \
+            if (self.model.domain(t_new, y_new, q, u, p, self._slack) is None and all(map(math.isfinite, y_new))) \
                     or not self._end_step(seg, t_target):
                 self.seg, self.t, self.x, self.f, self.g = seg, t_new, y_new, f_new, g_new
                 self._g_prev = g  # guards at the start of the step (the secant's direction)
@@ -847,7 +535,7 @@ class Simulator:
         if n >= self._budget:
             raise ModelError(
                 f"work budget exhausted: {n} internal steps within {elapsed:.3g} s of simulated time up to "
-                f"t = {t:.10g} s (max_steps_per_second = {self.p.max_steps_per_second:g}; mean step "
+                f"t = {t:.10g} s (max_steps_per_second = {self.solver.max_steps_per_second:g}; mean step "
                 f"{elapsed / n:.3g} s, latest {h:.3g} s). The model is stiff here: "
                 f"{self._stiffness_text()}. To change: make the fastest time scale slower "
                 f"(the parameters named above), or raise max_steps_per_second to let the run go on slowly")
@@ -856,7 +544,7 @@ class Simulator:
             self.new_warnings.append(
                 f"stiff: {n} internal steps within {elapsed:.3g} s of simulated time up to t = {t:.10g} s "
                 f"(mean step {elapsed / n:.3g} s); the run stops at max_steps_per_second = "
-                f"{self.p.max_steps_per_second:g} steps per simulated second. "
+                f"{self.solver.max_steps_per_second:g} steps per simulated second. "
                 f"{self._stiffness_text()}")
 
     def _stiffness_text(self):
@@ -884,7 +572,7 @@ class Simulator:
                 f"({self._stiffness_text()})")
         return ModelError(
             f"step size collapsed to {h:.3g} s at t = {t:.15g} s: the error estimate cannot be met with "
-            f"rel_tol = {self.p.rel_tol!r}, abs_tol = {self.p.abs_tol!r} (the model is stiff or singular here, "
+            f"rel_tol = {self.solver.rel_tol!r}, abs_tol = {self.solver.abs_tol!r} (the model is stiff or singular here, "
             f"or the tolerances lie below the rounding error of the states)")
 
     def _arithmetic_error(self, exc, where):
@@ -1066,7 +754,7 @@ class Simulator:
         """None, or ``(t_v, text)``: the first time in ``seg`` (bisected) where the model's domain
         condition fails, and the condition's text (with the values at the end of the step)."""
         domain = self.model.domain
-        msg = domain(t, x, self.q, self.u, self.p)
+        msg = domain(t, x, self.q, self.u, self.p, self._slack)
         if msg is None:
             if not all(map(math.isfinite, x)):
                 bad = ", ".join(f"{v.name} = {a!r}" for v, a in zip(self.model.states, x) if not math.isfinite(a))
@@ -1078,7 +766,7 @@ class Simulator:
             a, b = seg.t0, t
             for _ in range(60):
                 c = 0.5 * (a + b)
-                if domain(c, seg(c), self.q, self.u, self.p) is None:
+                if domain(c, seg(c), self.q, self.u, self.p, self._slack) is None:
                     a = c
                 else:
                     b = c
@@ -1137,10 +825,9 @@ def _check_time_scales(model, p):
 
 def _extreme_parameters(p):
     """Text naming the model parameters of the most extreme magnitude (for arithmetic failures)."""
-    solver = set(SOLVER_PARAMETER_NAMES)
     mags = []
     for name, v in p.as_dict().items():
-        if name in solver or isinstance(v, bool) or not isinstance(v, (int, float)) or v == 0 or not math.isfinite(v):
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or v == 0 or not math.isfinite(v):
             continue
         mags.append((abs(math.log10(abs(v))), name, v))
     mags.sort(reverse=True)
@@ -1148,79 +835,3 @@ def _extreme_parameters(p):
     return (f"the values exceed floating-point range; parameters of the most extreme magnitude: {named}"
             if named else "the values exceed floating-point range")
 
-
-# =============================================================================================
-# snapshots as plain data (fmi2SerializeFMUstate)
-# =============================================================================================
-#
-# A snapshot (Simulator.snapshot) holds the model, the parameters and the method (shared objects)
-# and the latest segment, whose right-hand side is a closure: none of them is data.  The plain
-# form keeps every other field as JSON-able values (floats round-trip exactly through repr) and
-# rebuilds the closures from the model on the way back, so that a restored simulator continues
-# bit for bit as the original.  The segment is needed only while the integrator is ahead of the
-# communication time (t > t_out): the next served points come from its dense output, and then its
-# right-hand side is the current one (a jump or an input change at t > t_out drops the segment).
-
-_NOT_DATA = ("model", "p", "pair", "fun", "active", "seg")
-
-
-def _encode(v):
-    if v is None or isinstance(v, (bool, int, float, str)):
-        return v
-    if isinstance(v, list):
-        return [_encode(a) for a in v]
-    if isinstance(v, tuple):
-        return {"tuple": [_encode(a) for a in v]}
-    if isinstance(v, dict):
-        return {"dict": [[k, _encode(a)] for k, a in v.items()]}
-    if isinstance(v, EventRecord):
-        return {"event": [v.time, v.name, v.index, list(v.x_before), list(v.x_after)]}
-    if hasattr(v, "maxlen") and hasattr(v, "appendleft"):  # collections.deque
-        return {"deque": [_encode(a) for a in v], "maxlen": v.maxlen}
-    raise TypeError(f"engine state field of type {type(v).__name__} has no plain-data form")
-
-
-def _decode(v):
-    if isinstance(v, list):
-        return [_decode(a) for a in v]
-    if not isinstance(v, dict):
-        return v
-    if "tuple" in v:
-        return tuple(_decode(a) for a in v["tuple"])
-    if "dict" in v:
-        return {k: _decode(a) for k, a in v["dict"]}
-    if "event" in v:
-        return EventRecord(*v["event"])
-    if "deque" in v:
-        from collections import deque
-
-        return deque((_decode(a) for a in v["deque"]), v["maxlen"])
-    raise ValueError(f"unknown engine state entry {sorted(v)}")
-
-
-def snapshot_to_data(snap: dict) -> dict:
-    """Plain data (JSON-able) of a :meth:`Simulator.snapshot`."""
-    data = {k: _encode(v) for k, v in snap.items() if k not in _NOT_DATA}
-    data["params"] = _encode(snap["p"].as_dict())
-    seg = snap.get("seg")
-    if seg is not None and snap["t"] > snap["t_out"]:
-        data["segment"] = _encode((seg.t0, seg.t1, seg.y0, seg.y1, seg.f0, tuple(seg.K)))
-    else:
-        data["segment"] = None
-    return data
-
-
-def snapshot_from_data(model: HybridModel, data: dict) -> dict:
-    """The :meth:`Simulator.snapshot` that :func:`snapshot_to_data` was made from."""
-    fields = {k: _decode(v) for k, v in data.items() if k not in ("params", "segment")}
-    sim = Simulator.__new__(Simulator)
-    sim.__dict__.update(fields)
-    sim.model = model
-    sim.p = Params(_decode(data["params"]))
-    sim.pair = METHODS[int(sim.p.method)].specialized(len(sim.x))
-    sim._rebind()
-    sim.seg = None
-    if data["segment"] is not None:
-        t0, t1, y0, y1, f0, K = _decode(data["segment"])
-        sim.seg = _Segment(t0, t1, y0, y1, f0, K, sim.fun, sim.pair)
-    return sim.snapshot()

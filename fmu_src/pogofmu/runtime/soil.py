@@ -2,7 +2,7 @@
 
 A soil is plain data plus pure functions, like a leg element (it knows nothing of FMI):
 
-* ``parameters``: its :class:`~pogofmu.model.Parameter` s, ``check(p)`` their rules;
+* ``parameters``: its :class:`~pogofmu.runtime.model.Parameter` s, ``check(p)`` their rules;
 * ``reference_velocity(p, impact_speed)``: the velocity scale of its damping, fixed at each
   touchdown (a model keeps it in its discrete state ``q``);
 * ``bind(p, d0dot) -> (force, rate)``: two closures for one contact,

@@ -19,11 +19,10 @@ contact, when every element allows it), then the elements' own events in leg ord
 """
 from __future__ import annotations
 
-import math
 from typing import Sequence
 
 from ..elements import Element
-from ..engine import solver_parameters
+from ..plant import F_EXT, FREE_LENGTH, GRAVITY, MASS
 from ..model import (FALLING, RISING, Event, HybridModel, Parameter, ParameterError, Variable, require,
                      require_finite, require_positive)
 
@@ -48,18 +47,18 @@ BASE_OUTPUTS = BASE_STATES + (
 
 INTEGER_OUTPUTS = frozenset({"s"})
 
-INPUTS = (Variable("F_ext", "N", "external vertical force on the mass (positive up)", 0.0),)
+INPUTS = (F_EXT,)
 
 
 def _head_parameters(leg):
-    return (Parameter("m", 1.0, "kg", "mass of the body"),) + tuple(
+    return (MASS,) + tuple(
         par for el in leg for par in el.parameters if not par.name.endswith("_0"))
 
 
 def _tail_parameters(leg):
     return (
-        Parameter("x_i", 1.0, "m", "free length of the leg"),
-        Parameter("g", 9.81, "m/s2", "gravitational acceleration (Earth 9.81, Moon 1.62, Ceres 0.28)"),
+        FREE_LENGTH,
+        GRAVITY,
         Parameter("xbar_0", 1.0, "m", "initial leg length"),
         Parameter("xdot_0", 0.0, "m/s", "initial leg length rate"),
         Parameter("y_0", 1.5, "m", "initial height of the mass"),
@@ -83,10 +82,9 @@ def make_stick_model(name: str, description: str, leg: Sequence[Element], plots=
         slices.append(slice(n, n + len(el.states)))
         n += len(el.states)
     I_WLEG, I_WEXT = n, n + 1
-    n_states = n + 2
     states = BASE_STATES + tuple(v for el in leg for v in el.states) + (
         Variable("W_leg", "J", "work absorbed by the leg"), Variable("W_ext", "J", "work done by F_ext"))
-    parameters = _head_parameters(leg) + _tail_parameters(leg) + solver_parameters()
+    parameters = _head_parameters(leg) + _tail_parameters(leg)
     names = [par.name for par in parameters]
     if len(set(names)) != len(names):
         raise ValueError(f"duplicate parameter names in leg of {name}: {names}")
@@ -197,16 +195,15 @@ def make_stick_model(name: str, description: str, leg: Sequence[Element], plots=
         X += [0.0, 0.0]  # W_leg, W_ext
         return X, q
 
-    def domain(t, X, q, u, p):
+    def domain(t, X, q, u, p, slack):
         xbar, y, z = X[0], X[2], X[4]
-        slack = 10.0 * (p.rel_tol * p.x_i + p.abs_tol)
         if xbar <= 0:
             return f"leg length xbar = {xbar:.6g} m must stay > 0 (the leg bottomed out)"
         if y <= 0:
             return f"mass height y = {y:.6g} m must stay > 0"
         if y <= z:
             return f"y = {y:.6g} m must stay above the foot z = {z:.6g} m"
-        if xbar - p.x_i > slack:
+        if xbar - p.x_i > slack(p.x_i):
             return f"leg deflection x = {xbar - p.x_i:.6g} m must stay <= 0 (the spring never extends)"
         return None
 

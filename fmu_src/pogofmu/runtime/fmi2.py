@@ -1,10 +1,10 @@
-"""One adapter from any :class:`~pogofmu.model.HybridModel` to an FMI 2.0 co-simulation slave.
+"""One adapter from any :class:`~pogofmu.runtime.model.HybridModel` to an FMI 2.0 co-simulation slave.
 
 A slave file is a few lines (pythonfmu's loader, used on the platforms where the FMU carries
 pythonfmu's binary, looks for the literal ``class <Name>(Fmi2Slave):``)::
 
-    from pogofmu.fmi import HybridSlave as Fmi2Slave
-    from pogofmu.models.pogo_stick import MODEL
+    from pogofmu.runtime.fmi2 import HybridSlave as Fmi2Slave
+    from pogofmu.runtime.models.pogo_stick import MODEL
 
     class PogoStick(Fmi2Slave):
         model = MODEL
@@ -50,14 +50,14 @@ from operator import itemgetter
 from dataclasses import dataclass
 from typing import NamedTuple, Optional, Tuple
 
-from .engine import Simulator, snapshot_from_data, snapshot_to_data
+from .engine import SOLVER_PARAMETERS, Simulator, snapshot_from_data, snapshot_to_data, solver_defaults, \
+    split_parameters
 from .model import HybridModel, ModelError, Params
+from .status import ERROR, FATAL, OK, WARNING, log_category
 
 __all__ = ["HybridSlave", "FMUError", "FmiVariable", "fmi2_variables", "LOG_CATEGORIES"]
 
-OK, WARNING, DISCARD, ERROR, FATAL = 0, 1, 2, 3, 4
 MAX_INTERNAL_STEPS_PER_CALL = 1e8  # a communication step needing more is refused before any work
-_STATUS_NAMES = ("ok", "warning", "discard", "error", "fatal")
 _STATE_FORMAT = "pogofmu-fmu-state-1"
 # the package this module was imported as: "_pogofmu_<Model>_<hash>" inside an FMU (one name per
 # build of one model, see build_fmu.py), "pogofmu" from the source tree
@@ -109,9 +109,10 @@ class FmiVariable:
 
 
 def fmi2_variables(model: HybridModel) -> Tuple[FmiVariable, ...]:
-    """The FMU's variables in value-reference order: parameters, inputs, outputs."""
+    """The FMU's variables in value-reference order: the model's parameters, the solver's settings
+    (every FMU has them, after the model's own), inputs, outputs."""
     out = []
-    for par in model.parameters:
+    for par in model.parameters + SOLVER_PARAMETERS:
         out.append(FmiVariable(par.name, len(out), "Integer" if par.integer else "Real", "parameter", "fixed",
                                par.description, par.unit, par.default, ("parameter", par.name)))
     for i, var in enumerate(model.inputs):
@@ -191,7 +192,7 @@ class HybridSlave:
 
     def _reset_state(self):
         model = type(self).model
-        self._par = model.defaults()
+        self._par = {**model.defaults(), **solver_defaults()}
         self._u = [float(v.start) for v in model.inputs]
         self._sim = None
         self._out = None
@@ -222,7 +223,7 @@ class HybridSlave:
 
     def log(self, msg: str, status: int = OK, category: Optional[str] = None):
         if category is None:
-            category = "logAll" if status == OK else f"logStatus{_STATUS_NAMES[status].capitalize()}"
+            category = log_category(status)
         self.log_queue.append(LogMsg(int(status), category, msg))
 
     def _refuse(self, message, status=ERROR):
@@ -308,12 +309,16 @@ class HybridSlave:
         self._set(vrs, values, "String")
 
     # ---- outputs ----------------------------------------------------------------------------
+    def _model_params(self) -> Params:
+        """The model's own parameters as set so far (the solver's settings left out)."""
+        return split_parameters(type(self).model, self._par)[0]
+
     def _initial_outputs(self):
         """Outputs before initialization, from the start values (zeros if they break a rule:
         the rule is reported where it is checked, in fmi2ExitInitializationMode)."""
         model = type(self).model
         try:
-            p = Params(self._par)
+            p = self._model_params()
             x, q = model.initial(p)
             out = model.output_fn(self._t_start, x, q, tuple(self._u), p)
         except (ModelError, ArithmeticError, ValueError, TypeError):
@@ -322,16 +327,19 @@ class HybridSlave:
         self._complete_outputs(self._t_start, x, q, tuple(self._u), p, out)
         return out
 
-    def _update_outputs(self):
+    def _update_outputs(self, point=None):
+        """Outputs at the point served last, or at ``point = (t, x, q)`` (FMI 3.0 model exchange:
+        the importer's time and states)."""
         sim = self._sim
-        out = self._output_fn(sim.t_out, sim.x_out, sim.q_out, sim.u, sim.p)
+        t, x, q = (sim.t_out, sim.x_out, sim.q_out) if point is None else point
+        out = self._output_fn(t, x, q, sim.u, sim.p)
         last = sim.last_event
         if last is None:
             out["n_events"], out["t_last_event"], out["last_event"] = sim.n_events, self._t_start, 0
         else:
             out["n_events"], out["t_last_event"], out["last_event"] = sim.n_events, last.time, last.index + 1
         if self._completes_outputs:
-            self._complete_outputs(sim.t_out, sim.x_out, sim.q_out, sim.u, sim.p, out)
+            self._complete_outputs(t, x, q, sim.u, sim.p, out)
         self._out = out
         self._pack_outputs(self._oview, 0, *self._out_values(out))
         self._ctl[0] = 1
@@ -361,7 +369,7 @@ class HybridSlave:
     def exit_initialization_mode(self):
         model = type(self).model
         try:
-            self._sim = Simulator(model, Params(self._par), u=tuple(self._u), t0=self._t_start,
+            self._sim = Simulator(model, self._par, u=tuple(self._u), t0=self._t_start,
                                   t_stop=self._t_stop)
             self._sim.advance(self._t_start)
         except (ModelError, ValueError, ArithmeticError) as exc:

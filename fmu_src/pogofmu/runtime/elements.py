@@ -2,16 +2,16 @@
 
 A leg element is plain data plus pure functions, like a model (it knows nothing of FMI):
 
-* ``parameters``: its :class:`~pogofmu.model.Parameter` s (names unique within a leg);
+* ``parameters``: its :class:`~pogofmu.runtime.model.Parameter` s (names unique within a leg);
 * ``states``: its own continuous states (e.g. the absement ``a`` of a mem-spring), with
   ``initial_states(p)`` and ``rates(x, xdot, xi, q, p)``;
 * ``discrete``: its own entries of the discrete state ``q`` (e.g. an SMA branch and anchor);
 * ``force(x, xdot, xi, q, p)``: its contribution to the leg's restoring force ``r``
   (``x = xbar - x_i`` the deflection, ``xdot`` its rate, ``xi`` the element's own states);
 * ``events``: its own :class:`LegEvent` s, active in contact only;
-* ``check(p)``: its parameter rules (raise :class:`~pogofmu.model.ParameterError`).
+* ``check(p)``: its parameter rules (raise :class:`~pogofmu.runtime.model.ParameterError`).
 
-A leg is a tuple of elements; :func:`pogofmu.models.stick.make_stick_model` sums the forces,
+A leg is a tuple of elements; :func:`pogofmu.runtime.models.stick.make_stick_model` sums the forces,
 stacks the states and collects the events and checks: adding an element is adding a class here.
 """
 from __future__ import annotations
@@ -19,6 +19,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Callable, Tuple
 
+from .plant import DAMPING, STIFFNESS
 from .model import FALLING, RISING, Parameter, Params, Variable, require, require_nonnegative
 
 
@@ -99,7 +100,7 @@ def _dashpot_time_scale(p):
 class LinearSpring(Element):
     """``r = k x`` (the paper's capacitor analogue)."""
 
-    parameters = (Parameter("k", 100.0, "N/m", "stiffness of the leg spring"),)
+    parameters = (STIFFNESS,)
 
     def force(self, x, xdot, xi, q, p):
         return p.k * x
@@ -117,7 +118,7 @@ class LinearSpring(Element):
 class LinearDashpot(Element):
     """``r = c xdot`` (the paper's resistor analogue)."""
 
-    parameters = (Parameter("c", 0.5, "N.s/m", "damping coefficient of the leg dashpot"),)
+    parameters = (DAMPING,)
 
     def force(self, x, xdot, xi, q, p):
         return p.c * xdot

@@ -1,8 +1,8 @@
-"""FMI 3.0 for any :class:`~pogofmu.model.HybridModel`: model exchange and co-simulation with
-event mode, on top of the FMI 2.0 adapter (:class:`~pogofmu.fmi.HybridSlave`).
+"""FMI 3.0 for any :class:`~pogofmu.runtime.model.HybridModel`: model exchange and co-simulation with
+event mode, on top of the FMI 2.0 adapter (:class:`~pogofmu.runtime.fmi2.HybridSlave`).
 
 Nothing here is specific to a model, and no equation is written twice: flows, guards, jumps,
-outputs, parameter rules and the engine are the model's and :mod:`pogofmu.engine`'s.  The same
+outputs, parameter rules and the engine are the model's and :mod:`pogofmu.runtime.engine`'s.  The same
 slave files (``fmu_src/slave_*.py``) make both generations: for an FMI 3.0 FMU the boot code
 (``pogofmu_boot.py``, ``fmi=3`` in ``resources/pogofmu_launch.txt``) wraps the slave class with
 :func:`fmi3_class`.  The C side is ``fmu_src/native/pogofmu_fmi.c`` built with ``-DPOGOFMU_FMI=3``.
@@ -45,12 +45,13 @@ from __future__ import annotations
 import math
 from typing import Tuple
 
-from .fmi import ERROR, FMUError, FmiVariable, HybridSlave, fmi2_variables
-from .model import FALLING, HybridModel, ModelError, Params
+from .fmi2 import FMUError, FmiVariable, HybridSlave, fmi2_variables
+from .model import FALLING, HybridModel, ModelError
+from .status import ERROR
 
 __all__ = ["fmi3_variables", "fmi3_class", "Fmi3Slave", "rate_unit", "indicator_name"]
 
-# the unit of d(state)/dt for the units of pogofmu.units
+# the unit of d(state)/dt for the units of pogofmu.runtime.units
 _RATE_UNITS = {"m": "m/s", "m/s": "m/s2", "m.s": "m", "s": "", "J": "W", "": ""}
 
 
@@ -58,7 +59,7 @@ def rate_unit(unit: str) -> str:
     try:
         return _RATE_UNITS[unit]
     except KeyError:
-        raise ValueError(f"no unit for the rate of a state in {unit!r}: add it to pogofmu.fmi3._RATE_UNITS") from None
+        raise ValueError(f"no unit for the rate of a state in {unit!r}: add it to pogofmu.runtime.fmi3._RATE_UNITS") from None
 
 
 def indicator_name(event) -> str:
@@ -161,7 +162,7 @@ class Fmi3Slave(HybridSlave):
         sim = self._sim
         if sim is None:
             try:
-                p = Params(self._par)
+                p = self._model_params()
                 x, q = model.initial(p)
             except (ModelError, ArithmeticError, ValueError, TypeError):
                 return {v.role[1]: 0.0 for v in type(self).variables() if v.role[0] == "derived"}
@@ -230,11 +231,7 @@ class Fmi3Slave(HybridSlave):
         problem = self._input_problem()
         if problem is not None:
             raise FMUError(problem)
-        sim = self._sim
-        sim.t = sim.t_out = self._me_t
-        sim.x = sim.x_out = list(self._me_x)
-        sim.seg, sim.pending = None, None
-        sim.set_input(self._u)
+        self._sim.restart_at(self._me_t, self._me_x, self._u)
         self._inputs_changed = False
         self._stale()
 
@@ -250,8 +247,7 @@ class Fmi3Slave(HybridSlave):
         if self._inputs_changed:
             self._me_inputs()
             self._me_stale = False
-        sim.t_out, sim.x_out, sim.q_out = self._me_t, self._me_x, sim.q
-        self._update_outputs()
+        self._update_outputs((self._me_t, self._me_x, sim.q))
 
     def _arm(self):
         """After initialization and after each event: a guard is armed if it lies strictly on the
@@ -284,7 +280,7 @@ class Fmi3Slave(HybridSlave):
         if self._sim is None:
             model = type(self).model
             try:
-                return list(model.initial(Params(self._par))[0])
+                return list(model.initial(self._model_params())[0])
             except (ModelError, ArithmeticError, ValueError, TypeError) as exc:
                 raise FMUError(f"{model.name}: no initial state: {exc}") from None
         return list(self._me_x)
@@ -324,7 +320,7 @@ class Fmi3Slave(HybridSlave):
             pending |= self._armed[k] and ev.active(sim.q) and not _before_side(ev.direction == FALLING, g)
         if pending:
             return (True, False)
-        msg = type(self).model.domain(self._me_t, self._me_x, sim.q, sim.u, sim.p)
+        msg = sim.domain_problem(self._me_t, self._me_x)
         if msg is not None or not all(map(math.isfinite, self._me_x)):
             self._failed = (f"{type(self).model.name}: the trajectory left the model's domain at t = "
                             f"{self._me_t:.10g} s: {msg or 'the state became non-finite'}")
@@ -356,7 +352,7 @@ class Fmi3Slave(HybridSlave):
 
     # ---- co-simulation ----------------------------------------------------------------------
     def _advance_engine(self, sim, t_end):
-        if sim.pending is not None and sim.t == sim.t_out:
+        if sim.event_due:
             sim.advance(sim.t)  # an event the importer left unhandled: its jump first
         self._stop = None
         if not self._early_return_allowed:
@@ -379,7 +375,7 @@ class Fmi3Slave(HybridSlave):
         sim = self._sim
         if sim is None:
             raise FMUError("fmi3UpdateDiscreteStates called before fmi3ExitInitializationMode")
-        if sim.pending is not None and sim.t == sim.t_out:
+        if sim.event_due:
             try:
                 sim.advance(sim.t)
             except ModelError as exc:

@@ -1,1 +1,0 @@
-"""Model variants: each module defines ``MODEL``, a :class:`pogofmu.model.HybridModel`."""
