@@ -17,7 +17,6 @@ from pogofmu.sweep import parse_event_log  # noqa: F401  (the tests read the FMU
 
 ROOT = Path(__file__).resolve().parents[1]
 DIST = Path(os.environ.get("POGOFMU_DIST", ROOT / "dist")).resolve()  # build target of the session
-REFERENCE = ROOT.parent / "shared" / "reference"
 
 
 def fmu_path(name: str) -> Path:
@@ -75,12 +74,12 @@ def simulate(name, start_values=None, stop_time=None, output_interval=None, inpu
     return run
 
 
-def reference_events():
-    path = REFERENCE / "pogo_basic_events.csv"
-    with path.open() as f:
-        rows = list(csv.DictReader(line for line in f if not line.startswith("#")))
-    return [{"index": int(r["index"]), "name": r["event"], "time": float(r["time_s"]),
-             "y": float(r["y_m"]), "ydot": float(r["ydot_m_per_s"])} for r in rows]
+def reference_events(params=None):
+    """The basic stick's events in closed form (40-digit roots, pogofmu.closed_form), default drop
+    unless ``params`` says otherwise: dicts with index, name, time, y, ydot."""
+    from pogofmu.closed_form import events_as_floats
+
+    return events_as_floats(params)
 
 
 class Instance:

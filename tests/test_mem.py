@@ -1,7 +1,7 @@
-"""PogoStickMem.fmu (MODELS.md Sect. 2): mem-spring and mem-dashpot legs, through the built FMU.
+"""PogoStickMem.fmu (docs/models.md "PogoStickMem"): mem-spring and mem-dashpot legs, through the built FMU.
 
 References are independent of the code under test: the closed-form event times of the basic stick
-(shared/reference/pogo_basic_events.csv), a solve_ivp model of the mem-stick written here, the
+(pogofmu.closed_form), a solve_ivp model of the mem-stick written here, the
 energy balance, and the geometry of the pinched loop.
 """
 import re

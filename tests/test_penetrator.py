@@ -1,4 +1,4 @@
-"""Penetrator.fmu: the stick driven into a Hunt-Crossley soil (issue 4, MODELS.md Sect. 4).
+"""Penetrator.fmu: the stick driven into a Hunt-Crossley soil (issue 4, docs/models.md "Penetrator").
 
 Every test drives the built FMU through fmpy.  The reference is written here independently of
 the package: Eq. 50 integrated by scipy's DOP853 at rtol = 1e-13, with scipy's own event
@@ -203,7 +203,7 @@ def test_defaults_first_touchdown_and_models_md_numbers():
     assert abs(ev[0]["time"] - 0.3192754284) < 1e-10
     assert abs(ev[0]["time"] - math.sqrt(2 * 0.5 / 9.81)) < 1e-12
     contact = [e for e in ev if e["name"] in CONTACT_EVENTS]
-    # MODELS.md Sect. 4: first liftoff near 0.7082 s with ydot near 2.828 m/s, maximum
+    # docs/models.md "Penetrator": first liftoff near 0.7082 s with ydot near 2.828 m/s, maximum
     # penetration near 0.0254 m, 19 (touchdown/liftoff) events in 10 s
     assert contact[1]["name"] == "liftoff"
     assert contact[1]["time"] == pytest.approx(0.7082, abs=1e-4)

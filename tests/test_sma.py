@@ -1,4 +1,4 @@
-"""PogoStickSMA.fmu (MODELS.md Sect. 3): shape-memory-alloy flag leg, through the built FMU.
+"""PogoStickSMA.fmu (docs/models.md "PogoStickSMA"): shape-memory-alloy flag leg, through the built FMU.
 
 References are independent of the code under test: the flag's geometry (plateau lines, the
 closed-form meeting point and area of a cycle), a solve_ivp model written here with guards in
@@ -111,7 +111,7 @@ def scipy_sma(t_end, c=C):
 
 def test_first_contact_runs_the_flag():
     """Defaults: touchdown, upper plateau at x1, reversal, lower plateau at H_l + x3 - x1 (1e-9 m),
-    virgin line at x3, liftoff; then the run of MODELS.md Sect. 3 (23 events in 10 s)."""
+    virgin line at x3, liftoff; then the run of docs/models.md "PogoStickSMA" (23 events in 10 s)."""
     run = sma_run(10.0)
     ev = run.events()
     assert [e["name"] for e in ev[:6]] == FIRST_CONTACT
@@ -120,7 +120,7 @@ def test_first_contact_runs_the_flag():
     assert xev(up) == pytest.approx(X1, abs=1e-9)
     H = xev(rev)
     assert abs(rev["state"]["xdot"]) < 1e-9
-    assert H == pytest.approx(-0.472, abs=1e-3)  # MODELS.md: "reversal near x = -0.472"
+    assert H == pytest.approx(-0.472, abs=1e-3)  # docs/models.md: "reversal near x = -0.472"
     assert abs(xev(low) - (H + X3 - X1)) <= 1e-9
     assert xev(vir) == pytest.approx(X3, abs=1e-9)
     assert lo["time"] == pytest.approx(0.820, abs=1e-3)
@@ -133,7 +133,7 @@ def test_first_contact_runs_the_flag():
         mid = at(0.5 * (a["time"] + b["time"]))
         assert run["branch"][mid] == branch and run["s"][mid] == 1, (a["name"], b["name"])
     assert run["branch"][at(lo["time"]) + 1] == 0 and run["s"][at(lo["time"]) + 1] == 0
-    # the rest of the default experiment (MODELS.md): 3 full flags, a small 4th one, settles
+    # the rest of the default experiment (docs/models.md): 3 full flags, a small 4th one, settles
     names = [e["name"] for e in ev]
     assert len(ev) == 23 and run["n_events"][-1] == 23
     assert names[:18] == FIRST_CONTACT * 3 and names[18:] == FIRST_CONTACT[:5]

@@ -1,7 +1,7 @@
 """`pogofmu sweep` and `pogofmu study` (issue 11): Dask sweeps of the built FMUs, Parquet rows.
 
 References: direct fmpy runs of the same FMU (support.simulate), numpy's documented generator
-for the Monte Carlo draws, the closed-form events (shared/reference/pogo_basic_events.csv) and
+for the Monte Carlo draws, the closed-form events (pogofmu.closed_form) and
 the work-precision expectations of tests/test_pogostick.py. The sweeps run on small local
 clusters (2 worker processes, one shared by most tests through --scheduler), and every test
 checks that no worker process outlives its cluster.

@@ -23,8 +23,9 @@ How to add a case (e.g. ``pogostick_mem.py`` for PogoStickMem)
 4. Set ``reference``: a callable ``reference(case)`` returning the exact event sequence
    ``[(time, event_name), ...]`` up to ``stop_time``:
 
-   * a closed form: :func:`csv_reference` reads a CSV with ``event`` and ``time_s`` columns
-     (as ``/work/shared/reference/pogo_basic_events.csv``);
+   * a closed form: :func:`closed_form_reference` (the basic stick's events computed by
+     ``pogofmu.closed_form``), or :func:`csv_reference` for a CSV with ``event`` and ``time_s``
+     columns;
    * no closed form: ``reference=tight_scipy_reference()`` runs the case's own ``scipy_loop``
      with DOP853 at ``rtol=1e-13``, ``atol=1e-15`` (once per run); say so in
      ``reference_label``.  The "event error" is then the distance to that much tighter solution
@@ -52,8 +53,6 @@ from typing import Callable, Dict, List, Tuple
 
 Events = List[Tuple[float, str]]
 
-# the shared reference data beside the checkout (as tests/support.py): <checkout>/../shared/reference
-SHARED_REFERENCE = Path(__file__).resolve().parents[3] / "shared" / "reference"
 
 
 @dataclass(frozen=True)
@@ -98,6 +97,14 @@ def csv_reference(path) -> Callable[[Case], Events]:
             return [(float(r["time_s"]), r["event"]) for r in rows]
 
     return load
+
+
+def closed_form_reference(case: Case) -> Events:
+    """The basic stick's events in closed form (pogofmu.closed_form, 40-digit roots) for the
+    case's parameters, up to its stop time."""
+    from pogofmu.closed_form import events_as_floats
+
+    return [(e["time"], e["name"]) for e in events_as_floats(case.params, case.stop_time)]
 
 
 _TIGHT_CACHE: Dict[str, Events] = {}

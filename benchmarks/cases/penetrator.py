@@ -1,4 +1,4 @@
-"""Benchmark case Penetrator (MODELS.md Sect. 4): the stick driven into a Hunt-Crossley soil, defaults.
+"""Benchmark case Penetrator (docs/models.md "Penetrator"): the stick driven into a Hunt-Crossley soil, defaults.
 
 The scipy peer integrates the same 7 states as ``pogofmu.runtime.models.penetrator.MODEL`` --
 ``[y, ydot, delta, tau, W_leg, W_soil, W_ext]`` -- with one right-hand side per mode (Eq. 50 in

@@ -1,4 +1,4 @@
-"""Benchmark case PogoStick (MODELS.md Sect. 1): the TEMPLATE to copy for a new model.
+"""Benchmark case PogoStick (docs/models.md "PogoStick"): the TEMPLATE to copy for a new model.
 
 The scipy peer below is the basic pogo stick written as a Python user would write it with
 ``solve_ivp``: one right-hand side per mode, the guards as terminal events with a direction, and a
@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from scipy.integrate import solve_ivp
 
-from . import SHARED_REFERENCE, Case, csv_reference
+from . import Case, closed_form_reference
 
 
 def scipy_loop(p, stop_time, method, rtol, atol, max_step):
@@ -65,7 +65,7 @@ CASE = Case(
     model="pogofmu.runtime.models.pogo_stick:MODEL",
     params={},  # the default experiment: drop from y = 1.5 m, 19 events, settles after t = 7.07 s
     scipy_loop=scipy_loop,
-    reference=csv_reference(SHARED_REFERENCE / "pogo_basic_events.csv"),
-    reference_label="closed form (shared/reference/pogo_basic_events.csv, 19 events)",
+    reference=closed_form_reference,
+    reference_label="closed form (pogofmu.closed_form, 19 events)",
     targets=True,
 )

@@ -1,4 +1,4 @@
-"""Benchmark case PogoStickMem (MODELS.md Sect. 2): softening mem-spring + linear dashpot (the defaults).
+"""Benchmark case PogoStickMem (docs/models.md "PogoStickMem"): softening mem-spring + linear dashpot (the defaults).
 
 The scipy peer integrates the same 8 states as ``pogofmu.runtime.models.pogo_stick_mem.MODEL`` --
 ``[xbar, xdot, y, ydot, z, a, W_leg, W_ext]`` (absement ``a' = x``) -- with one right-hand side

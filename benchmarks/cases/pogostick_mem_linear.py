@@ -4,7 +4,7 @@ against PogoStick's (issue 3: at most 1.3x its time).  Reference: the closed for
 """
 from __future__ import annotations
 
-from . import SHARED_REFERENCE, Case, csv_reference
+from . import Case, closed_form_reference
 from .pogostick_mem import scipy_loop
 
 CASE = Case(
@@ -13,8 +13,8 @@ CASE = Case(
     model="pogofmu.runtime.models.pogo_stick_mem:MODEL",
     params={"spring_law": 0, "gamma": 0.0},
     scipy_loop=scipy_loop,
-    reference=csv_reference(SHARED_REFERENCE / "pogo_basic_events.csv"),
-    reference_label="closed form (shared/reference/pogo_basic_events.csv, 19 events)",
+    reference=closed_form_reference,
+    reference_label="closed form (pogofmu.closed_form, 19 events)",
     compare_to="PogoStick",
     max_ratio=1.3,
 )

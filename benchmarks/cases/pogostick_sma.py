@@ -1,4 +1,4 @@
-"""Benchmark case PogoStickSMA (MODELS.md Sect. 3): superelastic SMA flag + linear dashpot, defaults.
+"""Benchmark case PogoStickSMA (docs/models.md "PogoStickSMA"): superelastic SMA flag + linear dashpot, defaults.
 
 The scipy peer integrates the same 7 states as ``pogofmu.runtime.models.pogo_stick_sma.MODEL`` --
 ``[xbar, xdot, y, ydot, z, W_leg, W_ext]`` -- with one right-hand side per (mode, SMA branch),

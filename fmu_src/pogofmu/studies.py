@@ -17,11 +17,11 @@ import csv
 import math
 import sys
 from pathlib import Path
+from typing import Optional
 
 from pogofmu.sweep import Settings, Sweep, SweepError, add_arguments, execute, make_points, parse_sample
 
 ROOT = Path(__file__).resolve().parents[2]
-REFERENCE = ROOT.parent / "shared" / "reference" / "pogo_basic_events.csv"
 TOLERANCES = [10.0 ** -k for k in range(3, 13)]  # 1e-3 ... 1e-12
 SOIL_DEFAULTS = [  # the soil of the default drop (K = 1e4 N/m^1.5, n = 1.5, c_r = 0.5), made uncertain
     "K=lognormal(9.2103404,0.5)",  # median 1e4 N/m^n (ln 1e4 = 9.2103404), a factor 1.65 per sigma
@@ -57,14 +57,23 @@ def _plt():
 # work-precision (Figs 21-22)
 # =============================================================================================
 
-def reference_times(path: Path):
-    """Closed-form event times [(name, t)] of the default PogoStick drop (40-digit roots)."""
+def reference_times(path: Optional[Path] = None):
+    """Closed-form event times [(name, t)] of the default PogoStick drop: computed
+    (pogofmu.closed_form, 40-digit roots), or read from a CSV with ``event`` and ``time_s``
+    columns (``--reference``)."""
+    if path is None:
+        from pogofmu.closed_form import events_as_floats
+
+        return [(e["name"], e["time"]) for e in events_as_floats()]
     if not path.is_file():
-        raise SweepError(f"--reference {path}: no such file (the closed-form events of the default drop, "
-                         "shared/reference/pogo_basic_events.csv)")
+        raise SweepError(f"--reference {path}: no such file (a CSV of the closed-form events, columns event "
+                         f"and time_s; without --reference they are computed)")
     with path.open() as f:
         rows = list(csv.DictReader(line for line in f if not line.startswith("#")))
-    return [(r["event"], float(r["time_s"])) for r in rows]
+    try:
+        return [(r["event"], float(r["time_s"])) for r in rows]
+    except (KeyError, ValueError, TypeError) as exc:
+        raise SweepError(f"--reference {path}: not a table of events with columns event and time_s ({exc})") from None
 
 
 def event_errors(event_t, event_name, ref):
@@ -84,7 +93,7 @@ def slope(tols, errs):
     return float(np.polyfit(np.log10(tols), np.log10(errs), 1)[0])
 
 
-def work_precision(out: Path, fmu: Path, reference: Path, workers=None, scheduler=None, progress=True):
+def work_precision(out: Path, fmu: Path, reference: Optional[Path] = None, workers=None, scheduler=None, progress=True):
     ref = reference_times(reference)
     out.mkdir(parents=True, exist_ok=True)
     names, points = make_points([("method", [5, 8]), ("max_step", [0.01, 0.0]), ("rel_tol", TOLERANCES)])
@@ -213,7 +222,8 @@ def study_main(argv):
     wp = sub.add_parser("work-precision", help="Figs 21-22: event-time error and events located vs rel_tol")
     wp.add_argument("--out", default=str(ROOT / "results" / "work-precision"), help="output folder")
     wp.add_argument("--fmu", default=str(ROOT / "dist" / "PogoStick.fmu"))
-    wp.add_argument("--reference", default=str(REFERENCE), help="closed-form events (CSV)")
+    wp.add_argument("--reference", default=None,
+                    help="closed-form events as a CSV (columns event, time_s); default: computed")
     add_arguments(wp)
     so = sub.add_parser("soil", help="Monte Carlo of the Penetrator over an uncertain soil")
     so.add_argument("--out", default=str(ROOT / "results" / "soil"), help="output folder")
@@ -227,7 +237,7 @@ def study_main(argv):
     args = ap.parse_args(argv)
     try:
         if args.study == "work-precision":
-            work_precision(Path(args.out), Path(args.fmu), Path(args.reference), args.workers, args.scheduler,
+            work_precision(Path(args.out), Path(args.fmu), Path(args.reference) if args.reference else None, args.workers, args.scheduler,
                            not args.no_progress)
         else:
             if not (math.isfinite(args.stop_time) and args.stop_time > 0):

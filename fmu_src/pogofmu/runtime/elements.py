@@ -131,7 +131,7 @@ class LinearDashpot(Element):
 
 
 # ---------------------------------------------------------------------------------------------
-# mem-elements (MODELS.md Sect. 2): each reduces to its linear element when its memory parameter
+# mem-elements (docs/models.md "PogoStickMem"): each reduces to its linear element when its memory parameter
 # is 0.  Both keep their memory in continuous states (absement a) or in the deflection itself.
 # ---------------------------------------------------------------------------------------------
 
@@ -218,7 +218,7 @@ class MemDashpot(Element):
 
 
 # ---------------------------------------------------------------------------------------------
-# shape-memory alloy (MODELS.md Sect. 3): a flag-shaped hysteresis with its branch as an explicit
+# shape-memory alloy (docs/models.md "PogoStickSMA"): a flag-shaped hysteresis with its branch as an explicit
 # discrete state and one event per branch transition
 # ---------------------------------------------------------------------------------------------
 

@@ -1,4 +1,4 @@
-"""Soil contact laws for a massless foot (MODELS.md Sect. 4; paper Sect. 5, Appendix A.3).
+"""Soil contact laws for a massless foot (docs/models.md "Penetrator"; paper Sect. 5, Appendix A.3).
 
 A soil is plain data plus pure functions, like a leg element (it knows nothing of FMI):
 

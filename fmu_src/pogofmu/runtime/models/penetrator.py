@@ -1,4 +1,4 @@
-"""Penetrator: the pogo stick driven into a Hunt–Crossley soil (MODELS.md Sect. 4; paper Sect. 5,
+"""Penetrator: the pogo stick driven into a Hunt–Crossley soil (docs/models.md "Penetrator"; paper Sect. 5,
 Appendix A.3, Eqs. 49-50).
 
 A mass ``m`` on a massless leg (linear spring ``k`` parallel to a linear dashpot ``c``, free length

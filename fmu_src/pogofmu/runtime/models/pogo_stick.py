@@ -1,4 +1,4 @@
-"""PogoStick: the basic model (MODELS.md Sect. 1; paper Sect. 3, Appendix A.1).
+"""PogoStick: the basic model (docs/models.md "PogoStick"; paper Sect. 3, Appendix A.1).
 
 A mass ``m`` on a massless leg made of a linear spring ``k`` and a linear dashpot ``c`` in parallel.
 """

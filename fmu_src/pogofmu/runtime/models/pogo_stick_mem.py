@@ -1,4 +1,4 @@
-"""PogoStickMem: the pogo stick with mem-elements (MODELS.md Sect. 2; paper Sect. 4, Appendix A.2).
+"""PogoStickMem: the pogo stick with mem-elements (docs/models.md "PogoStickMem"; paper Sect. 4, Appendix A.2).
 
 The leg is a mem-spring (``spring_law`` 0 linear, 1 softening, 2 hardening, memory coefficient
 ``beta``, absement state ``a``) in parallel with a mem-dashpot (``c(x) = c (1 + gamma x^2)``).

@@ -1,4 +1,4 @@
-"""PogoStickSMA: the pogo stick with a shape-memory-alloy leg (MODELS.md Sect. 3; paper Sect. 4,
+"""PogoStickSMA: the pogo stick with a shape-memory-alloy leg (docs/models.md "PogoStickSMA"; paper Sect. 4,
 Appendix A.2 event types #3-#6).
 
 The leg is a superelastic SMA flag (``k1, k2, x1, x3``; its branch and anchor are discrete

@@ -1,4 +1,4 @@
-"""The pogo-stick family (MODELS.md Sects. 1-3): a mass on a massless leg of parallel elements.
+"""The pogo-stick family (docs/models.md, the stick family): a mass on a massless leg of parallel elements.
 
 Continuous states ``[xbar, xdot, y, ydot, z, <element states...>, W_leg, W_ext]``:
 leg length, leg length rate, mass height, mass velocity, foot height, the elements' own states
