@@ -410,7 +410,9 @@ def test_an_unexpected_error_is_one_line_asking_for_a_report(tmp_path, monkeypat
     def broken(*a, **k):
         raise ZeroDivisionError("float division by zero")
 
-    monkeypatch.setattr(master, "validate", broken)
+    import pogofmu.ssp.cli
+
+    monkeypatch.setattr(pogofmu.ssp.cli, "validate", broken)
     monkeypatch.delenv("POGOFMU_DEBUG", raising=False)
     assert master.main(["check", str(SSP)]) == 2
     err = capsys.readouterr().err

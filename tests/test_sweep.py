@@ -164,35 +164,91 @@ def test_bad_options_are_refused_before_anything_runs(tmp_path, capsys):
     assert not out.exists()
 
 
-def test_resume_after_an_interruption_runs_only_the_missing_points(tmp_path, scheduler):
-    fmu = fmu_path("PogoStick")
+@pytest.fixture(scope="module")
+def gate_fmu(tmp_path_factory):
+    """tests/_sweep_gate.py built with pythonfmu: runs with k >= hold wait for a gate file."""
+    from pythonfmu.builder import FmuBuilder
+
+    dest = tmp_path_factory.mktemp("gate")
+    return Path(FmuBuilder.build_FMU(Path(__file__).with_name("_sweep_gate.py"), dest=dest))
+
+
+@pytest.fixture
+def gate():
+    """A fresh gate of tests/_sweep_gate.py: ``gate.set`` is the sweep's ``--set`` of its number,
+    ``gate.open()`` lets the held runs go on; the file is removed afterwards."""
+    sys.path.insert(0, str(Path(__file__).parent))
+    from _sweep_gate import gate_file
+
+    number = uuid.uuid4().int % 10 ** 12
+    path = Path(gate_file(number))
+
+    class Gate:
+        set = f"gate={number}"
+
+        def open(self):
+            path.touch()
+    yield Gate()
+    path.unlink(missing_ok=True)
+
+
+def _wait_for(predicate, proc=None, timeout=300.0):
+    """Poll ``predicate`` until it holds (the sweep process, if given, still running); the bound is
+    only a guard against a hang, never what decides the outcome."""
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        assert time.monotonic() < deadline, "timed out waiting (the test would otherwise hang)"
+        assert proc is None or proc.poll() is None, "the sweep ended before the test could interrupt it"
+        time.sleep(0.02)
+
+
+def _saved(parts):
+    return {r["run_id"]: r for f in parts.glob("chunk-*.parquet") for r in pq.read_table(f).to_pylist()}
+
+
+@pytest.fixture(params=["idle", "loaded"])
+def machine_load(request):
+    """'loaded': one CPU burner per core for the length of the test (the outcome must not change)."""
+    burners = []
+    if request.param == "loaded":
+        code = "import time\nwhile True: time.perf_counter()"
+        burners = [subprocess.Popen([sys.executable, "-c", code]) for _ in range(os.cpu_count() or 2)]
+    yield request.param
+    for b in burners:
+        b.kill()
+        b.wait()
+
+
+def test_resume_after_an_interruption_runs_only_the_missing_points(tmp_path, scheduler, gate_fmu, gate, machine_load):
+    """Runs k = 0 and 1 pass the gate, the other 18 wait for it: the sweep is interrupted (SIGINT,
+    as Ctrl-C) exactly when the two free runs are saved, whatever the machine's speed or load; the
+    resumed sweep, gate open, runs the 18 others only."""
     out = tmp_path / "r.parquet"
     parts = tmp_path / "r.parquet.parts"
-    n = 20  # about 0.2 s a run: the interruption comes after 2 of them, long before the last
-    cmd = [str(POGOFMU), "sweep", str(fmu), "--grid", f"k=60:170:{n}", "--set", "max_step=0.001", "--stop-time", "6",
-           "--step", "1e-2", "--outputs", "y", "--chunk-size", "1", "--scheduler", scheduler, "--out", str(out),
-           "--no-progress"]
+    n = 20
+    cmd = [str(POGOFMU), "sweep", str(gate_fmu), "--grid", f"k=0:{n - 1}:{n}", "--set", "hold=2", "--set", gate.set,
+           "--stop-time", "0.1", "--step", "0.05", "--outputs", "y", "--chunk-size", "1", "--scheduler", scheduler,
+           "--out", str(out), "--no-progress"]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    deadline = time.monotonic() + 120
-    while len(list(parts.glob("chunk-*.parquet"))) < 2 and time.monotonic() < deadline and proc.poll() is None:
-        time.sleep(0.02)
+    _wait_for(lambda: len(_saved(parts)) >= 2, proc)
     proc.send_signal(signal.SIGINT)  # Ctrl-C
-    stdout, stderr = proc.communicate(timeout=60)
+    stdout, stderr = proc.communicate(timeout=120)
     assert proc.returncode == 130, (proc.returncode, stdout, stderr[-3000:])
     assert "--resume" in stdout and not out.exists()
-    before = {r["run_id"]: r for f in parts.glob("chunk-*.parquet") for r in pq.read_table(f).to_pylist()}
-    assert 2 <= len(before) < n, f"{len(before)} runs saved: the interruption came too late to test resume"
+    before = _saved(parts)
+    assert sorted(before) == [0, 1], sorted(before)  # exactly the runs the gate let through
 
+    gate.open()
     again = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     assert again.returncode == 2 and "--resume" in again.stderr  # an interrupted sweep is not overwritten silently
     resumed = subprocess.run(cmd + ["--resume"], capture_output=True, text=True, timeout=300)
     assert resumed.returncode == 0, resumed.stderr[-3000:]
-    assert f"{len(before)} of {n} runs done, running the other {n - len(before)}" in resumed.stdout
-    assert f"({n - len(before)} run now)" in resumed.stdout
+    assert f"2 of {n} runs done, running the other {n - 2}" in resumed.stdout
+    assert f"({n - 2} run now)" in resumed.stdout
     rows = pq.read_table(out).to_pylist()
     assert [r["run_id"] for r in rows] == list(range(n)) and not parts.exists()
     for r in rows:
-        assert r["status"] == "ok"
+        assert r["status"] == "ok" and r["y_final"] == r["k"]
         if r["run_id"] in before:
             assert r == before[r["run_id"]]  # the same row, wall time included: not run again
     # a finished sweep resumed again does nothing
@@ -279,9 +335,10 @@ def test_run_and_ssp_are_subcommands_of_pogofmu(tmp_path):
     assert unknown.returncode == 2 and "unknown command 'nosuch'" in unknown.stderr
 
 
-def test_a_worker_killed_mid_sweep_loses_no_run(tmp_path):
-    """A worker process dies (SIGKILL) while it runs a chunk; Dask may not retry the task here
-    (allowed-failures 0), so the sweep reruns the chunk's points one by one: every run is a row."""
+def test_a_worker_killed_mid_sweep_loses_no_run(tmp_path, gate_fmu, gate):
+    """A worker process dies (SIGKILL) while it runs a chunk — held at the gate, so it is surely
+    in the middle of one; Dask may not retry the task here (allowed-failures 0), so the sweep
+    reruns the chunk's points one by one: every run is a row."""
     import dask
     from distributed import Client, LocalCluster
 
@@ -293,23 +350,24 @@ def test_a_worker_killed_mid_sweep_loses_no_run(tmp_path):
         pids = client.run(os.getpid)
         out, parts = tmp_path / "k.parquet", tmp_path / "k.parquet.parts"
         n = 20
-        proc = subprocess.Popen([str(POGOFMU), "sweep", str(fmu_path("PogoStick")), "--grid", f"k=60:170:{n}",
-                                 "--set", "max_step=0.001", "--stop-time", "6", "--step", "1e-2", "--outputs", "y",
+        proc = subprocess.Popen([str(POGOFMU), "sweep", str(gate_fmu), "--grid", f"k=0:{n - 1}:{n}",
+                                 "--set", "hold=5", "--set", gate.set, "--stop-time", "0.1", "--step", "0.05", "--outputs", "y",
                                  "--chunk-size", "5", "--scheduler", cluster.scheduler_address, "--out", str(out),
                                  "--no-progress"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        deadline = time.monotonic() + 120
-        while not list(parts.glob("chunk-*.parquet")) and time.monotonic() < deadline and proc.poll() is None:
-            time.sleep(0.02)
+        _wait_for(lambda: len(_saved(parts)) >= 5, proc)  # the free chunk (k = 0..4) is saved
         busy = []
-        while not busy and time.monotonic() < deadline:  # a worker in the middle of a chunk
-            busy = [w for w, keys in client.processing().items() if keys and w in pids]
-            time.sleep(0.01)
+
+        def a_worker_holds_a_chunk():
+            busy[:] = [w for w, keys in client.processing().items() if keys and w in pids]
+            return bool(busy)
+        _wait_for(a_worker_holds_a_chunk, proc)  # every other chunk waits at the gate
         os.kill(pids[busy[0]], signal.SIGKILL)
+        gate.open()
         stdout, stderr = proc.communicate(timeout=300)
         assert proc.returncode == 0, stderr[-3000:]
         rows = pq.read_table(out).to_pylist()
         assert [r["run_id"] for r in rows] == list(range(n))
-        assert all(r["status"] == "ok" and r["n_events"] > 0 for r in rows), [r["message"] for r in rows]
+        assert all(r["status"] == "ok" and r["y_final"] == r["k"] for r in rows), [r["message"] for r in rows]
         assert len(list(parts.glob("*"))) == 0 and f"{n} runs" in stdout
         assert "KilledWorker" in stdout and "running them one by one" in stdout, stdout + stderr[-3000:]
     finally:
@@ -318,30 +376,31 @@ def test_a_worker_killed_mid_sweep_loses_no_run(tmp_path):
     assert not _wait_gone(_children() - before), "worker processes left behind"
 
 
-def test_a_lost_scheduler_stops_the_sweep_and_resume_finishes_it_elsewhere(tmp_path, scheduler):
-    """The cluster goes away mid-sweep: the sweep stops at once, says so, keeps what it saved and
-    records no run it did not do; --resume on another cluster runs the rest."""
+def test_a_lost_scheduler_stops_the_sweep_and_resume_finishes_it_elsewhere(tmp_path, scheduler, gate_fmu, gate):
+    """The cluster goes away mid-sweep (while the held runs wait at the gate): the sweep stops at
+    once, says so, keeps what it saved and records no run it did not do; --resume on another
+    cluster, gate open, runs the rest."""
     from distributed import LocalCluster
 
     before = _children()
     lost = LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=":0")
     out, parts = tmp_path / "l.parquet", tmp_path / "l.parquet.parts"
     n = 16
-    args = [str(POGOFMU), "sweep", str(fmu_path("PogoStick")), "--grid", f"k=60:170:{n}", "--stop-time", "5",
-            "--step", "1e-2", "--outputs", "y", "--chunk-size", "2", "--out", str(out), "--no-progress"]
+    args = [str(POGOFMU), "sweep", str(gate_fmu), "--grid", f"k=0:{n - 1}:{n}", "--set", "hold=4", "--set", gate.set,
+            "--stop-time", "0.1", "--step", "0.05", "--outputs", "y", "--chunk-size", "2", "--out", str(out),
+            "--no-progress"]
     proc = subprocess.Popen(args + ["--scheduler", lost.scheduler_address], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     try:
-        deadline = time.monotonic() + 120
-        while not list(parts.glob("chunk-*.parquet")) and time.monotonic() < deadline and proc.poll() is None:
-            time.sleep(0.02)
+        _wait_for(lambda: len(_saved(parts)) >= 4, proc)  # the two free chunks (k = 0..3) are saved
     finally:
         lost.close()
     stdout, stderr = proc.communicate(timeout=120)
     assert not _wait_gone(_children() - before), "worker processes left behind"
     assert proc.returncode == 2 and "the sweep stopped" in stderr and "--resume runs the rest" in stderr, stderr[-2000:]
-    saved = [r for f in parts.glob("chunk-*.parquet") for r in pq.read_table(f).to_pylist()]
-    assert 2 <= len(saved) < n and all(r["status"] == "ok" for r in saved)
+    saved = list(_saved(parts).values())
+    assert sorted(r["run_id"] for r in saved) == [0, 1, 2, 3] and all(r["status"] == "ok" for r in saved)
+    gate.open()
     resumed = subprocess.run(args + ["--scheduler", scheduler, "--resume"], capture_output=True, text=True, timeout=300)
     assert resumed.returncode == 0, resumed.stderr[-3000:]
     rows = pq.read_table(out).to_pylist()

@@ -1,0 +1,113 @@
+"""The command line of the SSP master: ``run`` and ``check``."""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+from pathlib import Path
+
+from .master import ALGORITHMS, simulate
+from .package import SSPError, read_ssd, unpack
+from .plot import plot
+from .record import CSVStream
+from .validate import validate
+
+def prepare_out(out: Path, *files: Path):
+    """The output folder, created, and proven writable before the first step (never after the run)."""
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise SSPError(f"output folder {str(out)!r} (--out) is an existing file, not a folder")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=out):
+            pass
+    except OSError as exc:
+        raise SSPError(f"output folder {str(out)!r} (--out) cannot be written: {exc.strerror or exc}") from None
+    for f in files:
+        if f.is_dir():
+            raise SSPError(f"output file {str(f)!r} is a folder: remove it or choose another --out")
+
+
+def run(ssp, parameters=None, stop_time=None, step=1e-3, out=None, algorithm="gauss-seidel", progress=True):
+    """The ``run`` command: simulate, streaming ``<out>/<set>.csv``, then draw ``<out>/<set>.png``.
+
+    The package, the numbers and the output folder are all checked before the first step."""
+    ssp = Path(ssp)
+    out = Path(out) if out is not None else Path("results") / ssp.stem
+    tag = parameters or "default"
+    csv_path, png_path = out / f"{tag}.csv", out / f"{tag}.png"
+    opened = []
+
+    def open_csv(names, types, units, n_rows):  # called once the package and the numbers are valid
+        prepare_out(out, csv_path, png_path)
+        try:
+            opened.append(CSVStream(csv_path, names, types, units, n_rows))
+        except OSError as exc:
+            raise SSPError(f"cannot write {csv_path}: {exc.strerror or exc}") from None
+        return opened[0]
+
+    try:
+        rec = simulate(ssp, parameters, stop_time, step, algorithm=algorithm, progress=progress, sink=open_csv)
+    except SSPError as exc:
+        if opened and opened[0].rows:
+            s = opened[0]
+            raise SSPError(f"{exc}\n  the {s.rows} rows up to t = {s.last_time:.10g} s are in {s.incomplete}") from None
+        raise
+    try:
+        plot(rec, png_path, f"{rec.system} ({rec.parameter_set}): {algorithm}, step {step:g} s", rec.connections)
+    except OSError as exc:
+        raise SSPError(f"cannot write {png_path}: {exc.strerror or exc} (the results are in {csv_path})") from None
+    print(f"{rec.system}: simulated to t = {rec.last_time:.6g} s -> {csv_path}, {png_path}")
+    return rec, csv_path, png_path
+
+
+def main(argv=None, prog="python -m pogofmu.ssp"):
+    """The command line (``run`` / ``check``); returns the exit status. ``prog`` names the command
+    in the usage text (a console command forwarding here may pass its own)."""
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("--debug", action="store_true",
+                        help="show the Python traceback of an unexpected error (also: POGOFMU_DEBUG=1)")
+    ap = argparse.ArgumentParser(prog=prog, description="SSP master built on fmpy")
+    sub = ap.add_subparsers(dest="command", required=True)
+    r = sub.add_parser("run", parents=[common], help="simulate an .ssp with a fixed communication step")
+    r.add_argument("ssp")
+    r.add_argument("--parameters", help="parameter set: resources/NAME.ssv (default: the .ssd's bindings)")
+    r.add_argument("--stop-time", type=float, help="default: the .ssd's DefaultExperiment stopTime")
+    r.add_argument("--step", type=float, default=1e-3, help="communication step [s] (default 1e-3)")
+    r.add_argument("--algorithm", choices=ALGORITHMS, default="gauss-seidel")
+    r.add_argument("--out", help="output folder (default results/<SSP name>)")
+    r.add_argument("--quiet", action="store_true", help="no progress lines")
+    c = sub.add_parser("check", parents=[common],
+                       help="validate an .ssp (structure, FMUs, units, parameter sets) without running")
+    c.add_argument("ssp")
+    c.add_argument("--parameters")
+    args = ap.parse_args(argv)
+    try:
+        if args.command == "check":
+            with tempfile.TemporaryDirectory() as tmp:
+                system = read_ssd(unpack(Path(args.ssp), Path(tmp)))
+                validate(system, args.parameters)
+                print(f"{args.ssp}: system {system.name!r} is valid: components {system.order()}, "
+                      f"{len(system.connections)} connections, parameter sets "
+                      f"{[Path(s).stem for s in system.parameter_sets]}")
+            return 0
+        run(args.ssp, args.parameters, args.stop_time, args.step, args.out, args.algorithm, not args.quiet)
+    except SSPError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:  # noqa: BLE001 - the last resort: one line, never a traceback by default
+        if args.debug or os.environ.get("POGOFMU_DEBUG", "") not in ("", "0"):
+            raise
+        print(f"error: unexpected {type(exc).__name__}: {exc} -- this is a bug of pogofmu, please report it "
+              f"(run again with --debug or POGOFMU_DEBUG=1 for the traceback)", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
+

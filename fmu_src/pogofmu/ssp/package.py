@@ -1,0 +1,257 @@
+"""Reading an SSP package: unpacking the .ssp, parsing SystemStructure.ssd and its .ssv parameter
+sets into plain data (:class:`System` and its parts). Nothing here loads an FMU."""
+from __future__ import annotations
+
+import math
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Dict, List, Optional
+from xml.etree import ElementTree as ET
+
+NS = {
+    "ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
+    "ssc": "http://ssp-standard.org/SSP1/SystemStructureCommon",
+    "ssv": "http://ssp-standard.org/SSP1/SystemStructureParameterValues",
+}
+TYPES = ("Real", "Integer", "Boolean", "String", "Enumeration", "Binary")
+
+
+class SSPError(Exception):
+    """The package cannot be run as it is; the message names every offending element."""
+
+
+
+# =============================================================================================
+# the system as read from the package
+# =============================================================================================
+
+@dataclass
+class Connector:
+    name: str
+    kind: str
+    type: str
+    unit: Optional[str]
+
+
+@dataclass
+class Component:
+    name: str
+    source: str
+    connectors: Dict[str, Connector]
+    bindings: List[str]  # sources of the component's ParameterBindings, in order
+    variables: dict = field(default_factory=dict)  # name -> fmpy ScalarVariable (filled on validation)
+    model_description: object = None
+
+
+@dataclass
+class Connection:
+    index: int  # 1-based position in ssd:Connections
+    start_element: str
+    start_connector: str
+    end_element: str
+    end_connector: str
+
+    def __str__(self):
+        return (f"Connection {self.index} ({self.start_element}.{self.start_connector} -> "
+                f"{self.end_element}.{self.end_connector})")
+
+
+@dataclass
+class Parameter:
+    name: str
+    type: str
+    value: object
+    unit: Optional[str]
+
+
+@dataclass
+class ParameterSet:
+    name: str
+    source: str  # path inside the package, e.g. resources/moon.ssv
+    parameters: List[Parameter]
+
+
+@dataclass
+class System:
+    name: str
+    root: Path  # directory of the unpacked package
+    components: Dict[str, Component]  # in ssd:Elements order
+    connections: List[Connection]
+    parameter_sets: Dict[str, ParameterSet]  # by source
+    start_time: float = 0.0
+    stop_time: Optional[float] = None
+
+    def order(self) -> List[str]:
+        """Gauss-Seidel order: first appearance in the connections (start, then end element),
+        then the components no connection mentions, in ssd:Elements order."""
+        seen = []
+        for c in self.connections:
+            for name in (c.start_element, c.end_element):
+                if name in self.components and name not in seen:
+                    seen.append(name)
+        return seen + [n for n in self.components if n not in seen]
+
+
+def _tag(prefix, name):
+    return f"{{{NS[prefix]}}}{name}"
+
+
+def _connector_type(el):
+    for t in TYPES:
+        child = el.find(f"ssc:{t}", NS)
+        if child is not None:
+            return t, child.get("unit")
+    return None, None
+
+
+def unpack(ssp: Path, dest: Path) -> Path:
+    """Unzip an .ssp into ``dest`` (a directory holding SystemStructure.ssd is used as it is)."""
+    ssp = Path(ssp)
+    if ssp.is_dir():
+        return ssp
+    if not ssp.exists():
+        raise SSPError(f"{ssp}: no such file")
+    try:
+        with zipfile.ZipFile(ssp) as z:
+            z.extractall(dest)
+    except zipfile.BadZipFile:
+        raise SSPError(f"{ssp}: not an SSP package (not a zip archive)") from None
+    return dest
+
+
+def read_ssd(root: Path) -> System:
+    """Parse ``root/SystemStructure.ssd`` and the .ssv files under ``root/resources``."""
+    path = root / "SystemStructure.ssd"
+    if not path.exists():
+        raise SSPError(f"{root}: the package holds no SystemStructure.ssd")
+    try:
+        tree = ET.parse(path)
+    except ET.ParseError as exc:
+        raise SSPError(f"SystemStructure.ssd is not well-formed XML: {exc}") from None
+    top = tree.getroot()
+    if top.tag != _tag("ssd", "SystemStructureDescription"):
+        raise SSPError(f"SystemStructure.ssd: root element is {top.tag}, not ssd:SystemStructureDescription "
+                       f"(namespace {NS['ssd']})")
+    system_el = top.find("ssd:System", NS)
+    if system_el is None:
+        raise SSPError("SystemStructure.ssd: no ssd:System element")
+    components = {}
+    elements = system_el.find("ssd:Elements", NS)
+    problems = []
+    for el in (list(elements) if elements is not None else []):
+        if el.tag != _tag("ssd", "Component"):
+            problems.append(f"ssd:Elements: element {el.tag.split('}')[-1]} {el.get('name')!r} is not supported "
+                            f"(only ssd:Component; no nested systems)")
+            continue
+        name = el.get("name")
+        connectors = {}
+        for cel in el.findall("ssd:Connectors/ssd:Connector", NS):
+            t, unit = _connector_type(cel)
+            connectors[cel.get("name")] = Connector(cel.get("name"), cel.get("kind"), t, unit)
+        bindings = []
+        for bel in el.findall("ssd:ParameterBindings/ssd:ParameterBinding", NS):
+            if bel.get("source") is None:
+                problems.append(f"Component {name}: a ParameterBinding without source (inline values "
+                                f"are not supported)")
+            else:
+                bindings.append(bel.get("source"))
+        if name in components:
+            problems.append(f"Component {name}: the name is used twice in ssd:Elements")
+        components[name] = Component(name, el.get("source"), connectors, bindings)
+    connections = []
+    for i, cel in enumerate(system_el.findall("ssd:Connections/ssd:Connection", NS), start=1):
+        connections.append(Connection(i, cel.get("startElement"), cel.get("startConnector"),
+                                      cel.get("endElement"), cel.get("endConnector")))
+    start, stop = 0.0, None
+    de = top.find("ssd:DefaultExperiment", NS)
+    if de is not None:
+        for attr in ("startTime", "stopTime"):
+            try:
+                value = parse_value("Real", de.get(attr)) if de.get(attr) is not None else None
+            except ValueError as exc:
+                problems.append(f"ssd:DefaultExperiment: {attr} {de.get(attr)!r} {exc}")
+                continue
+            if value is not None and not math.isfinite(value):
+                problems.append(f"ssd:DefaultExperiment: {attr} = {value!r} must be a finite number")
+            elif attr == "startTime" and value is not None:
+                start = value
+            elif value is not None:
+                stop = value
+    parameter_sets = {}
+    for ssv in sorted((root / "resources").glob("*.ssv")) if (root / "resources").is_dir() else []:
+        source = f"resources/{ssv.name}"
+        parameter_sets[source] = read_ssv(ssv, source, problems)
+    system = System(system_el.get("name") or top.get("name"), root, components, connections, parameter_sets,
+                    start, stop)
+    if problems:
+        raise SSPError(_problem_text(system, problems))
+    return system
+
+
+INT32 = (-2 ** 31, 2 ** 31 - 1)  # the range of fmi2Integer
+
+
+def parse_value(type_: str, raw: Optional[str]):
+    """The value of an ``ssv:Real|Integer|Boolean|String`` element's ``value`` attribute.
+
+    Raises ValueError with the rule the text breaks (the caller names the parameter and the file).
+    Real follows xs:double (``1.62``, ``2e-3``, also ``NaN``/``INF``, which the FMU's own parameter
+    rules then judge); Integer is xs:int (a whole number within fmi2Integer's 32 bits, so ``2.5``
+    and ``3.0`` are refused); Boolean is ``true``/``false``/``1``/``0``.
+    """
+    if raw is None:
+        raise ValueError("has no value attribute")
+    if type_ == "String":
+        return raw
+    text = raw.strip()
+    if not text:
+        raise ValueError("is empty")
+    if type_ == "Real":
+        try:
+            return float(text)
+        except ValueError:
+            raise ValueError("is not a number (xs:double, e.g. 1.62 or 2e-3)") from None
+    if type_ == "Integer":
+        try:
+            value = int(text)
+        except ValueError:
+            raise ValueError("is not a whole number (xs:int, e.g. 8)") from None
+        if not INT32[0] <= value <= INT32[1]:
+            raise ValueError(f"is outside the 32-bit range [{INT32[0]}, {INT32[1]}] of fmi2Integer")
+        return value
+    if text in ("true", "1"):
+        return True
+    if text in ("false", "0"):
+        return False
+    raise ValueError("is not a boolean (true, false, 1 or 0)")
+
+
+def read_ssv(path: Path, source: str, problems: list) -> ParameterSet:
+    """Parse one .ssv; every value that breaks its type's rule is added to ``problems``."""
+    try:
+        top = ET.parse(path).getroot()
+    except ET.ParseError as exc:
+        raise SSPError(f"{source} is not well-formed XML: {exc}") from None
+    if top.tag != _tag("ssv", "ParameterSet"):
+        raise SSPError(f"{source}: root element is {top.tag}, not ssv:ParameterSet (namespace {NS['ssv']})")
+    params = []
+    for pel in top.findall("ssv:Parameters/ssv:Parameter", NS):
+        for t in ("Real", "Integer", "Boolean", "String"):
+            v = pel.find(f"ssv:{t}", NS)
+            if v is not None:
+                raw = v.get("value")
+                try:
+                    params.append(Parameter(pel.get("name"), t, parse_value(t, raw), v.get("unit")))
+                except ValueError as exc:
+                    problems.append(f"{source}: parameter {pel.get('name')!r}: {t} value {raw!r} {exc}")
+                break
+        else:
+            problems.append(f"{source}: parameter {pel.get('name')!r} has no Real/Integer/Boolean/String value")
+    return ParameterSet(top.get("name"), source, params)
+
+
+def _problem_text(system, problems):
+    head = f"SSP system {system.name!r} is invalid ({len(problems)} problem{'s' * (len(problems) > 1)}):"
+    return "\n  ".join([head] + problems)
+

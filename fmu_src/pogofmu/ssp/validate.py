@@ -1,0 +1,145 @@
+"""Validating a system against itself and its FMUs, before anything is loaded: every problem is
+reported with the element it concerns."""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Dict, Optional
+
+from .package import ParameterSet, SSPError, System, _problem_text
+
+def _fmu_unit(var):
+    unit = getattr(var, "unit", None)
+    if unit is None and getattr(var, "declaredType", None) is not None:
+        unit = getattr(var.declaredType, "unit", None)
+    return unit or None
+
+
+def validate(system: System, parameters: Optional[str] = None) -> Dict[str, Optional[ParameterSet]]:
+    """Check the system against itself and its FMUs; return the parameter set of every component.
+
+    Raises :class:`SSPError` listing every problem found, each naming its element.
+    """
+    from fmpy import read_model_description
+
+    problems = []
+    # ---- components and their FMUs ----
+    for comp in system.components.values():
+        if not comp.source:
+            problems.append(f"Component {comp.name}: no source attribute")
+            continue
+        fmu = system.root / comp.source
+        if not fmu.is_file():
+            problems.append(f"Component {comp.name}: source {comp.source} is not in the package")
+            continue
+        try:
+            md = read_model_description(str(fmu), validate=False)
+        except Exception as exc:  # noqa: BLE001 - any unreadable FMU is a problem of the package
+            problems.append(f"Component {comp.name}: source {comp.source} is not a readable FMU ({exc})")
+            continue
+        if md.coSimulation is None:
+            problems.append(f"Component {comp.name}: {comp.source} does not support co-simulation")
+            continue
+        comp.model_description = md
+        comp.variables = {v.name: v for v in md.modelVariables}
+        for con in comp.connectors.values():
+            where = f"Connector {comp.name}.{con.name}"
+            if con.kind not in ("input", "output", "parameter", "calculatedParameter", "inout"):
+                problems.append(f"{where}: kind {con.kind!r} is not an SSP connector kind")
+            if con.type is None:
+                problems.append(f"{where}: no type (ssc:Real, ssc:Integer, ...)")
+            var = comp.variables.get(con.name)
+            if var is None:
+                problems.append(f"{where}: {comp.source} has no variable {con.name!r}")
+                continue
+            if con.type is not None and var.type != con.type:
+                problems.append(f"{where}: type {con.type} but the FMU's variable is {var.type}")
+            if con.kind in ("input", "output") and var.causality != con.kind:
+                problems.append(f"{where}: kind {con.kind} but the FMU's variable has causality {var.causality}")
+            fu = _fmu_unit(var)
+            if con.type == "Real" and (con.unit or None) != fu:
+                problems.append(f"{where}: unit mismatch: connector unit {con.unit!r}, FMU unit {fu!r}")
+    # ---- connections ----
+    fed = {}
+    for c in system.connections:
+        ok = True
+        for role, el, cn in (("start", c.start_element, c.start_connector), ("end", c.end_element, c.end_connector)):
+            if not el:
+                problems.append(f"{c}: {role}Element missing (connections to the system's own connectors are "
+                                f"not supported)")
+                ok = False
+            elif el not in system.components:
+                problems.append(f"{c}: unknown component {el!r} (not in ssd:Elements)")
+                ok = False
+            elif cn not in system.components[el].connectors:
+                problems.append(f"{c}: dangling: component {el} declares no connector {cn!r}")
+                ok = False
+        if not ok:
+            continue
+        a = system.components[c.start_element].connectors[c.start_connector]
+        b = system.components[c.end_element].connectors[c.end_connector]
+        if a.kind not in ("output", "inout", "parameter", "calculatedParameter"):
+            problems.append(f"{c}: start connector {c.start_element}.{a.name} is an {a.kind}, not an output")
+        if b.kind not in ("input", "inout"):
+            problems.append(f"{c}: end connector {c.end_element}.{b.name} is an {b.kind}, not an input")
+        if a.type != b.type:
+            problems.append(f"{c}: type mismatch: {a.type} -> {b.type}")
+        elif (a.unit or None) != (b.unit or None):
+            problems.append(f"{c}: unit mismatch: {c.start_element}.{a.name} is in {a.unit!r}, "
+                            f"{c.end_element}.{b.name} in {b.unit!r} (no unit conversion)")
+        key = (c.end_element, c.end_connector)
+        if key in fed:
+            problems.append(f"{c}: input {c.end_element}.{c.end_connector} is already fed by Connection {fed[key]}")
+        fed[key] = c.index
+    # ---- parameter sets ----
+    for comp in system.components.values():
+        for source in comp.bindings:
+            if source not in system.parameter_sets:
+                problems.append(f"Component {comp.name}: ParameterBinding source {source} is missing from the package")
+    chosen = None
+    if parameters is not None:
+        matches = [ps for ps in system.parameter_sets.values()
+                   if ps.source == f"resources/{parameters}.ssv" or ps.name == parameters]
+        if not matches:
+            avail = ", ".join(Path(s).stem for s in system.parameter_sets) or "none"
+            problems.append(f"parameter set {parameters!r}: no resources/{parameters}.ssv in the package "
+                            f"(available: {avail})")
+        else:
+            chosen = matches[0]
+    selected = {}
+    for comp in system.components.values():
+        if chosen is not None:
+            selected[comp.name] = chosen if comp.bindings else None
+        else:
+            sets = [system.parameter_sets[s] for s in comp.bindings if s in system.parameter_sets]
+            # SSP: bindings apply in order, later values win
+            merged = {}
+            for ps in sets:
+                for p in ps.parameters:
+                    merged[p.name] = p
+            selected[comp.name] = (ParameterSet("+".join(ps.name for ps in sets), "+".join(ps.source for ps in sets),
+                                                list(merged.values())) if sets else None)
+    used = {}
+    for comp in system.components.values():
+        ps = selected.get(comp.name)
+        if ps is None or not comp.variables:
+            continue
+        for p in ps.parameters:
+            var = comp.variables.get(p.name)
+            if var is None:
+                used.setdefault((ps.source, p.name), False)
+                continue
+            used[(ps.source, p.name)] = True
+            where = f"parameter {p.name} of {ps.source} applied to {comp.name}"
+            if var.causality not in ("parameter", "input") and var.variability != "tunable":
+                problems.append(f"{where}: the FMU's variable has causality {var.causality}")
+            if p.type != var.type and not (p.type == "Real" and var.type == "Integer" and float(p.value).is_integer()):
+                problems.append(f"{where}: type {p.type} but the FMU's variable is {var.type}")
+            fu = _fmu_unit(var)
+            if p.unit is not None and fu is not None and p.unit != fu:
+                problems.append(f"{where}: unit mismatch: {p.unit!r} in the .ssv, {fu!r} in the FMU")
+    for (source, name), applied in used.items():
+        if not applied:
+            problems.append(f"parameter {name} of {source}: no component bound to this set has a variable {name!r}")
+    if problems:
+        raise SSPError(_problem_text(system, problems))
+    return selected
