@@ -262,7 +262,21 @@ def _description_body(root, cls, variables):
         ET.SubElement(cats, "Category", name=name, description=description)
     ET.SubElement(root, "DefaultExperiment", startTime="0.0", stopTime=repr(float(model.default_stop_time)),
                   stepSize=repr(float(model.default_step)))
+    if root.get("fmiVersion") == "2.0":
+        _pogofmu_annotation(ET.SubElement(ET.SubElement(root, "VendorAnnotations"), "Tool", name="pogofmu"), model)
     return ET.SubElement(root, "ModelVariables")
+
+
+def cosimulation_events(model):
+    """The events a co-simulation step of this model can contain: its events if it has states (a
+    model without states changes only with its inputs, which are held over a step)."""
+    return [ev.name for ev in model.events] if model.states else []
+
+
+def _pogofmu_annotation(parent, model):
+    """What a master needs to know beyond the standard: the events a step may contain (the SSP
+    master saves and restores FMI 2.0 states only around components that can have one)."""
+    ET.SubElement(parent, "Events", cosimulation=" ".join(cosimulation_events(model)))
 
 
 def _variable_attributes(model, v):
@@ -302,20 +316,31 @@ def model_description_fmi2(cls, token: str) -> bytes:
             t["start"] = _number(v.start, v.type == "Integer")
         ET.SubElement(sv, v.type, t)
     ms = ET.SubElement(root, "ModelStructure")
-    outputs = [i for i, v in enumerate(variables, start=1) if v.causality == "output"]
+    outputs = [(i, v) for i, v in enumerate(variables, start=1) if v.causality == "output"]
+    index_of = {v.name: i for i, v in enumerate(variables, start=1)}
     if outputs:
         out_el = ET.SubElement(ms, "Outputs")
         init_el = ET.SubElement(ms, "InitialUnknowns")
-        for index in outputs:
-            ET.SubElement(out_el, "Unknown", index=str(index))
+        for index, v in outputs:
+            # co-simulation: an output depends on the inputs it feeds through (and on internal states,
+            # which are not knowns of the FMU); at initialization on every known (no attribute)
+            deps = [index_of[n] for n in model.feeds_through(v.name)]
+            ET.SubElement(out_el, "Unknown", index=str(index), **_dependencies(deps))
             ET.SubElement(init_el, "Unknown", index=str(index))
     ET.indent(root)
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
 
 
+def _dependencies(knowns):
+    """The dependencies/dependenciesKind attributes listing ``knowns`` (indices or value references)."""
+    knowns = sorted(knowns)
+    return {"dependencies": " ".join(map(str, knowns)), "dependenciesKind": " ".join(["dependent"] * len(knowns))}
+
+
 def model_description_fmi3(cls, token: str) -> bytes:
     """FMI 3.0: model exchange and co-simulation in one description (pogofmu.runtime.fmi3 for the extra
     variables: state locals, derivatives, event indicators, and the independent variable time)."""
+    from pogofmu.dependencies import structure
     from pogofmu.runtime.fmi3 import check_state_outputs, fmi3_class, indicator_name
 
     problem = check_state_outputs(cls.model)
@@ -350,16 +375,28 @@ def model_description_fmi3(cls, token: str) -> bytes:
     ms = ET.SubElement(root, "ModelStructure")
     states = [by_name[s.name] for s in model.states]
     derivatives = [by_name[f"der({s.name})"] for s in model.states]
+    deps = structure(model)
+
+    def knowns(key, name=None):
+        on_states, on_inputs = deps.get(key, (set(), set()))
+        return {by_name[n].vr for n in on_states} | {by_name[n].vr for n in on_inputs}
+
+    engine_outputs = {v.name for v in model.engine_outputs()}
     for v in variables:
         if v.causality == "output":
-            ET.SubElement(ms, "Output", valueReference=str(v.vr))
-    for v in derivatives:
-        ET.SubElement(ms, "ContinuousStateDerivative", valueReference=str(v.vr))
+            # the engine's event counters change only at events: they depend on no known
+            known = set() if v.name in engine_outputs else knowns(f"output:{v.name}")
+            ET.SubElement(ms, "Output", valueReference=str(v.vr), **_dependencies(known))
+    for s_var, v in zip(model.states, derivatives):
+        ET.SubElement(ms, "ContinuousStateDerivative", valueReference=str(v.vr),
+                      **_dependencies(knowns(f"der:{s_var.name}")))
     initial = {v.vr for v in variables if v.causality == "output"} | {v.vr for v in states + derivatives}
     for vr in sorted(initial):
         ET.SubElement(ms, "InitialUnknown", valueReference=str(vr))
     for ev in model.events:
-        ET.SubElement(ms, "EventIndicator", valueReference=str(by_name[indicator_name(ev)].vr))
+        ET.SubElement(ms, "EventIndicator", valueReference=str(by_name[indicator_name(ev)].vr),
+                      **_dependencies(knowns(f"indicator:{ev.name}")))
+    _pogofmu_annotation(ET.SubElement(ET.SubElement(root, "Annotations"), "Annotation", type="org.pogofmu"), model)
     ET.indent(root)
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
 
@@ -427,17 +464,37 @@ def build_one(name: str, dest: Path, token_seed: str = "", fmi_version: int = 2)
     return fmu
 
 
-def pack_ssp(system_dir: Path, dest: Path) -> Path:
-    """Pack ``ssp/<System>/`` (SystemStructure.ssd, *.ssv) and the FMUs it references into an .ssp."""
+def ssp2_text(text: str, what: str) -> str:
+    """An SSP 1.0 .ssd or .ssv as SSP 2.0, for FMI 3.0 components: version 2.0 and the FMI 3.0 type
+    names (``Real`` -> ``Float64``, ``Integer`` -> ``Int32``); everything else as written."""
+    out = re.sub(r'(<(?:ssd:SystemStructureDescription|ssv:ParameterSet)\b[^>]*?\bversion=")1\.0"', r'\g<1>2.0"',
+                 text, count=1)
+    if out == text:
+        raise BuildError(f"{what}: no version=\"1.0\" on its root element to make SSP 2.0 of")
+    out = re.sub(r"<(/?)(ssc|ssv):Real\b", r"<\1\2:Float64", out)
+    out = re.sub(r"<(/?)(ssc|ssv):Integer\b", r"<\1\2:Int32", out)
+    head = out.find("?>") + 2 if out.startswith("<?xml") else 0
+    note = (f"\n<!-- generated by build_fmu.py from the SSP 1.0 {what}: the same system as SSP 2.0, "
+            f"whose components are the FMI 3.0 FMUs -->")
+    return out[:head] + note + out[head:]
+
+
+def pack_ssp(system_dir: Path, dest: Path, fmi3: bool = False) -> Path:
+    """Pack ``ssp/<System>/`` (SystemStructure.ssd, *.ssv) and the FMUs it references into an .ssp:
+    SSP 1.0 with the FMI 2.0 FMUs (``<System>.ssp``), or with ``fmi3`` the same system as SSP 2.0
+    with the FMI 3.0 FMUs (``<System>-fmi3.ssp``)."""
     ssd = system_dir / "SystemStructure.ssd"
     text = ssd.read_text()
-    out = dest / f"{system_dir.name}.ssp"
-    members = [("SystemStructure.ssd", ssd.read_bytes(), False)]
-    members += [(f"resources/{ssv.name}", ssv.read_bytes(), False) for ssv in sorted(system_dir.glob("*.ssv"))]
+    out = dest / f"{system_dir.name}{'-fmi3' if fmi3 else ''}.ssp"
+    conv = (lambda t, what: ssp2_text(t, what)) if fmi3 else (lambda t, what: t)
+    members = [("SystemStructure.ssd", conv(text, ssd.name).encode(), False)]
+    members += [(f"resources/{ssv.name}", conv(ssv.read_text(), ssv.name).encode(), False)
+                for ssv in sorted(system_dir.glob("*.ssv"))]
+    fmus = dest / "fmi3" if fmi3 else dest
     for source in sorted(set(re.findall(r'source="(resources/[^"]+\.fmu)"', text))):
-        fmu = dest / Path(source).name
+        fmu = fmus / Path(source).name
         if not fmu.exists():  # an .ssp without its FMUs would only fail when run
-            raise BuildError(f"{ssd}: component source {source} is not built in {dest}")
+            raise BuildError(f"{ssd}: component source {source} is not built in {fmus}")
         members.append((source, fmu.read_bytes(), False))
     write_zip(out, members)
     print(f"packed {out.relative_to(ROOT) if out.is_relative_to(ROOT) else out}")
@@ -464,6 +521,7 @@ def main(argv=None):
     if not args.names:
         for ssd in sorted(SSP_DIR.glob("*/SystemStructure.ssd")):
             pack_ssp(ssd.parent, dest)
+            pack_ssp(ssd.parent, dest, fmi3=True)
     return built
 
 

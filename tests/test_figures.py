@@ -167,7 +167,7 @@ def test_ssp_figure_draws_each_connected_signal_once(ssp_run):
         assert not any(lb.startswith(dst) for lb in labels)
     data = [tuple(np.asarray(ln.get_ydata(), float).round(12)) for ln in lines]
     assert len(set(data)) == len(data)
-    assert len(lines) == len(rec.names) - 1 - len(rec.connections) - 1  # all but time, copies, n_events
+    assert len(lines) == len(rec.names) - 2 - len(rec.connections) - 1  # all but time, event, copies, n_events
 
 
 def test_ssp_figure_units_and_integer_ticks(ssp_run):

@@ -141,6 +141,8 @@ class Fmi3Slave(HybridSlave):
         self._me_x = None
         self._armed = [False] * len(type(self).model.events)
         self._me_stale = False
+        self._cs_stale = False  # co-simulation: inputs set in Event Mode, outputs not yet refreshed
+        self._event_mode = False
         self._stop = None
 
     def _native_attach(self, mode="cs", event_mode_used=False, early_return_allowed=False):
@@ -185,13 +187,21 @@ class Fmi3Slave(HybridSlave):
 
     def _set(self, vrs, values, type_):
         result = super()._set(vrs, values, type_)
-        if self._mode == "me" and self._inputs_changed and self._sim is not None:
-            self._stale()  # outputs, derivatives and indicators may feed through from the inputs
+        if self._inputs_changed and self._sim is not None:
+            if self._mode == "me":
+                self._stale()  # outputs, derivatives and indicators may feed through from the inputs
+            elif self._event_mode:
+                # co-simulation in Event Mode: the outputs that feed through from the inputs follow
+                # them at this instant (superdense time), refreshed when next read or updated
+                self._cs_stale = True
+                self._ctl[0] = 0
         return result
 
     def _get(self, vrs, type_, convert):
         if self._me_stale:
             self._me_refresh()
+        elif self._cs_stale:
+            self._cs_event_inputs()
         derived = None
         values = []
         for vr in vrs:
@@ -207,6 +217,8 @@ class Fmi3Slave(HybridSlave):
     # ---- initialization ---------------------------------------------------------------------
     def exit_initialization_mode(self):
         super().exit_initialization_mode()
+        # FMI 3.0: model exchange, and co-simulation with eventModeUsed, go on in Event Mode
+        self._event_mode = self._mode == "me" or self._event_mode_used
         sim = self._sim
         self._me_t, self._me_x = sim.t_out, list(sim.x_out)
         self._arm()
@@ -371,10 +383,27 @@ class Fmi3Slave(HybridSlave):
         end = current_time + step_size
         return (stop is not None and self._event_mode_used, False, stop is not None and stop < end, self._t_ok)
 
+    def _cs_event_inputs(self):
+        """Co-simulation, Event Mode: the inputs set at this instant take effect now (the engine goes
+        on from here with them; the outputs are refreshed)."""
+        self._cs_stale = False
+        sim = self._sim
+        problem = self._input_problem()
+        if problem is not None:
+            raise FMUError(problem)
+        try:
+            sim.set_input(self._u)
+        except ModelError as exc:
+            raise self._model_failed(exc) from None
+        self._inputs_changed = False
+        self._update_outputs()
+
     def _cs_update(self):
         sim = self._sim
         if sim is None:
             raise FMUError("fmi3UpdateDiscreteStates called before fmi3ExitInitializationMode")
+        if self._cs_stale:
+            self._cs_event_inputs()
         if sim.event_due:
             try:
                 sim.advance(sim.t)
@@ -386,13 +415,13 @@ class Fmi3Slave(HybridSlave):
 
     # ---- both -------------------------------------------------------------------------------
     def enter_event_mode(self):
-        pass
+        self._event_mode = True
 
     def enter_continuous_time_mode(self):
-        pass
+        self._event_mode = False
 
     def enter_step_mode(self):
-        pass
+        self._event_mode = False
 
     def update_discrete_states(self):
         """(discreteStatesNeedUpdate, terminateSimulation, nominalsOfContinuousStatesChanged,

@@ -18,7 +18,7 @@ Conventions (docs/models.md):
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Callable, Mapping, Optional, Sequence, Tuple
 
 FALLING = -1
@@ -115,6 +115,10 @@ class HybridModel:
     ``default_input(t, p) -> {input name: value}`` (optional) gives the inputs of the master
     script's default experiment at time ``t`` (a model that only reacts to its inputs, such as a
     controller, shows nothing with constant inputs);
+    ``feedthrough`` maps an output to the inputs it depends on *directly* (within one evaluation,
+    not through the states): an output not named depends on the states, the discrete state and
+    the parameters only — the FMUs declare it in their model structure, and a master derives its
+    update order and finds algebraic loops from it (tests perturb each input to check it);
     ``time_scales(p)`` (optional) lists the model's physical time scales as
     ``(label, parameter names, seconds)``: the engine refuses parameters that make one faster than
     it can resolve and names the fastest ones when the model turns out stiff; ``error_scales(p)``
@@ -139,6 +143,7 @@ class HybridModel:
     bind: Optional[Callable] = None
     plots: tuple = ()
     default_input: Optional[Callable] = None
+    feedthrough: Mapping[str, Tuple[str, ...]] = field(default_factory=dict)
     default_stop_time: float = 10.0
     default_step: float = 1e-3
     time_scales: Optional[Callable] = None  # p -> ((label, parameter names, seconds), ...)
@@ -152,6 +157,10 @@ class HybridModel:
             Variable("t_last_event", "s", "time of the latest state event (the start time before the first)"),
             Variable("last_event", "", f"kind of the latest state event: 0 none, {codes}"),
         )
+
+    def feeds_through(self, output: str) -> Tuple[str, ...]:
+        """The inputs ``output`` depends on directly (empty for the engine's own outputs)."""
+        return tuple(self.feedthrough.get(output, ()))
 
     def all_outputs(self) -> Tuple[Variable, ...]:
         return self.outputs + self.engine_outputs()

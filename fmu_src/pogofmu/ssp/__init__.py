@@ -13,7 +13,7 @@ One module per job:
 
 Host-side code (fmpy, numpy, matplotlib); never imported inside an FMU.
 """
-from .master import ALGORITHMS, _Instance, simulate  # noqa: F401
+from .master import ALGORITHMS, simulate  # noqa: F401
 from .package import NS, SSPError, System, parse_value, read_ssd, read_ssv, unpack  # noqa: F401
 from .record import PLOT_BINS, CSVStream, Envelope, Result  # noqa: F401
 from .plot import figure, plot  # noqa: F401

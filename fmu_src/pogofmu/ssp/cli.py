@@ -7,7 +7,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from .master import ALGORITHMS, simulate
+from .master import ALGORITHMS, DEFAULT_EVENT_TOLERANCE, simulate
 from .package import SSPError, read_ssd, unpack
 from .plot import plot
 from .record import CSVStream
@@ -29,8 +29,10 @@ def prepare_out(out: Path, *files: Path):
             raise SSPError(f"output file {str(f)!r} is a folder: remove it or choose another --out")
 
 
-def run(ssp, parameters=None, stop_time=None, step=1e-3, out=None, algorithm="gauss-seidel", progress=True):
-    """The ``run`` command: simulate, streaming ``<out>/<set>.csv``, then draw ``<out>/<set>.png``.
+def run(ssp, parameters=None, stop_time=None, step=1e-3, out=None, algorithm="gauss-seidel", progress=True,
+        **options):
+    """The ``run`` command: simulate, streaming ``<out>/<set>.csv``, then draw ``<out>/<set>.png``;
+    ``options`` go to :func:`~.master.simulate` (``events``, ``event_tolerance``, ``rel_tol``, ...).
 
     The package, the numbers and the output folder are all checked before the first step."""
     ssp = Path(ssp)
@@ -39,30 +41,39 @@ def run(ssp, parameters=None, stop_time=None, step=1e-3, out=None, algorithm="ga
     csv_path, png_path = out / f"{tag}.csv", out / f"{tag}.png"
     opened = []
 
-    def open_csv(names, types, units, n_rows):  # called once the package and the numbers are valid
+    def open_csv(names, types, units, span):  # called once the package and the numbers are valid
         prepare_out(out, csv_path, png_path)
         try:
-            opened.append(CSVStream(csv_path, names, types, units, n_rows))
+            opened.append(CSVStream(csv_path, names, types, units, span))
         except OSError as exc:
             raise SSPError(f"cannot write {csv_path}: {exc.strerror or exc}") from None
         return opened[0]
 
     try:
-        rec = simulate(ssp, parameters, stop_time, step, algorithm=algorithm, progress=progress, sink=open_csv)
+        rec = simulate(ssp, parameters, stop_time, step, algorithm=algorithm, progress=progress, sink=open_csv,
+                       **options)
     except SSPError as exc:
         if opened and opened[0].rows:
             s = opened[0]
             raise SSPError(f"{exc}\n  the {s.rows} rows up to t = {s.last_time:.10g} s are in {s.incomplete}") from None
         raise
     try:
-        plot(rec, png_path, f"{rec.system} ({rec.parameter_set}): {algorithm}, step {step:g} s", rec.connections)
+        how = algorithm if algorithm == "model-exchange" else \
+            f"{algorithm}, {'events synchronized' if rec.events else 'fixed step'}"
+        plot(rec, png_path, f"{rec.system} ({rec.parameter_set}): {how}, output step {step:g} s", rec.connections)
     except OSError as exc:
         raise SSPError(f"cannot write {png_path}: {exc.strerror or exc} (the results are in {csv_path})") from None
     print(f"{rec.system}: simulated to t = {rec.last_time:.6g} s -> {csv_path}, {png_path}")
     return rec, csv_path, png_path
 
 
-def main(argv=None, prog="python -m pogofmu.ssp"):
+def _on_off(text):
+    if text not in ("on", "off"):
+        raise argparse.ArgumentTypeError(f"{text!r}: on or off")
+    return text == "on"
+
+
+def main(argv=None, prog="pogofmu ssp"):
     """The command line (``run`` / ``check``); returns the exit status. ``prog`` names the command
     in the usage text (a console command forwarding here may pass its own)."""
     common = argparse.ArgumentParser(add_help=False)
@@ -70,12 +81,23 @@ def main(argv=None, prog="python -m pogofmu.ssp"):
                         help="show the Python traceback of an unexpected error (also: POGOFMU_DEBUG=1)")
     ap = argparse.ArgumentParser(prog=prog, description="SSP master built on fmpy")
     sub = ap.add_subparsers(dest="command", required=True)
-    r = sub.add_parser("run", parents=[common], help="simulate an .ssp with a fixed communication step")
+    r = sub.add_parser("run", parents=[common], help="simulate an .ssp (events synchronized, or strongly coupled)")
     r.add_argument("ssp")
     r.add_argument("--parameters", help="parameter set: resources/NAME.ssv (default: the .ssd's bindings)")
     r.add_argument("--stop-time", type=float, help="default: the .ssd's DefaultExperiment stopTime")
-    r.add_argument("--step", type=float, default=1e-3, help="communication step [s] (default 1e-3)")
-    r.add_argument("--algorithm", choices=ALGORITHMS, default="gauss-seidel")
+    r.add_argument("--step", type=float, default=1e-3,
+                   help="communication step = output grid [s] (default 1e-3)")
+    r.add_argument("--algorithm", choices=ALGORITHMS, default="gauss-seidel",
+                   help="gauss-seidel (default) or jacobi co-simulation; model-exchange: the components' "
+                        "equations integrated together (FMI 3.0 model exchange, CVODE)")
+    r.add_argument("--events", type=_on_off, default=True, metavar="on|off",
+                   help="on (default): every component is brought to each event instant; off: a fixed "
+                        "communication step (libcosim's algorithm)")
+    r.add_argument("--event-tolerance", type=float, default=DEFAULT_EVENT_TOLERANCE,
+                   help="[s] bisection tolerance of an event of an FMI 2.0 FMU of another tool (a change of a "
+                        "discrete output; this project's FMUs report the exact time)")
+    r.add_argument("--rel-tol", type=float, default=1e-10, help="model-exchange integrator's relative tolerance")
+    r.add_argument("--abs-tol", type=float, default=1e-12, help="model-exchange integrator's absolute tolerance")
     r.add_argument("--out", help="output folder (default results/<SSP name>)")
     r.add_argument("--quiet", action="store_true", help="no progress lines")
     c = sub.add_parser("check", parents=[common],
@@ -88,11 +110,12 @@ def main(argv=None, prog="python -m pogofmu.ssp"):
             with tempfile.TemporaryDirectory() as tmp:
                 system = read_ssd(unpack(Path(args.ssp), Path(tmp)))
                 validate(system, args.parameters)
-                print(f"{args.ssp}: system {system.name!r} is valid: components {system.order()}, "
+                print(f"{args.ssp}: system {system.name!r} is valid: components {system.update_order()}, "
                       f"{len(system.connections)} connections, parameter sets "
                       f"{[Path(s).stem for s in system.parameter_sets]}")
             return 0
-        run(args.ssp, args.parameters, args.stop_time, args.step, args.out, args.algorithm, not args.quiet)
+        run(args.ssp, args.parameters, args.stop_time, args.step, args.out, args.algorithm, not args.quiet,
+            events=args.events, event_tolerance=args.event_tolerance, rel_tol=args.rel_tol, abs_tol=args.abs_tol)
     except SSPError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1

@@ -1,103 +1,99 @@
-"""Running a system: instantiate and initialize its FMUs in connection order, then step them with
-the chosen master algorithm, recording every connector."""
+"""Running a system: instantiate and initialize its FMUs in update order, then advance them with
+the chosen master algorithm (:mod:`.algorithms`), recording every connector (:mod:`.record`)."""
 from __future__ import annotations
 
 import math
 import shutil
 import sys
 import tempfile
-import time as _time
 from pathlib import Path
 from typing import Optional
 
-from .package import Component, SSPError, read_ssd, unpack
+from .algorithms import Exchange, Progress, fixed_step, synchronized
+from .components import Fmi2CoSimulation, Fmi3CoSimulation, Fmi3ModelExchange
+from .graph import algebraic_loop, loop_text
+from .package import SSPError, read_ssd, unpack
 from .record import Result
 from .validate import _fmu_unit, validate
 
-ALGORITHMS = ("gauss-seidel", "jacobi")
+ALGORITHMS = ("gauss-seidel", "jacobi", "model-exchange")
+DEFAULT_EVENT_TOLERANCE = 1e-10  # s: bisection of a discrete output's change (FMUs of other tools)
 
-from pogofmu.runtime.status import status_name as _label  # noqa: E402
+
+def _warn(text):
+    print(text, file=sys.stderr, flush=True)
 
 
-class _Instance:
-    """One FMU of the system, instantiated with fmpy, with its log kept."""
+def _instantiate(comp, work, echo, algorithm, events):
+    version = comp.model_description.fmiVersion
+    if algorithm == "model-exchange":
+        if not version.startswith("3"):
+            raise SSPError(f"Component {comp.name}: --algorithm model-exchange needs FMI 3.0 model exchange, "
+                           f"and {comp.source} is FMI {version}")
+        return Fmi3ModelExchange(comp, work, echo)
+    if version.startswith("3"):
+        return Fmi3CoSimulation(comp, work, echo, events=events)
+    return Fmi2CoSimulation(comp, work, echo)
 
-    def __init__(self, comp: Component, workdir: Path, echo):
-        from fmpy import extract
-        from fmpy.fmi2 import FMU2Slave, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, \
-            fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE
-        from fmpy import calloc, free
 
-        self.comp = comp
-        self.messages = []
-        self.dead = False
-        md = comp.model_description
-        self.dir = extract(str(comp.model_description_path), unzipdir=str(workdir / comp.name))
-        self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=self.dir, modelIdentifier=md.coSimulation.modelIdentifier,
-                             instanceName=comp.name)
-
-        def logger(component, instance, status, category, message):
-            text = message.decode(errors="replace") if message else ""
-            self.messages.append((int(status), text))
-            if status >= 1 and echo:
-                print(f"[{_label(status)}] {comp.name}: {text}", file=sys.stderr, flush=True)
-
-        cb = fmi2CallbackFunctions()
-        cb.logger = fmi2CallbackLoggerTYPE(logger)
-        cb.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
-        cb.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-        self._cb = cb  # keep the callbacks alive
-        self.fmu.instantiate(loggingOn=True, callbacks=cb)
-
-    def last_error(self):
-        for status, text in reversed(self.messages):
-            if status >= 2:
-                return text
-        return "no message from the FMU"
-
-    def vr(self, name):
-        return self.comp.variables[name].valueReference
-
-    def set_value(self, name, value):
-        var = self.comp.variables[name]
-        if var.type == "Real":
-            self.fmu.setReal([var.valueReference], [float(value)])
-        elif var.type in ("Integer", "Enumeration"):
-            self.fmu.setInteger([var.valueReference], [int(value)])
-        elif var.type == "Boolean":
-            self.fmu.setBoolean([var.valueReference], [bool(value)])
-        else:
-            self.fmu.setString([var.valueReference], [str(value)])
-
-    def close(self):
-        if self.dead:  # FMI 2.0: nothing may be called on an instance after fmi2Fatal
-            return
+def initialize(ex: Exchange, t0, selected):
+    """Initialize in update order: parameters from the selected set, inputs from the outputs of
+    components initialized before (a later component already sees the initial outputs of the
+    earlier ones); then the inputs fed by later components; then the discrete iteration of every
+    component that is in Event Mode after initialization (FMI 3.0)."""
+    for inst in ex.order:
+        ps = selected.get(inst.name)
         try:
-            self.fmu.terminate()
-        finally:
-            self.fmu.freeInstance()
-
+            inst.enter_initialization(t0)
+            names = [p.name for p in (ps.parameters if ps is not None else []) if p.name in inst.variables]
+            values = [p.value for p in ps.parameters if p.name in inst.variables] if ps is not None else []
+            if names:
+                inst.set_values(names, values)
+            if ex.ready(inst):
+                ex.feed(inst)
+            inst.exit_initialization(t0)
+        except SSPError:
+            raise
+        except Exception as exc:  # noqa: BLE001 - fmpy raises FMICallException on an error status
+            inst.dead = "fatal" in str(exc).lower()
+            raise SSPError(f"Component {inst.name}: initialization failed with "
+                           f"{ps.source if ps else 'no parameter set'}: {inst.last_error()}") from None
+        ex.read(inst)
+    for inst in ex.order:  # inputs of earlier components fed by later ones
+        ex.feed(inst)
 
 
 def simulate(ssp, parameters: Optional[str] = None, stop_time: Optional[float] = None, step: float = 1e-3,
              start_time: Optional[float] = None, algorithm: str = "gauss-seidel", progress: bool = False,
-             echo_log: bool = True, sink=None):
-    """Run an SSP package; return a :class:`Result` (see the module docstring).
+             echo_log: bool = True, sink=None, events: bool = True, event_tolerance: float = DEFAULT_EVENT_TOLERANCE,
+             rel_tol: float = 1e-10, abs_tol: float = 1e-12):
+    """Run an SSP package; return a :class:`~.record.Result` (see the package docstring).
 
-    ``sink(names, types, units, n_rows)``, if given, makes the recorder instead (an object with
-    ``add(row)`` and ``close(complete)``, e.g. a :class:`CSVStream`): it is called once the package
-    and every number are found valid, before any FMU is loaded, and what it returns is returned.
+    ``algorithm``: ``gauss-seidel`` or ``jacobi`` co-simulation, with every component brought to
+    each event instant (``events=True``) or a fixed communication step (``events=False``); or
+    ``model-exchange``, the strongly coupled solution (FMI 3.0 model exchange, ``rel_tol`` and
+    ``abs_tol`` its integrator's tolerances). ``step`` is the communication step, the output grid.
+
+    ``sink(names, types, units, span)``, if given, makes the recorder instead (an object with
+    ``add(row)`` and ``close(complete)``, e.g. a :class:`~.record.CSVStream`): it is called once the
+    package and every number are found valid, before any FMU is loaded, and what it returns is
+    returned.
     """
-    # no scipy import: the FMUs do not use scipy (the workaround of README "Known issues" is for
-    # scipy-using FMUs) and it would cost the master 50 MB of its 150 MB budget (issue 9 item 10)
+    # no scipy import here: it would cost the master 50 MB of its memory budget
     if algorithm not in ALGORITHMS:
-        raise SSPError(f"algorithm {algorithm!r} is not one of {ALGORITHMS}")
+        raise SSPError(f"algorithm {algorithm!r} is not one of {', '.join(ALGORITHMS)}")
     for what, value in (("communication step (--step)", step), ("stop time (--stop-time)", stop_time),
-                        ("start time", start_time)):
+                        ("start time", start_time), ("event tolerance (--event-tolerance)", event_tolerance),
+                        ("relative tolerance (--rel-tol)", rel_tol), ("absolute tolerance (--abs-tol)", abs_tol)):
         if value is not None and not (isinstance(value, (int, float)) and math.isfinite(value)):
             raise SSPError(f"{what} = {value!r} must be a finite number")
     if not step > 0:
         raise SSPError(f"communication step (--step) = {step!r} must be > 0")
+    if not event_tolerance > 0:
+        raise SSPError(f"event tolerance (--event-tolerance) = {event_tolerance!r} must be > 0")
+    if not (0 < rel_tol < 1 and abs_tol > 0):
+        raise SSPError(f"model-exchange tolerances --rel-tol = {rel_tol!r}, --abs-tol = {abs_tol!r} must be "
+                       f"0 < rel-tol < 1 and abs-tol > 0")
     work = Path(tempfile.mkdtemp(prefix="pogofmu_ssp_"))
     instances = {}
     res = None
@@ -114,125 +110,42 @@ def simulate(ssp, parameters: Optional[str] = None, stop_time: Optional[float] =
         n_steps = int(round((t_end - t0) / step))
         if n_steps < 1 or not math.isclose(t0 + n_steps * step, t_end, rel_tol=1e-9, abs_tol=1e-12):
             raise SSPError(f"stop time {t_end} - start time {t0} is not a whole number of steps {step}")
-        order = system.order()
+        loop = algebraic_loop(system)
+        if loop is not None:
+            text = (f"algebraic loop {loop_text(loop)}: every output in it depends directly on the input "
+                    f"before it (the FMUs' declared dependencies)")
+            if algorithm == "model-exchange":
+                raise SSPError(f"{text}; the strongly coupled algorithm does not solve algebraic loops")
+            _warn(f"warning: {text}; a communication step breaks it (the coupling delay), the initialization "
+                  f"and the event iteration iterate it to a fixed point")
+        order = system.update_order()
         for name in order:
             comp = system.components[name]
             comp.model_description_path = root / comp.source
-        # incoming connections of every component, in connection order
-        incoming = {name: [c for c in system.connections if c.end_element == name] for name in order}
-        # record: every connector of every component
-        record = [(name, con) for name in order for con in system.components[name].connectors.values()]
-        columns = ([f"{n}.{c.name}" for n, c in record], [c.type for _, c in record],
-                   [c.unit or _fmu_unit(system.components[n].variables[c.name]) for n, c in record], n_steps + 1)
+        cols = [(n, c) for n in order for c in system.components[n].connectors.values()]
+        columns = (["event"] + [f"{n}.{c.name}" for n, c in cols], ["Integer"] + [c.type for _, c in cols],
+                   [None] + [c.unit or _fmu_unit(system.components[n].variables[c.name]) for n, c in cols],
+                   (t0, t0 + n_steps * step))
         res = (sink or Result)(*columns)
-        outputs = {name: [c for c in system.components[name].connectors.values() if c.kind != "input"]
-                   for name in order}
-        value = {}  # (component, connector) -> latest value of an output connector
-
-        def read_outputs(inst):
-            comp = inst.comp
-            reals = [c.name for c in outputs[comp.name] if c.type == "Real"]
-            ints = [c.name for c in outputs[comp.name] if c.type in ("Integer", "Enumeration")]
-            if reals:
-                for n, v in zip(reals, inst.fmu.getReal([inst.vr(n) for n in reals])):
-                    value[(comp.name, n)] = v
-            if ints:
-                for n, v in zip(ints, inst.fmu.getInteger([inst.vr(n) for n in ints])):
-                    value[(comp.name, n)] = v
-
-        inputs_now = {}  # (component, connector) -> value set for the coming step
-
-        def set_inputs(inst):
-            reals, rv, ints, iv = [], [], [], []
-            for c in incoming[inst.comp.name]:
-                v = value[(c.start_element, c.start_connector)]
-                inputs_now[(c.end_element, c.end_connector)] = v
-                var = inst.comp.variables[c.end_connector]
-                if var.type == "Real":
-                    reals.append(var.valueReference)
-                    rv.append(float(v))
-                else:
-                    ints.append(var.valueReference)
-                    iv.append(int(v))
-            if reals:
-                inst.fmu.setReal(reals, rv)
-            if ints:
-                inst.fmu.setInteger(ints, iv)
-
-        def store(t):
-            row = [t]
-            for name, con in record:
-                key = (name, con.name)
-                if con.kind == "input":
-                    v = inputs_now.get(key)
-                    if v is None:
-                        v = instances[name].fmu.getReal([instances[name].vr(con.name)])[0] if con.type == "Real" \
-                            else instances[name].fmu.getInteger([instances[name].vr(con.name)])[0]
-                else:
-                    v = value[key]
-                row.append(v)
-            res.add(row)
-
-        # ---- instantiate and initialize, in order ----
         for name in order:
-            comp = system.components[name]
-            inst = instances[name] = _Instance(comp, work, echo_log)
-            # no stop time for the FMUs (stopTimeDefined = false): the engine clamps its steps at a
-            # defined stop time, and an input change within ~1e-14 s of it ends in a 'step size
-            # collapsed' fatal error (seen with PogoStick at t = 6 - 1e-14 s; report of issue 5)
-            inst.fmu.setupExperiment(startTime=t0)
-            inst.fmu.enterInitializationMode()
-            ps = selected.get(name)
-            try:
-                for p in (ps.parameters if ps is not None else []):
-                    if p.name in comp.variables:
-                        inst.set_value(p.name, p.value)
-                if all((c.start_element, c.start_connector) in value for c in incoming[name]):
-                    set_inputs(inst)
-                inst.fmu.exitInitializationMode()
-            except Exception as exc:  # noqa: BLE001 - fmpy raises FMICallException on an error status
-                inst.dead = "fatal" in str(exc).lower()
-                raise SSPError(f"Component {name}: initialization failed with "
-                               f"{ps.source if ps else 'no parameter set'}: {inst.last_error()}") from None
-            read_outputs(inst)
-        for name in order:  # inputs of earlier components fed by later ones
-            set_inputs(instances[name])
-        store(t0)
+            instances[name] = _instantiate(system.components[name], work, echo_log, algorithm, events)
+        ex = Exchange(system, instances, order, res)
+        initialize(ex, t0, selected)
+        prog = Progress(system.name, t0, t0 + n_steps * step, progress)
+        if algorithm == "model-exchange":
+            from .coupled import model_exchange
 
-        # ---- fixed-step loop ----
-        insts = [instances[n] for n in order]
-        marks = {int(round(n_steps * q / 10)) for q in range(1, 11)} if progress else set()
-        wall0 = _time.perf_counter()
-        for k in range(n_steps):
-            t = t0 + k * step
-            if algorithm == "jacobi":
-                for inst in insts:
-                    set_inputs(inst)
-            for inst in insts:
-                if algorithm == "gauss-seidel":
-                    set_inputs(inst)
-                try:
-                    inst.fmu.doStep(currentCommunicationPoint=t, communicationStepSize=step)
-                except Exception as exc:  # noqa: BLE001 - FMICallException: status discard/error/fatal
-                    inst.dead = "fatal" in str(exc).lower()
-                    raise SSPError(f"Component {inst.comp.name}: fmi2DoStep from t = {t:.10g} s "
-                                   f"(step {step:g} s) failed ({exc}): {inst.last_error()}") from None
-                if algorithm == "gauss-seidel":
-                    read_outputs(inst)
-            if algorithm == "jacobi":
-                for inst in insts:
-                    read_outputs(inst)
-            for c in system.connections:  # the values the inputs will get for the next step
-                inputs_now[(c.end_element, c.end_connector)] = value[(c.start_element, c.start_connector)]
-            store(t0 + (k + 1) * step)
-            if k + 1 in marks:
-                el = _time.perf_counter() - wall0
-                frac = (k + 1) / n_steps
-                print(f"{system.name}: {100 * frac:3.0f} %  t = {t0 + (k + 1) * step:.6g} s  "
-                      f"({k + 1}/{n_steps} steps, {el:.1f} s elapsed, ~{el / frac - el:.1f} s left)", flush=True)
+            model_exchange(ex, t0, t0 + n_steps * step, step, rel_tol, abs_tol, progress=prog)
+        else:
+            jacobi = algorithm == "jacobi"
+            if events:
+                synchronized(ex, t0, t0 + n_steps * step, step, event_tolerance, jacobi, progress=prog, warn=_warn)
+            else:
+                ex.row(t0)
+                fixed_step(ex, t0, t0 + n_steps * step, step, jacobi, progress=prog)
         res.system = system.name
         res.parameter_set = ", ".join(sorted({ps.name for ps in selected.values() if ps is not None})) or "none"
-        res.algorithm, res.step, res.connections = algorithm, step, list(system.connections)
+        res.algorithm, res.events, res.step, res.connections = algorithm, events, step, list(system.connections)
         res.close(complete=True)
         res.last_time = t0 + n_steps * step
         return res
@@ -246,3 +159,5 @@ def simulate(ssp, parameters: Optional[str] = None, stop_time: Optional[float] =
                 pass
         shutil.rmtree(work, ignore_errors=True)
 
+
+__all__ = ["ALGORITHMS", "simulate", "initialize", "Fmi2CoSimulation", "Fmi3CoSimulation", "Fmi3ModelExchange"]

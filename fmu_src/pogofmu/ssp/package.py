@@ -14,7 +14,21 @@ NS = {
     "ssc": "http://ssp-standard.org/SSP1/SystemStructureCommon",
     "ssv": "http://ssp-standard.org/SSP1/SystemStructureParameterValues",
 }
-TYPES = ("Real", "Integer", "Boolean", "String", "Enumeration", "Binary")
+# connector and parameter types: SSP 1.0's, and SSP 2.0's FMI 3.0 names (Float64, Int32, ...)
+TYPES = ("Real", "Float64", "Float32", "Integer", "Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64",
+         "UInt64", "Boolean", "String", "Enumeration", "Binary")
+REAL = ("Real", "Float64", "Float32")
+WHOLE = ("Integer", "Int32", "Int8", "UInt8", "Int16", "UInt16", "UInt32", "Int64", "UInt64", "Enumeration")
+WHOLE_RANGE = {"Int8": (-2 ** 7, 2 ** 7 - 1), "UInt8": (0, 2 ** 8 - 1), "Int16": (-2 ** 15, 2 ** 15 - 1),
+               "UInt16": (0, 2 ** 16 - 1), "UInt32": (0, 2 ** 32 - 1), "Int64": (-2 ** 63, 2 ** 63 - 1),
+               "UInt64": (0, 2 ** 64 - 1)}
+
+
+def same_type(a: Optional[str], b: Optional[str]) -> bool:
+    """Two type names for the same kind of value (SSP 1.0 ``Real`` is FMI 3.0's ``Float64``, and
+    ``Integer`` its ``Int32``)."""
+    alias = {"Real": "Float64", "Integer": "Int32"}
+    return alias.get(a, a) == alias.get(b, b)
 
 
 class SSPError(Exception):
@@ -81,6 +95,14 @@ class System:
     parameter_sets: Dict[str, ParameterSet]  # by source
     start_time: float = 0.0
     stop_time: Optional[float] = None
+
+    def update_order(self) -> List[str]:
+        """The order the master updates the components in (Gauss–Seidel, initialization, event
+        iteration): each after the components that feed its direct feed-through inputs (the FMUs'
+        declared dependencies, once validated), else that of :meth:`order`."""
+        from .graph import update_order
+
+        return update_order(self, self.order())
 
     def order(self) -> List[str]:
         """Gauss-Seidel order: first appearance in the connections (start, then end element),
@@ -207,18 +229,22 @@ def parse_value(type_: str, raw: Optional[str]):
     text = raw.strip()
     if not text:
         raise ValueError("is empty")
-    if type_ == "Real":
+    if type_ in REAL:
         try:
             return float(text)
         except ValueError:
             raise ValueError("is not a number (xs:double, e.g. 1.62 or 2e-3)") from None
-    if type_ == "Integer":
+    if type_ in WHOLE:
         try:
             value = int(text)
         except ValueError:
             raise ValueError("is not a whole number (xs:int, e.g. 8)") from None
-        if not INT32[0] <= value <= INT32[1]:
-            raise ValueError(f"is outside the 32-bit range [{INT32[0]}, {INT32[1]}] of fmi2Integer")
+        lo, hi = WHOLE_RANGE.get(type_, INT32)
+        if not lo <= value <= hi:
+            where = "fmi2Integer" if type_ == "Integer" else type_
+            bits = {"Integer": 32, "Int32": 32}.get(type_, None)
+            span = f"the {bits}-bit range" if bits else "the range"
+            raise ValueError(f"is outside {span} [{lo}, {hi}] of {where}")
         return value
     if text in ("true", "1"):
         return True
@@ -237,7 +263,8 @@ def read_ssv(path: Path, source: str, problems: list) -> ParameterSet:
         raise SSPError(f"{source}: root element is {top.tag}, not ssv:ParameterSet (namespace {NS['ssv']})")
     params = []
     for pel in top.findall("ssv:Parameters/ssv:Parameter", NS):
-        for t in ("Real", "Integer", "Boolean", "String"):
+        for t in ("Real", "Float64", "Float32", "Integer", "Int32", "Int8", "UInt8", "Int16", "UInt16", "UInt32",
+                  "Int64", "UInt64", "Boolean", "String"):
             v = pel.find(f"ssv:{t}", NS)
             if v is not None:
                 raw = v.get("value")

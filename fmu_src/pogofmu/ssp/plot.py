@@ -10,7 +10,7 @@ def _panels(rec, connections):
     copies = {}
     for dst, src in fed.items():
         copies.setdefault(src, []).append(dst)
-    shown = [n for n in rec.names[1:] if n not in fed and not n.endswith(".n_events")]
+    shown = [n for n in rec.names[1:] if n not in fed and n != "event" and not n.endswith(".n_events")]
     return sorted(shown, key=lambda n: rec.types[n] != "Real"), copies  # integer signals last
 
 

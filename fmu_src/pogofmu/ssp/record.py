@@ -9,18 +9,23 @@ PLOT_BINS = 2000  # time slices of a figure's min/max envelope (more than the fi
 
 
 class Envelope:
-    """Min/max envelope of every column of a run over ``bins`` equal slices of its rows.
+    """Min/max envelope of every column of a run over ``bins`` equal slices of its time span
+    ``(t0, t1)`` (column 0 is the time).
 
     Drawn as a line through each slice's minimum and maximum in time order, a run of any length
     looks like the full one at the figure's resolution (every peak, every mode switch stays
-    visible) from at most ``2 * bins`` points per signal; with no more rows than ``bins`` it keeps
-    every row. Rows arrive in blocks of any size (:meth:`add`), so nothing else of the run is kept.
+    visible) from at most ``2 * bins`` points per signal; rows that fall into slices of their own
+    (fewer rows than slices, evenly spread) are all kept. Rows arrive in blocks of any size
+    (:meth:`add`), so nothing else of the run is kept; the number of rows need not be known (a
+    run's events add rows to its grid).
     """
 
-    def __init__(self, n_rows: int, n_cols: int, bins: int = PLOT_BINS):
+    def __init__(self, span, n_cols: int, bins: int = PLOT_BINS):
         import numpy as np
 
-        self.n, self.bins, self.rows = n_rows, min(bins, n_rows), 0
+        self.t0, t1 = float(span[0]), float(span[1])
+        self.width = t1 - self.t0 if t1 > self.t0 else 1.0
+        self.bins, self.rows = bins, 0
         shape = (self.bins, n_cols)
         self.kmin, self.kmax = np.full(shape, -1, np.int64), np.full(shape, -1, np.int64)
         self.vmin, self.vmax = np.full(shape, np.inf), np.full(shape, -np.inf)
@@ -34,7 +39,8 @@ class Envelope:
         m = len(block)
         if m == 0:
             return
-        slot = np.arange(self.rows, self.rows + m) * self.bins // self.n
+        slot = np.clip(np.floor((block[:, 0] - self.t0) / self.width * self.bins), 0, self.bins - 1).astype(np.int64)
+        slot = np.maximum.accumulate(slot)  # rows come in time order (equal times at event instants)
         cuts = np.flatnonzero(np.diff(slot)) + 1
         cols = np.arange(block.shape[1])
         for a, b in zip(np.r_[0, cuts], np.r_[cuts, m]):
@@ -63,28 +69,38 @@ class Envelope:
 
 
 class Result:
-    """Every connector at every communication point: ``res["PogoStick.y"]`` is a numpy array
-    (what :func:`simulate` returns by default; the ``run`` command streams to a CSV instead)."""
+    """Every connector at every communication point and event: ``res["PogoStick.y"]`` is a numpy
+    array (what :func:`simulate` returns by default; the ``run`` command streams to a CSV
+    instead); ``res["event"]`` tells the rows apart (0 on the output grid, -1 / +1 the left and
+    right limits at an event between grid points)."""
 
-    def __init__(self, names, types, units, n):
-        import numpy as np
-
+    def __init__(self, names, types, units, span):
         self.names = ["time"] + list(names)
         self.types = dict(zip(names, types))
         self.units = dict(zip(names, units))
-        self.data = {"time": np.empty(n)}
-        for name, t in zip(names, types):
-            self.data[name] = np.empty(n, dtype=np.float64 if t == "Real" else np.int64)
-        self.n, self.rows = n, 0
+        self.span = span
+        self._rows = []
+        self._arrays = {}
         self._envelope = None
 
+    @property
+    def rows(self):
+        return len(self._rows)
+
     def __getitem__(self, name):
-        return self.data[name]
+        import numpy as np
+
+        got = self._arrays.get(name)
+        if got is None or len(got) != len(self._rows):
+            col = self.names.index(name)
+            integer = name != "time" and self.types.get(name) not in ("Real", "Float64", "Float32")
+            got = self._arrays[name] = np.array([r[col] for r in self._rows],
+                                                dtype=np.int64 if integer else np.float64)
+        return got
 
     def add(self, row):
-        for name, v in zip(self.names, row):
-            self.data[name][self.rows] = v
-        self.rows += 1
+        self._rows.append(tuple(row))
+        self._envelope = None
 
     def close(self, complete=True):
         pass
@@ -93,8 +109,9 @@ class Result:
         if self._envelope is None:
             import numpy as np
 
-            self._envelope = Envelope(self.rows, len(self.names))
-            self._envelope.add(np.column_stack([self.data[n][:self.rows] for n in self.names]))
+            self._envelope = Envelope(self.span, len(self.names))
+            if self._rows:
+                self._envelope.add(np.array(self._rows, dtype=np.float64))
         return self._envelope
 
 
@@ -108,7 +125,7 @@ class CSVStream:
 
     CHUNK = 4096  # rows per write
 
-    def __init__(self, path: Path, names, types, units, n_rows):
+    def __init__(self, path: Path, names, types, units, span):
         import csv
 
         self.path = Path(path)
@@ -117,8 +134,8 @@ class CSVStream:
         self.names = ["time"] + list(names)
         self.types = dict(zip(names, types))
         self.units = dict(zip(names, units))
-        self.n, self.rows, self.last_time = n_rows, 0, None
-        self._env = Envelope(n_rows, len(self.names))
+        self.rows, self.last_time = 0, None
+        self._env = Envelope(span, len(self.names))
         self._buf = []
         self._file = self.part.open("w", newline="")
         self._csv = csv.writer(self._file)  # floats as repr (shortest round trip), integers as integers

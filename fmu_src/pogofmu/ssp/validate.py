@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Dict, Optional
 
-from .package import ParameterSet, SSPError, System, _problem_text
+from .package import REAL, WHOLE, ParameterSet, SSPError, System, _problem_text, same_type
 
 def _fmu_unit(var):
     unit = getattr(var, "unit", None)
@@ -51,12 +51,12 @@ def validate(system: System, parameters: Optional[str] = None) -> Dict[str, Opti
             if var is None:
                 problems.append(f"{where}: {comp.source} has no variable {con.name!r}")
                 continue
-            if con.type is not None and var.type != con.type:
+            if con.type is not None and not same_type(var.type, con.type):
                 problems.append(f"{where}: type {con.type} but the FMU's variable is {var.type}")
             if con.kind in ("input", "output") and var.causality != con.kind:
                 problems.append(f"{where}: kind {con.kind} but the FMU's variable has causality {var.causality}")
             fu = _fmu_unit(var)
-            if con.type == "Real" and (con.unit or None) != fu:
+            if con.type in REAL and (con.unit or None) != fu:
                 problems.append(f"{where}: unit mismatch: connector unit {con.unit!r}, FMU unit {fu!r}")
     # ---- connections ----
     fed = {}
@@ -81,7 +81,7 @@ def validate(system: System, parameters: Optional[str] = None) -> Dict[str, Opti
             problems.append(f"{c}: start connector {c.start_element}.{a.name} is an {a.kind}, not an output")
         if b.kind not in ("input", "inout"):
             problems.append(f"{c}: end connector {c.end_element}.{b.name} is an {b.kind}, not an input")
-        if a.type != b.type:
+        if not same_type(a.type, b.type):
             problems.append(f"{c}: type mismatch: {a.type} -> {b.type}")
         elif (a.unit or None) != (b.unit or None):
             problems.append(f"{c}: unit mismatch: {c.start_element}.{a.name} is in {a.unit!r}, "
@@ -132,7 +132,8 @@ def validate(system: System, parameters: Optional[str] = None) -> Dict[str, Opti
             where = f"parameter {p.name} of {ps.source} applied to {comp.name}"
             if var.causality not in ("parameter", "input") and var.variability != "tunable":
                 problems.append(f"{where}: the FMU's variable has causality {var.causality}")
-            if p.type != var.type and not (p.type == "Real" and var.type == "Integer" and float(p.value).is_integer()):
+            if not same_type(p.type, var.type) and not (p.type in REAL and var.type in WHOLE
+                                                        and float(p.value).is_integer()):
                 problems.append(f"{where}: type {p.type} but the FMU's variable is {var.type}")
             fu = _fmu_unit(var)
             if p.unit is not None and fu is not None and p.unit != fu:

@@ -1,7 +1,14 @@
 """HopController: a hop-height regulator for the pogo stick (issue 5; README "HopController.fmu").
 
-A feedback law with no state of its own (zero continuous states, no events): it reads the
-stick's ``y``, ``ydot`` and mode ``s`` and returns the thrust ``F_ext`` on the mass.
+A feedback law with no state of its own (zero continuous states): it reads the stick's ``y``,
+``ydot`` and mode ``s`` and returns the thrust ``F_ext`` on the mass.
+
+Its one discontinuity in time, the thrust switching on where the leg starts to extend (``ydot``
+rising through 0 in contact: from 0 to the law's value, saturated at ``F_max``), is an event
+(``extension``) whose guard reads the inputs: an importer that integrates the plant itself (FMI
+3.0 model exchange, or a strongly coupled master) stops there as at the plant's own contacts. In
+co-simulation the inputs are held over a communication step, so the switch is seen at the
+communication points and the event never fires inside a step.
 
 Energy of the hopper as the controller sees it (the leg length is ``y`` in contact, the foot
 being on the ground)::
@@ -27,8 +34,8 @@ from __future__ import annotations
 import math
 
 from ..plant import DAMPING, FREE_LENGTH, GRAVITY, MASS, STIFFNESS, known_to_controller
-from ..model import HybridModel, Parameter, Variable, require, require_finite, require_nonnegative, \
-    require_positive
+from ..model import RISING, Event, HybridModel, Parameter, Variable, require, require_finite, \
+    require_nonnegative, require_positive
 
 PARAMETERS = (
     Parameter("h_target", 1.5, "m", "apex height to regulate (> x_i: the stick must leave the ground)"),
@@ -100,6 +107,19 @@ def _outputs(t, x, q, u, p):
     return {"F_ext": F, "E_est": E, "E_err": p.m * p.g * p.h_target - E, "phase": phase(y, ydot, s)}
 
 
+def _extension_guard(x, q, u, p):
+    """``ydot`` in contact (the thrust law switches on where it rises through 0), 1 in flight (no
+    switch: the thrust is 0 whatever ``ydot`` does)."""
+    return u[1] if u[2] == 1 else 1.0
+
+
+def _no_jump(x, q, u, p):
+    return x, q  # the law itself switches with its inputs: nothing to reset
+
+
+EVENTS = (Event("extension", RISING, _extension_guard, _no_jump),)
+
+
 def demo_hop(t, p):
     """Inputs of the default experiment: the stick's (y, ydot, s) over repeated hops of the
     controller's own plant model without dashpot and without thrust (an open loop: the thrust
@@ -140,7 +160,7 @@ MODEL = HybridModel(
     inputs=INPUTS,
     outputs=OUTPUTS,
     flow=_flow,
-    events=(),
+    events=EVENTS,
     initial=_initial,
     output_fn=_outputs,
     check=_check,
@@ -149,6 +169,9 @@ MODEL = HybridModel(
     # the law swept over the hops of demo_hop: the inputs it sees, the thrust and energies it returns
     plots=((("y",), ("ydot",), ("s", "phase"), ("F_ext",)),),  # (E_est is constant: a lossless hop)
     default_input=demo_hop,
+    # a feedback law: every output is a function of the inputs at the same instant
+    feedthrough={"F_ext": ("y", "ydot", "s"), "E_est": ("y", "ydot", "s"), "E_err": ("y", "ydot", "s"),
+                 "phase": ("ydot", "s")},
     default_stop_time=2.0,
     default_step=1e-3,
 )

@@ -1,0 +1,478 @@
+"""The master algorithms: how the components of a system advance together in time.
+
+* :func:`fixed_step` — Gauss–Seidel (in update order) or Jacobi with a fixed communication step
+  (``--events off``: the algorithm of libcosim and fmpy's ``simulate_ssp``);
+* :func:`synchronized` — the fixed grid, but every component is brought to each event's instant
+  (``--events on``, the default): step, detect, locate, synchronize, iterate the event;
+* :func:`model_exchange` — the strongly coupled solution (``--algorithm model-exchange``, in
+  :mod:`.coupled`).
+
+The components are :mod:`.components`; :class:`Exchange` moves the connected values between
+them and writes the rows.
+"""
+from __future__ import annotations
+
+import math
+import time as _time
+from typing import Dict, List
+
+from .components import Fmi3CoSimulation, StepResult
+from .package import SSPError
+
+MAX_EVENT_ITERATIONS = 100  # discrete iterations at one instant before the master gives up
+GRID, LEFT, RIGHT = 0, -1, 1  # the ``event`` column: output grid, left and right limit at an event
+
+
+class Exchange:
+    """The connections of a system: the latest value of every output connector, the value held on
+    every input, and the rows written from them (``event`` column: 0 grid, -1 / +1 the left and
+    right limits at an event instant)."""
+
+    def __init__(self, system, instances: Dict[str, object], order: List[str], record):
+        self.system = system
+        self.instances = instances
+        self.order = [instances[n] for n in order]
+        self.record = record
+        self.incoming = {n: [c for c in system.connections if c.end_element == n] for n in order}
+        self.outputs = {n: [c.name for c in system.components[n].connectors.values() if c.kind != "input"]
+                        for n in order}
+        self.watch = {n: list(self.outputs[n]) for n in order}  # read with the outputs (see watch())
+        self.value = {}  # (component, connector) -> latest output value
+        self.held = {}  # (component, connector) -> value set on the input
+        self.source = {(c.end_element, c.end_connector): (c.start_element, c.start_connector)
+                       for c in system.connections}
+        self.columns = [(n, c) for n in order for c in system.components[n].connectors.values()]
+
+    def ready(self, inst) -> bool:
+        """Every input of ``inst`` has a source value."""
+        return all((c.start_element, c.start_connector) in self.value for c in self.incoming[inst.name])
+
+    def feed(self, inst, only=None) -> bool:
+        """Set the inputs of ``inst`` from the latest outputs (``only``: of those components); True
+        if any value changed."""
+        names, values, changed = [], [], False
+        for c in self.incoming[inst.name]:
+            if only is not None and c.start_element not in only:
+                continue
+            v = self.value[(c.start_element, c.start_connector)]
+            key = (c.end_element, c.end_connector)
+            changed |= self.held.get(key) != v
+            self.held[key] = v
+            names.append(c.end_connector)
+            values.append(v)
+        if names:
+            try:
+                inst.set_values(names, values)
+            except Exception as exc:  # noqa: BLE001 - fmpy raises FMICallException on an error status
+                raise inst.fail(f"setting its inputs {names} at t = {inst.t!r} s", exc) from None
+        return changed
+
+    def also_read(self, inst, names):
+        """Read these variables of ``inst`` with its outputs, into ``value`` (one FMI call per type)."""
+        self.watch[inst.name] += [n for n in names if n not in self.watch[inst.name]]
+
+    def read(self, inst) -> bool:
+        """Read the output connectors of ``inst`` (and what :meth:`also_read` added); True if any
+        value changed."""
+        names = self.watch[inst.name]
+        if not names:
+            return False
+        try:
+            values = inst.get_values(names)
+        except Exception as exc:  # noqa: BLE001
+            raise inst.fail(f"reading its outputs at t = {inst.t!r} s", exc) from None
+        changed = False
+        for n, v in zip(names, values):
+            key = (inst.name, n)
+            changed |= self.value.get(key) != v
+            self.value[key] = v
+        return changed
+
+    def row(self, t: float, kind: int = GRID):
+        """One row: every output, and every input with the value it holds from here on (its
+        source's latest value; an unconnected input its own)."""
+        self.record.add(self.row_values(t, kind))
+
+    def row_values(self, t: float, kind: int = GRID) -> list:
+        out = [t, kind]
+        for name, con in self.columns:
+            key = (name, con.name)
+            if con.kind == "input":
+                src = self.source.get(key)
+                v = self.value[src] if src is not None else self.instances[name].get_values([con.name])[0]
+            else:
+                v = self.value[key]
+            out.append(v)
+        return out
+
+
+class Progress:
+    """A line every 10 % of a long run (``--quiet``: none)."""
+
+    def __init__(self, name, t0, t_end, on=True):
+        self.name, self.t0, self.span, self.on = name, t0, t_end - t0, on
+        self.next, self.wall0 = 0.1, _time.perf_counter()
+
+    def __call__(self, t):
+        if not self.on:
+            return
+        frac = (t - self.t0) / self.span
+        if frac + 1e-12 >= self.next:
+            el = _time.perf_counter() - self.wall0
+            print(f"{self.name}: {100 * frac:3.0f} %  t = {t:.6g} s  ({el:.1f} s elapsed, "
+                  f"~{el / max(frac, 1e-12) - el:.1f} s left)", flush=True)
+            while self.next <= frac + 1e-12:
+                self.next += 0.1
+
+
+def grid_points(t0, t_end, step):
+    n = int(round((t_end - t0) / step))
+    return [t0 + k * step for k in range(1, n + 1)]
+
+
+# =============================================================================================
+# fixed step (--events off)
+# =============================================================================================
+
+def fixed_step(ex: Exchange, t0, t_end, step, jacobi=False, progress=None):
+    """Every component steps from ``t_k`` to ``t_k + h``; Gauss–Seidel sets a component's inputs
+    from the latest outputs just before its step (update order), Jacobi sets every input from the
+    outputs at ``t_k`` (libcosim's algorithm). Events happen inside the FMUs; the master learns of
+    them at the next communication point."""
+    t = t0
+    for T in grid_points(t0, t_end, step):
+        if jacobi:
+            for inst in ex.order:
+                ex.feed(inst)
+        for inst in ex.order:
+            if not jacobi:
+                ex.feed(inst)
+            inst.do_step(t, T - t)
+            if not jacobi:
+                ex.read(inst)
+        if jacobi:
+            for inst in ex.order:
+                ex.read(inst)
+        ex.row(T)
+        t = T
+        if progress:
+            progress(T)
+    return t
+
+
+# =============================================================================================
+# event-synchronized (--events on)
+# =============================================================================================
+
+class Synchronizer:
+    """The fixed grid of communication points, with every component brought to each event instant.
+
+    A macro step from ``t`` towards the next grid point ``T``:
+
+    1. **step** each component in update order (its inputs set from the latest outputs);
+    2. **detect**: an FMI 3.0 component returns early at its event (``earlyReturnAllowed``); an
+       FMI 2.0 one reports it after the step (this project's FMUs count their events, any other
+       FMU changes a discrete output);
+    3. **locate**: an FMI 2.0 component rolls back (its state saved before the step) and is
+       stepped to just before its event — the exact ``t_last_event`` of a pogofmu FMU, or the
+       change of a discrete output bisected to ``tolerance``;
+    4. **synchronize**: the components already stepped past that instant are restored and
+       stepped to it, the later ones go no further; the macro step ends there;
+    5. **iterate the event** at that instant: the left-limit row, then the components updated in
+       update order — Event Mode with ``fmi3UpdateDiscreteStates`` until none asks for more and
+       no connected value changes (FMI 3.0), a step across the event (FMI 2.0) — then the
+       right-limit row; the macro step goes on from there.
+
+    A component may also switch because its *inputs* cross a threshold inside the step (a
+    controller's phase where the plant's velocity crosses 0): a discrete output that depends
+    directly on inputs (declared dependencies) and changed over a step without an event is
+    located by bisecting the whole system's step (every component restored and stepped to the
+    midpoint, in update order) to ``tolerance``, and handled as an event at that instant.
+
+    States are saved only where a later component (or the component itself, for a rollback) may
+    cut the step short, and only by components that can get and set their state.
+    """
+
+    def __init__(self, ex: Exchange, tolerance: float, jacobi=False, warn=print):
+        self.ex, self.tol, self.jacobi = ex, tolerance, jacobi
+        order = ex.order
+        for inst in order:
+            inst.rollback = inst.fmi == 2 and inst.can_save and self._may_have_events(inst)
+            inst.may_stop = inst.rollback or (isinstance(inst, Fmi3CoSimulation) and inst.early_return
+                                              and self._may_have_events(inst))
+            if inst.fmi == 2 and self._may_have_events(inst) and not inst.can_save:
+                warn(f"warning: Component {inst.name} cannot get and set its FMU state "
+                     f"(canGetAndSetFMUstate = false): it keeps the fixed communication step, and the other "
+                     f"components learn of its events at the next communication point")
+        for inst in order:
+            inst.switches = switching_outputs(inst, ex)
+            ex.also_read(inst, inst.switches)
+            if inst.rollback and inst.counts_events:
+                ex.also_read(inst, ["n_events", "t_last_event"])
+        self.switching = [inst for inst in order if inst.switches]
+        for i, inst in enumerate(order):
+            later = any(o.may_stop for o in order[i + 1:]) or any(o.switches for o in order[i:])
+            inst.must_save = inst.can_save and (inst.rollback or later)
+            if later and not inst.can_save:
+                warn(f"warning: Component {inst.name} cannot get and set its FMU state: an event of a "
+                     f"component after it in the update order is not synchronized with it (it stays at the "
+                     f"end of the communication step)")
+        self.next_event = {}  # component -> time event it asked for (FMI 3.0 nextEventTime)
+
+    @staticmethod
+    def _may_have_events(inst) -> bool:
+        if inst.events is not None:  # a pogofmu FMU says which events a step can hold
+            return bool(inst.events)
+        return inst.fmi == 3 or bool(inst.discrete_outputs)
+
+    # ---- one component: step, detect, locate ---------------------------------------------------
+    def _counts(self, inst):
+        """The event counter and the latest event time, as read with the outputs."""
+        v = self.ex.value
+        return int(v[(inst.name, "n_events")]), float(v[(inst.name, "t_last_event")])
+
+    def _step(self, inst, t, T) -> StepResult:
+        """Step ``inst`` from ``t`` to ``T`` (and read its outputs); an FMI 2.0 component that can
+        roll back is stopped just before the first event of the step (``event_at`` tells where it
+        lies)."""
+        ex = self.ex
+        if not inst.rollback:
+            r = inst.do_step(t, T - t)
+            ex.read(inst)
+            return r
+        if inst.counts_events:
+            n0, _ = self._counts(inst)
+            r = inst.do_step(t, T - t)
+            ex.read(inst)
+            n1, t_c = self._counts(inst)
+            if n1 == n0:
+                return r
+            while True:  # the first event of the step (t_last_event is the latest)
+                inst.restore()
+                left = math.nextafter(t_c, -math.inf)
+                if left <= t:
+                    return StepResult(t, event_at=t_c)
+                inst.do_step(t, left - t)
+                ex.read(inst)
+                n, t_last = self._counts(inst)
+                if n == n0:
+                    return StepResult(left, event_at=t_c)
+                t_c = t_last
+        d0 = inst.get_values(inst.discrete_outputs)
+        r = inst.do_step(t, T - t)
+        ex.read(inst)
+        if inst.get_values(inst.discrete_outputs) == d0:
+            return r
+        lo, hi = t, T  # bisection: the change lies in (lo, hi]
+        while hi - lo > self.tol:
+            mid = 0.5 * (lo + hi)
+            inst.restore()
+            inst.do_step(t, mid - t)
+            if inst.get_values(inst.discrete_outputs) != d0:
+                hi = mid
+            else:
+                lo = mid
+        if hi - t <= self.tol:  # the outputs changed with the inputs set at t: no event inside the step
+            inst.restore()
+            r = inst.do_step(t, T - t)
+            ex.read(inst)
+            return r
+        inst.restore()
+        if lo > t:
+            inst.do_step(t, lo - t)
+        ex.read(inst)
+        return StepResult(lo, event_at=hi)
+
+    # ---- the macro step: synchronize -----------------------------------------------------------
+    def advance(self, t, T):
+        """Bring every component from ``t`` to ``T``, or to the first event before it; returns
+        ``(t_reached, step result of the event or None)``."""
+        ex, target, event, stepped = self.ex, T, None, []
+        switch0 = {inst.name: self._switch_values(inst) for inst in self.switching}
+        for t_next in self.next_event.values():  # time events asked for by FMI 3.0 components
+            if t < t_next < target:
+                target = t_next
+        if self.jacobi:
+            for inst in ex.order:
+                ex.feed(inst)
+        for inst in ex.order:
+            if inst.t >= target:  # ahead (it cannot roll back): wait for the others
+                stepped.append(inst)
+                continue
+            if not self.jacobi:
+                ex.feed(inst)
+            if inst.must_save:
+                inst.save()
+            r = self._step(inst, t, target)  # (it reads the outputs)
+            if r.terminate:
+                raise SSPError(f"Component {inst.name} asked to terminate the simulation at t = {r.t_end!r} s")
+            if r.t_end < target:  # it stopped at (or just before) an event: everyone goes no further
+                target, event = r.t_end, r
+                for prev in stepped:
+                    if prev.t > target and prev.must_save:
+                        prev.restore()
+                        try:
+                            if target > t:
+                                prev.do_step(t, target - t)
+                        except SSPError as exc:
+                            raise SSPError(f"{exc} (the step shortened to the event of Component {inst.name} at "
+                                           f"t = {target!r} s)") from None
+                        ex.read(prev)
+            elif r.event_at is not None and event is None:
+                event = r  # an event exactly at the end of the step
+            stepped.append(inst)
+        if event is None and target in self.next_event.values():
+            event = StepResult(target, event_at=target, event_mode=True)
+        if event is None and any(self._switch_values(inst) != switch0[inst.name] for inst in self.switching):
+            located = self._locate_switch(t, target, switch0)
+            if located is not None:
+                target, event = located
+        return target, event
+
+    def _switch_values(self, inst):
+        v = self.ex.value
+        return [v[(inst.name, n)] for n in inst.switches]
+
+    def _redo(self, t, tau):
+        """Every component restored to ``t`` and stepped to ``tau`` in update order (Gauss–Seidel:
+        each fed from the components before it, at ``tau``; the inputs from later ones are those
+        saved at ``t``)."""
+        ex, done = self.ex, set()
+        for inst in ex.order:
+            if inst.must_save and inst.saved_at == t:
+                inst.restore()
+            if inst.t == t:
+                if not self.jacobi:
+                    ex.feed(inst, only=done)
+                if tau > t:
+                    inst.do_step(t, tau - t)
+                ex.read(inst)
+            done.add(inst.name)
+
+    def _locate_switch(self, t, T, switch0):
+        """Bisect the system's step for the instant a feed-through discrete output changes; None
+        when it changed with the inputs at ``t`` (no switch inside the step)."""
+        if not all(inst.must_save and inst.saved_at == t for inst in self.ex.order if inst.t > t):
+            return None  # a component cannot go back: the switch is seen at the end of the step
+
+        def switched():
+            return any(self._switch_values(inst) != switch0[inst.name] for inst in self.switching)
+        lo, hi = t, T
+        while hi - lo > self.tol:
+            mid = 0.5 * (lo + hi)
+            self._redo(t, mid)
+            if switched():
+                hi = mid
+            else:
+                lo = mid
+        if hi - t <= self.tol:  # the outputs changed with the inputs at t: go on as stepped
+            self._redo(t, T)
+            return None
+        self._redo(t, lo)
+        return lo, StepResult(lo, event_at=hi)
+
+    # ---- at the event: iterate ----------------------------------------------------------------
+    def cross(self, t, t_event):
+        """FMI 2.0 rollback: every component steps across the event, from just before it to it, in
+        update order; each is fed from the components that crossed before it (feed-through of the
+        new mode), none from later ones — an input changed just before the event would move the
+        event it is crossing."""
+        ex, done = self.ex, set()
+        for inst in ex.order:
+            if not self.jacobi:
+                ex.feed(inst, only=done)
+            if inst.t < t_event:
+                inst.do_step(inst.t, t_event - inst.t)
+            ex.read(inst)
+            done.add(inst.name)
+
+    def iterate(self, t):
+        """Event Mode at ``t`` for every FMI 3.0 component that uses it: update in update order
+        until no component asks for another discrete update and no connected value changes
+        (superdense time); a limit ends the run naming the components and the time."""
+        ex = self.ex
+        em = [inst for inst in ex.order if getattr(inst, "event_mode_used", False)]
+        for inst in em:
+            inst.enter_event_mode()
+        self.settle(t, em)
+        for inst in em:
+            inst.enter_step_mode()
+
+    def settle(self, t, em):
+        ex = self.ex
+        for k in range(MAX_EVENT_ITERATIONS):
+            busy = []
+            for inst in ex.order:
+                changed = ex.feed(inst) if ex.ready(inst) else False
+                if inst in em:
+                    need, terminate, t_next = inst.update_discrete_states()
+                    if terminate:
+                        raise SSPError(f"Component {inst.name} asked to terminate the simulation at t = {t!r} s")
+                    if t_next is not None and t_next > t:
+                        self.next_event[inst] = t_next
+                    else:
+                        self.next_event.pop(inst, None)
+                    if need:
+                        busy.append(inst.name)
+                changed |= ex.read(inst)
+                if changed and k > 0 and inst.name not in busy:
+                    busy.append(inst.name)
+            if not busy and k > 0:
+                return
+            if not busy and k == 0:
+                continue  # one more pass: the first one may have changed inputs of earlier components
+        raise SSPError(f"the discrete iteration at t = {t!r} s did not settle after {MAX_EVENT_ITERATIONS} "
+                       f"iterations: {', '.join(sorted(set(busy)))} still changing (an algebraic loop through "
+                       f"discrete variables, or an event that fires again at the same instant)")
+
+
+def switching_outputs(inst, ex) -> List[str]:
+    """The discrete outputs of ``inst`` that depend directly on a connected input (declared
+    dependencies; an output without them depends on every input)."""
+    from .graph import feedthrough
+
+    fed = {c.end_connector for c in ex.incoming[inst.name]}
+    if not fed:
+        return []
+    ft = feedthrough(inst.comp)
+    out = []
+    for name in inst.discrete_outputs:
+        deps = ft.get(name)
+        if deps is None or deps & fed:
+            out.append(name)
+    return out
+
+
+def synchronized(ex: Exchange, t0, t_end, step, tolerance=1e-10, jacobi=False, progress=None, warn=print):
+    """The event-synchronized master (class :class:`Synchronizer`): every grid row, and at every
+    event a left-limit row (``event = -1``) and a right-limit row (``event = +1``; at an event on
+    a grid point the grid row is the right limit)."""
+    sync = Synchronizer(ex, tolerance, jacobi, warn)
+    for inst in ex.order:  # the event counters and switching outputs the synchronizer watches
+        ex.read(inst)
+    em = [inst for inst in ex.order if getattr(inst, "event_mode_used", False)]
+    sync.settle(t0, em)  # FMI 3.0 with eventModeUsed: in Event Mode after initialization
+    for inst in em:
+        inst.enter_step_mode()
+    ex.row(t0)
+    t = t0
+    for T in grid_points(t0, t_end, step):
+        while t < T:
+            t_reached, ev = sync.advance(t, T)
+            if ev is not None:
+                ex.row(t_reached, LEFT)
+                if ev.event_at > t_reached:  # FMI 2.0 rollback: stopped just before the event
+                    sync.cross(t_reached, ev.event_at)
+                    t_reached = ev.event_at
+                else:
+                    sync.iterate(t_reached)
+                if t_reached < T:
+                    ex.row(t_reached, RIGHT)
+            if t_reached <= t and ev is None:
+                raise SSPError(f"no component advanced from t = {t!r} s (a component returned early without an "
+                               f"event)")
+            t = t_reached
+        ex.row(T)
+        if progress:
+            progress(T)
+    return t

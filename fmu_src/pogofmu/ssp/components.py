@@ -1,0 +1,410 @@
+"""The components of a running system: one FMU instance each, behind one interface whatever its FMI
+version and interface type, so that the master algorithms (:mod:`.algorithms`) read in the
+terms of the system — set inputs, step, save and restore, handle events — not of fmpy.
+
+* :class:`Fmi2CoSimulation` — FMI 2.0 co-simulation; it can take part in event
+  synchronization by *rollback* when it can get and set its state: a step that holds an event
+  is redone up to just before the event.  For this project's FMUs the event time is exact (the
+  outputs ``n_events`` and ``t_last_event``); for any other FMU a change of a discrete output is
+  located by bisection to the tolerance the user sets.
+* :class:`Fmi3CoSimulation` — FMI 3.0 co-simulation, instantiated with ``earlyReturnAllowed``
+  (and ``eventModeUsed`` where the FMU has Event Mode): a step returns early at an event.
+* :class:`Fmi3ModelExchange` — FMI 3.0 model exchange, for the strongly coupled algorithm.
+
+Host-side code (fmpy); never imported inside an FMU.
+"""
+from __future__ import annotations
+
+import ctypes
+import math
+import sys
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Dict, List, Optional
+from xml.etree import ElementTree as ET
+
+from pogofmu.runtime.status import status_name
+
+from .package import SSPError
+
+REAL_TYPES = ("Real", "Float64", "Float32")
+INTEGER_TYPES = ("Integer", "Int32", "Enumeration", "Int8", "UInt8", "Int16", "UInt16", "UInt32", "Int64",
+                 "UInt64")
+
+
+@dataclass
+class StepResult:
+    """What one step of a component did.
+
+    ``t_end``: the time the component reached (the end of the step, or earlier);
+    ``event_at``: an event lies at this time (``t_end`` itself for an FMI 3.0 early return; just
+    after ``t_end`` for a rollback, whose component stops a rounding unit before its event);
+    ``event_mode``: the component waits in front of its event for Event Mode (FMI 3.0);
+    ``terminate``: the component asks to end the simulation."""
+
+    t_end: float
+    event_at: Optional[float] = None
+    event_mode: bool = False
+    terminate: bool = False
+
+
+def pogofmu_events(unzipdir: str) -> Optional[List[str]]:
+    """The events a co-simulation step of a pogofmu FMU can contain (from the modelDescription's
+    pogofmu annotation), or None for an FMU of another tool."""
+    try:
+        root = ET.parse(Path(unzipdir) / "modelDescription.xml").getroot()
+    except (OSError, ET.ParseError):
+        return None
+    if not (root.get("generationTool") or "").startswith("pogofmu"):
+        return None
+    for el in root.iter("Events"):
+        return (el.get("cosimulation") or "").split()
+    return None
+
+
+class Component:
+    """One FMU instance of the system, with its log kept (warnings and errors echoed)."""
+
+    fmi = 2
+    interface = "cs"
+
+    def __init__(self, comp, workdir: Path, echo: bool):
+        from fmpy import extract
+
+        self.comp = comp
+        self.name = comp.name
+        self.messages = []
+        self.dead = False
+        self.echo = echo
+        self.md = comp.model_description
+        self.dir = extract(str(comp.model_description_path), unzipdir=str(workdir / comp.name))
+        self.variables = comp.variables
+        self.events = pogofmu_events(self.dir)  # None: not a pogofmu FMU
+        self.t = None  # the time the component has reached
+        self._state = None
+        self.saved_at = None
+        self._plans = {}
+
+    # ---- logging ------------------------------------------------------------------------------
+    def _log(self, status, message):
+        text = message.decode(errors="replace") if isinstance(message, bytes) else (message or "")
+        self.messages.append((int(status), text))
+        if status >= 1 and self.echo:
+            print(f"[{status_name(status)}] {self.name}: {text}", file=sys.stderr, flush=True)
+
+    def last_error(self):
+        for status, text in reversed(self.messages):
+            if status >= 2:
+                return text
+        return "no message from the FMU"
+
+    def fail(self, what: str, exc: Exception) -> SSPError:
+        """The error that ends the run: the component, the call, the FMU's own message."""
+        self.dead = self.dead or "fatal" in str(exc).lower()
+        return SSPError(f"Component {self.name}: {what} failed ({exc}): {self.last_error()}")
+
+    # ---- variables ----------------------------------------------------------------------------
+    def vr(self, name):
+        return self.variables[name].valueReference
+
+    def type_of(self, name) -> str:
+        return self.variables[name].type
+
+    def _plan(self, names):
+        """``[(kind, value references, positions in names)]``: one FMI call per kind (cached)."""
+        key = tuple(names)
+        plan = self._plans.get(key)
+        if plan is None:
+            groups: Dict[str, tuple] = {}
+            for pos, n in enumerate(key):
+                t = self.type_of(n)
+                kind = "real" if t in REAL_TYPES else "int" if t in INTEGER_TYPES else t.lower()
+                vrs, where = groups.setdefault(kind, ([], []))
+                vrs.append(self.vr(n))
+                where.append(pos)
+            plan = self._plans[key] = [(kind, vrs, where) for kind, (vrs, where) in groups.items()]
+        return plan
+
+    def set_values(self, names, values):
+        """Set variables by name (reals, integers, booleans, strings each in one call)."""
+        for kind, vrs, where in self._plan(names):
+            self._set(kind, vrs, [values[i] for i in where])
+
+    def get_values(self, names) -> list:
+        out = [None] * len(names)
+        for kind, vrs, where in self._plan(names):
+            for i, v in zip(where, self._get(kind, vrs)):
+                out[i] = v
+        return out
+
+    @property
+    def discrete_outputs(self) -> List[str]:
+        """Outputs whose change marks an event of an FMU of another tool (integers, booleans,
+        discrete reals)."""
+        return [n for n, v in self.variables.items() if v.causality == "output"
+                and (v.type not in REAL_TYPES or v.variability == "discrete")]
+
+    # ---- states -------------------------------------------------------------------------------
+    def save(self):
+        """Save the FMU state (the same state object reused: the FMU overwrites it)."""
+        try:
+            self._save()
+        except Exception as exc:  # noqa: BLE001 - fmpy raises FMICallException on an error status
+            raise self.fail("saving its state", exc) from None
+        self.saved_at = self.t
+
+    def restore(self):
+        try:
+            self._restore()
+        except Exception as exc:  # noqa: BLE001
+            raise self.fail("restoring its state", exc) from None
+        self.t = self.saved_at
+
+    def close(self):
+        if self.dead:  # nothing may be called on an instance after a fatal error
+            return
+        try:
+            if self._state is not None:
+                self._free_state()
+            self.fmu.terminate()
+        finally:
+            self.fmu.freeInstance()
+
+
+# =============================================================================================
+# FMI 2.0 co-simulation
+# =============================================================================================
+
+class Fmi2CoSimulation(Component):
+    fmi = 2
+
+    def __init__(self, comp, workdir, echo):
+        super().__init__(comp, workdir, echo)
+        from fmpy import calloc, free
+        from fmpy.fmi2 import FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE, \
+            fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
+
+        md = self.md
+        self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=self.dir, modelIdentifier=md.coSimulation.modelIdentifier,
+                             instanceName=self.name)
+        cb = fmi2CallbackFunctions()
+        cb.logger = fmi2CallbackLoggerTYPE(lambda c, inst, status, cat, msg: self._log(status, msg))
+        cb.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+        cb.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+        self._cb = cb  # keep the callbacks alive
+        self.fmu.instantiate(loggingOn=True, callbacks=cb)
+        self.can_save = bool(md.coSimulation.canGetAndSetFMUstate)
+        self.counts_events = self.events is not None and "n_events" in self.variables \
+            and "t_last_event" in self.variables
+
+    def _set(self, kind, vrs, values):
+        f = {"real": self.fmu.setReal, "int": self.fmu.setInteger, "boolean": self.fmu.setBoolean,
+             "string": self.fmu.setString}[kind]
+        conv = {"real": float, "int": int, "boolean": bool, "string": str}[kind]
+        f(vrs, [conv(v) for v in values])
+
+    def _get(self, kind, vrs):
+        return {"real": self.fmu.getReal, "int": self.fmu.getInteger, "boolean": self.fmu.getBoolean,
+                "string": self.fmu.getString}[kind](vrs)
+
+    def enter_initialization(self, t0):
+        # no stop time for the FMUs (stopTimeDefined = false): an input change within ~1e-14 s of a
+        # defined stop time ended in a 'step size collapsed' error (README "Known issues")
+        self.fmu.setupExperiment(startTime=t0)
+        self.fmu.enterInitializationMode()
+
+    def exit_initialization(self, t0):
+        self.fmu.exitInitializationMode()
+        self.t = t0
+
+    def do_step(self, t, h) -> StepResult:
+        try:
+            self.fmu.doStep(currentCommunicationPoint=t, communicationStepSize=h)
+        except Exception as exc:  # noqa: BLE001 - FMICallException: status discard/error/fatal
+            raise self.fail(f"fmi2DoStep from t = {t:.10g} s (step {h:g} s)", exc) from None
+        self.t = t + h
+        return StepResult(self.t)
+
+    def _save(self):
+        if self._state is None:
+            self._state = self.fmu.getFMUstate()
+        else:
+            self.fmu.fmi2GetFMUstate(self.fmu.component, ctypes.byref(self._state))
+
+    def _restore(self):
+        self.fmu.setFMUstate(self._state)
+
+    def _free_state(self):
+        self.fmu.freeFMUstate(self._state)
+        self._state = None
+
+
+# =============================================================================================
+# FMI 3.0
+# =============================================================================================
+
+class _Fmi3(Component):
+    fmi = 3
+
+    def _logger(self):
+        from fmpy.fmi3 import fmi3LogMessageCallback  # noqa: F401 (fmpy wraps the callable itself)
+
+        return lambda env, status, category, message: self._log(status, message)
+
+    def _set(self, kind, vrs, values):
+        f = {"real": self.fmu.setFloat64, "int": self.fmu.setInt32, "boolean": self.fmu.setBoolean,
+             "string": self.fmu.setString}[kind]
+        conv = {"real": float, "int": int, "boolean": bool, "string": str}[kind]
+        f(vrs, [conv(v) for v in values])
+
+    def _get(self, kind, vrs):
+        return {"real": self.fmu.getFloat64, "int": self.fmu.getInt32, "boolean": self.fmu.getBoolean,
+                "string": self.fmu.getString}[kind](vrs)
+
+    def enter_initialization(self, t0):
+        self.fmu.enterInitializationMode(startTime=t0)
+
+    def enter_event_mode(self):
+        try:
+            self.fmu.enterEventMode()
+        except Exception as exc:  # noqa: BLE001
+            raise self.fail(f"fmi3EnterEventMode at t = {self.t:.15g} s", exc) from None
+
+    def update_discrete_states(self):
+        """(discreteStatesNeedUpdate, terminateSimulation, nextEventTime or None)."""
+        try:
+            need, terminate, _, _, defined, t_next = self.fmu.updateDiscreteStates()
+        except Exception as exc:  # noqa: BLE001
+            raise self.fail(f"fmi3UpdateDiscreteStates at t = {self.t:.15g} s", exc) from None
+        return bool(need), bool(terminate), (t_next if defined else None)
+
+    def _save(self):
+        if self._state is None:
+            self._state = self.fmu.getFMUState()
+        else:
+            self.fmu.fmi3GetFMUState(self.fmu.component, ctypes.byref(self._state))
+
+    def _restore(self):
+        self.fmu.setFMUState(self._state)
+
+    def _free_state(self):
+        self.fmu.freeFMUState(self._state)
+        self._state = None
+
+
+class Fmi3CoSimulation(_Fmi3):
+    """FMI 3.0 co-simulation; with ``events`` it may return early at an event (and then, if it
+    has Event Mode, waits in front of the event for the master's event handling)."""
+
+    def __init__(self, comp, workdir, echo, events=True):
+        super().__init__(comp, workdir, echo)
+        from fmpy.fmi3 import FMU3Slave
+
+        md = self.md
+        cs = md.coSimulation
+        self.fmu = FMU3Slave(guid=md.guid, unzipDirectory=self.dir, modelIdentifier=cs.modelIdentifier,
+                             instanceName=self.name)
+        self.event_mode_used = bool(events and cs.hasEventMode)
+        self.early_return = bool(events)
+        self.fmu.instantiate(loggingOn=True, eventModeUsed=self.event_mode_used,
+                             earlyReturnAllowed=self.early_return, logMessage=self._logger())
+        self.can_save = bool(cs.canGetAndSetFMUstate)
+
+    def exit_initialization(self, t0):
+        self.fmu.exitInitializationMode()  # then in Event Mode when eventModeUsed (the master iterates)
+        self.t = t0
+
+    def enter_step_mode(self):
+        try:
+            self.fmu.enterStepMode()
+        except Exception as exc:  # noqa: BLE001
+            raise self.fail(f"fmi3EnterStepMode at t = {self.t:.15g} s", exc) from None
+
+    def do_step(self, t, h) -> StepResult:
+        try:
+            event, terminate, early, last = self.fmu.doStep(currentCommunicationPoint=t, communicationStepSize=h)
+        except Exception as exc:  # noqa: BLE001
+            raise self.fail(f"fmi3DoStep from t = {t:.10g} s (step {h:g} s)", exc) from None
+        end = t + h
+        if early:
+            if not (last >= t) or not math.isfinite(last):
+                raise SSPError(f"Component {self.name}: fmi3DoStep from t = {t:.15g} s returned early at "
+                               f"lastSuccessfulTime = {last!r} s, before the start of the step")
+            if last > end:
+                raise SSPError(f"Component {self.name}: fmi3DoStep from t = {t:.15g} s (step {h:g} s) returned "
+                               f"early at lastSuccessfulTime = {last!r} s, after the end of the step")
+            self.t = last
+        else:
+            self.t = end
+        if event or early:
+            return StepResult(self.t, event_at=self.t, event_mode=bool(event and self.event_mode_used),
+                              terminate=bool(terminate))
+        return StepResult(self.t, terminate=bool(terminate))
+
+
+class Fmi3ModelExchange(_Fmi3):
+    """FMI 3.0 model exchange: the master integrates the states (:mod:`.algorithms`)."""
+
+    interface = "me"
+
+    def __init__(self, comp, workdir, echo):
+        super().__init__(comp, workdir, echo)
+        from fmpy.fmi3 import FMU3Model
+
+        md = self.md
+        me = md.modelExchange
+        if me is None:
+            raise SSPError(f"Component {self.name}: {comp.source} does not support model exchange "
+                           f"(--algorithm model-exchange needs FMI 3.0 model exchange in every FMU)")
+        self.fmu = FMU3Model(guid=md.guid, unzipDirectory=self.dir, modelIdentifier=me.modelIdentifier,
+                             instanceName=self.name)
+        self.fmu.instantiate(loggingOn=True, logMessage=self._logger())
+        self.can_save = bool(me.canGetAndSetFMUstate)
+        self.nx = len(md.derivatives)
+        self.nz = len(md.eventIndicators)
+        self._x = (ctypes.c_double * max(self.nx, 1))()
+        self._dx = (ctypes.c_double * max(self.nx, 1))()
+        self._z = (ctypes.c_double * max(self.nz, 1))()
+
+    def exit_initialization(self, t0):
+        self.fmu.exitInitializationMode()  # then in Event Mode
+        self.t = t0
+
+    def enter_continuous_time_mode(self):
+        self.fmu.enterContinuousTimeMode()
+
+    def set_time(self, t):
+        self.fmu.setTime(t)
+        self.t = t
+
+    def get_states(self, out, offset):
+        if self.nx:
+            self.fmu.getContinuousStates(self._x, self.nx)
+            out[offset:offset + self.nx] = self._x[:self.nx]
+
+    def set_states(self, x, offset):
+        if self.nx:
+            self._x[:self.nx] = x[offset:offset + self.nx]
+            self.fmu.setContinuousStates(self._x, self.nx)
+
+    def get_derivatives(self, out, offset):
+        if self.nx:
+            self.fmu.getContinuousStateDerivatives(self._dx, self.nx)
+            out[offset:offset + self.nx] = self._dx[:self.nx]
+
+    def get_indicators(self, out, offset):
+        if self.nz:
+            self.fmu.getEventIndicators(self._z, self.nz)
+            out[offset:offset + self.nz] = self._z[:self.nz]
+
+    def completed_integrator_step(self):
+        """(enterEventMode, terminateSimulation)."""
+        enter, terminate = self.fmu.completedIntegratorStep()
+        return bool(enter), bool(terminate)
+
+
+def source_fmi_version(path: Path) -> str:
+    """The fmiVersion of the FMU at ``path`` (read from its modelDescription.xml)."""
+    with zipfile.ZipFile(path) as z:
+        return ET.fromstring(z.read("modelDescription.xml")).get("fmiVersion", "")
