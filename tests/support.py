@@ -4,7 +4,6 @@ Everything here drives the *built* FMUs in dist/, as an importer would.
 """
 from __future__ import annotations
 
-import csv
 import json
 import math
 import os
@@ -209,3 +208,21 @@ def compile_c_host(source, exe):
     needed = subprocess.run(["readelf", "-d", str(exe)], capture_output=True, text=True, check=True).stdout
     assert "libpython" not in needed
     return exe
+
+
+def clean_venv():
+    """A venv with fmpy and numpy only (the versions of the project's venv), cached in build/."""
+    import shutil
+
+    import fmpy
+    import numpy
+
+    venv = ROOT / "build" / f"venv-fmpy-{fmpy.__version__}-numpy-{numpy.__version__}"
+    python = venv / "bin" / "python"
+    if not (venv / ".complete").exists():
+        shutil.rmtree(venv, ignore_errors=True)
+        subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True)
+        subprocess.run([str(python), "-m", "pip", "install", "--quiet", "--disable-pip-version-check",
+                        f"fmpy=={fmpy.__version__}", f"numpy=={numpy.__version__}"], check=True)
+        (venv / ".complete").write_text("ok")
+    return python

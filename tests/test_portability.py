@@ -15,6 +15,7 @@ from pathlib import Path
 import pytest
 
 import build_fmu
+from support import clean_venv as _clean_venv
 from support import DIST, ROOT, compile_c_host, fmu_path, simulate
 
 FMUS = build_fmu.model_names()
@@ -180,22 +181,6 @@ def test_c_host_refuses_a_foreign_model_description(c_host, unzipped):
 
 
 # ---- a plain fmpy script in a virtual environment without the project -------------------------
-
-def _clean_venv():
-    """A venv with fmpy and numpy only (the versions of the project's venv), cached in build/."""
-    import fmpy
-    import numpy
-
-    venv = ROOT / "build" / f"venv-fmpy-{fmpy.__version__}-numpy-{numpy.__version__}"
-    python = venv / "bin" / "python"
-    if not (venv / ".complete").exists():
-        shutil.rmtree(venv, ignore_errors=True)
-        subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True)
-        subprocess.run([str(python), "-m", "pip", "install", "--quiet", "--disable-pip-version-check",
-                        f"fmpy=={fmpy.__version__}", f"numpy=={numpy.__version__}"], check=True)
-        (venv / ".complete").write_text("ok")
-    return python
-
 
 @pytest.fixture(scope="session")
 def other_version_fmu(tmp_path_factory):

@@ -10,6 +10,7 @@ import tomllib
 from support import DIST, ROOT
 
 README = (ROOT / "README.md").read_text()
+DOCS = {p.name: p.read_text() for p in (ROOT / "docs").glob("*.md")}
 
 BOTTOM_OUT = f"""
 from fmpy import simulate_fmu
@@ -31,20 +32,23 @@ def test_readme_says_how_fmpy_reports_a_bottomed_out_leg():
     [line] = [ln for ln in proc.stdout.splitlines() if ln.startswith(("RAISED", "RETURNED"))]
     assert line == "RAISED fmi2DoStep failed with status 3 (error)."
     assert "fmi2DoStep failed with status 3 (error)" in README
-    assert "quietly: check" not in README  # the old, wrong comment of the example
-    mem = README[README.index("### PogoStickMem.fmu"):README.index("### PogoStickSMA.fmu")]
+    assert "fmi2DoStep failed with status 3 (error)" in DOCS["using-fmus.md"]
+    assert not any("quietly: check" in text for text in [README, *DOCS.values()])  # the old, wrong comment
+    fmus = DOCS["fmus.md"]
+    mem = fmus[fmus.index("## PogoStickMem.fmu"):fmus.index("## PogoStickSMA.fmu")]
     assert "bottoms out at t ≈ 4.989 s and the step ends in fmi2Error" in mem
-    errors = README[README.index("## Errors"):README.index("## Performance")]
+    errors = DOCS["errors.md"]
     assert "FMICallException" in errors and "fmi2Fatal, message" not in errors
 
 
 def test_readme_runs_the_ssp_master_with_the_venv_or_the_console_command():
-    """Issue 9 item 11: every `python -m pogofmu.ssp` command the README gives is the venv's
-    Python (a bare system python has no pogofmu), and the console command is named too."""
-    commands = [c.lstrip("`") for c in re.findall(r"(\S*python3?) -m pogofmu\.ssp", README)]
-    assert len(commands) >= 4, commands
+    """Every `python -m pogofmu.ssp` and `pogofmu` command the README and the docs give is the
+    venv's (a bare system python has no pogofmu), but for the warning that says so."""
+    text = README + "\n".join(DOCS.values())
+    commands = [c.lstrip("`") for c in re.findall(r"(\S*python3?) -m pogofmu\.ssp", text)]
+    assert len(commands) >= 2, commands
     bare = [c for c in commands if c != ".venv/bin/python"]
-    assert bare == ["python3"] and "a bare `python3 -m pogofmu.ssp` ends in" in README, commands  # the warning
+    assert bare == ["python3"] and "a bare\n`python3 -m pogofmu.ssp` ends in" in README, commands  # the warning
     assert "pogofmu ssp run" in README and "source .venv/bin/activate" in README
     # and the venv's Python does run it
     proc = subprocess.run([str(ROOT / ".venv" / "bin" / "python"), "-m", "pogofmu.ssp", "check",
@@ -66,3 +70,15 @@ def test_license_is_an_spdx_expression_with_a_setuptools_that_reads_it():
     assert st.specifier.contains("77.0") and not st.specifier.contains("76.1"), st
     md = importlib.metadata.metadata("pogofmu")
     assert md["License-Expression"] == "MIT" and md.get("License") is None
+
+
+def test_readme_is_an_entry_and_every_page_it_names_exists():
+    """The README: at most 20 000 characters, the two commands, and a link to every docs page
+    (each of which exists)."""
+    assert len(README) <= 20_000, len(README)
+    assert "python3 tasks.py run" in README and "python3 tasks.py test" in README
+    linked = set(re.findall(r"\(docs/([a-z0-9-]+\.md)\)", README))
+    assert linked == set(DOCS), (linked ^ set(DOCS))
+    for name, page in DOCS.items():  # links between the pages resolve too
+        for target in re.findall(r"\]\(([a-z0-9-]+\.md)\)", page):
+            assert target in DOCS, (name, target)

@@ -141,31 +141,10 @@ def test_without_thrust_the_apex_decays(tmp_path):
 # ---------------------------------------------------------------------------------------------
 
 def continuous_first_apex(p):
-    """First apex of the continuous-time closed loop (thrust law inside the ODE, no coupling
-    delay), from the .ssv's drop at rest: flight in closed form, contact by scipy DOP853."""
-    from scipy.integrate import solve_ivp
+    """The continuous-time closed loop (pogofmu.closed_loop: the law inside a scipy ODE)."""
+    from pogofmu.closed_loop import first_apex
 
-    m, g, k, c, xi = p["m"], p["g"], p["k"], p["c"], p["x_i"]
-    v_td = -math.sqrt(2 * g * (p["y_0"] - xi))
-
-    def compression(t, X):
-        return [X[1], (-k * (X[0] - xi) - c * X[1]) / m - g]
-
-    bottom = lambda t, X: X[1]  # noqa: E731
-    bottom.terminal, bottom.direction = True, 1
-    s1 = solve_ivp(compression, (0, 10), [xi, v_td], method="DOP853", rtol=1e-12, atol=1e-14, events=bottom)
-    y_b = s1.y_events[0][0][0]
-
-    def extension(t, X):
-        F = p["F_max"] if X[1] <= 0 else law(X[0], X[1], 1, p)  # ydot -> 0+: the law saturates
-        return [X[1], (F - k * (X[0] - xi) - c * X[1]) / m - g]
-
-    liftoff = lambda t, X: X[0] - xi  # noqa: E731
-    liftoff.terminal, liftoff.direction = True, 1
-    s2 = solve_ivp(extension, (0, 10), [y_b, 0.0], method="DOP853", rtol=1e-12, atol=1e-14, events=liftoff,
-                   max_step=1e-3)
-    v_lo = s2.y_events[0][0][1]
-    return xi + v_lo ** 2 / (2 * g)
+    return first_apex(p)
 
 
 def delay_bound(p, apex, h):
@@ -217,9 +196,9 @@ def test_coupling_delay(algorithm, lag):
 # ---------------------------------------------------------------------------------------------
 
 def run_libcosim_ssp(path, step, times, variables, timeout=300):
-    script = ROOT / "tests" / "_libcosim_ssp_runner.py"
     payload = json.dumps({"ssp": str(path), "step": step, "times": list(times), "variables": variables})
-    proc = subprocess.run([sys.executable, str(script), payload], capture_output=True, text=True, timeout=timeout)
+    proc = subprocess.run([sys.executable, "-m", "pogofmu.libcosim_runner", payload], capture_output=True, text=True,
+                          timeout=timeout)
     assert proc.returncode == 0, f"libcosimpy failed ({proc.returncode}): {proc.stderr[-2000:]}"
     out = json.loads(proc.stdout.strip().splitlines()[-1])
     assert out["ok"]

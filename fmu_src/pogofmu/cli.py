@@ -1,47 +1,61 @@
-"""The ``pogofmu`` command (declared in pyproject.toml's [project.scripts]).
-
-    pogofmu run [--dist dist] [--out results] [NAME ...]     simulate each FMU's default experiment
-    pogofmu ssp run|check FILE.ssp [...]                      the SSP master
-    pogofmu sweep FMU --grid ... | --sample ... --out F.parquet   grids and Monte Carlo on Dask
-    pogofmu study work-precision|soil [--out DIR]             the studies (CSV + PNG)
-
-``pogofmu COMMAND --help`` tells each command's options. ``run`` and ``ssp`` are
-``pogofmu.master`` and ``pogofmu.ssp`` (``python -m pogofmu.master`` and ``python -m pogofmu.ssp``
-still work); their arguments are passed on unchanged.
-"""
+"""The ``pogofmu`` command (declared in pyproject.toml's [project.scripts]); ``pogofmu --help``."""
 from __future__ import annotations
 
 import os
 import sys
 
-COMMANDS = ("run", "ssp", "sweep", "study")
+# command: (module, function, one line for --help); each gets the rest of the line and its own prog
+COMMANDS = {
+    "run": ("pogofmu.master", "main", "simulate each FMU's default experiment: CSV, event table, figures"),
+    "ssp": ("pogofmu.ssp.cli", "main", "run or check an SSP system (events synchronized, or model exchange)"),
+    "sweep": ("pogofmu.sweep", "sweep_main", "grids and Monte Carlo of one FMU on Dask, to Parquet"),
+    "study": ("pogofmu.studies", "study_main", "the studies: work-precision, soil, coupling"),
+}
+
+
+def usage() -> str:
+    lines = ["usage: pogofmu [--version] [--help] COMMAND [ARGS ...]", "",
+             "Hybrid pogo-stick FMUs (Pei, Quadrelli & Wright 2020): run, compose, sweep and study them.", "",
+             "commands:"]
+    lines += [f"  {name:7s} {text}" for name, (_, _, text) in COMMANDS.items()]
+    lines += ["", "pogofmu COMMAND --help tells each command's options. Errors are one line; --debug (where a",
+              "command has it) or POGOFMU_DEBUG=1 shows the traceback of an unexpected one."]
+    return "\n".join(lines)
 
 
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     os.environ.setdefault("MPLBACKEND", "Agg")
-    if not argv or argv[0] in ("-h", "--help"):
-        print(__doc__.strip())
-        return 0 if argv else 2
+    if not argv:
+        print(usage(), file=sys.stderr)
+        return 2
+    if argv[0] in ("-h", "--help"):
+        print(usage())
+        return 0
+    if argv[0] in ("-V", "--version"):
+        from pogofmu import __version__
+
+        print(f"pogofmu {__version__}")
+        return 0
     cmd, rest = argv[0], argv[1:]
-    if cmd == "run":
-        from pogofmu import master
+    if cmd not in COMMANDS:
+        print(f"pogofmu: unknown command {cmd!r}: the commands are {', '.join(COMMANDS)} (pogofmu --help)",
+              file=sys.stderr)
+        return 2
+    module, function, _ = COMMANDS[cmd]
+    import importlib
 
-        return master.main(rest) or 0
-    if cmd == "ssp":
-        from pogofmu import ssp
-
-        return ssp.main(rest) or 0
-    if cmd == "sweep":
-        from pogofmu.sweep import sweep_main
-
-        return sweep_main(rest)
-    if cmd == "study":
-        from pogofmu.studies import study_main
-
-        return study_main(rest)
-    print(f"pogofmu: unknown command {cmd!r} (one of {', '.join(COMMANDS)}); pogofmu --help", file=sys.stderr)
-    return 2
+    try:
+        return getattr(importlib.import_module(module), function)(rest, prog=f"pogofmu {cmd}") or 0
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:  # noqa: BLE001 - the last resort: one line, never a traceback by default
+        if os.environ.get("POGOFMU_DEBUG", "") not in ("", "0") or "--debug" in rest:
+            raise
+        print(f"error: unexpected {type(exc).__name__}: {exc} -- this is a bug of pogofmu, please report it "
+              f"(POGOFMU_DEBUG=1 shows the traceback)", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

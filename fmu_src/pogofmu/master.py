@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import csv
 import math
+import sys
 from pathlib import Path
 
 from pogofmu.runtime.status import status_name
@@ -219,13 +220,20 @@ def model_of(fmu: Path):
     return all_models().get(name)
 
 
+class RunError(Exception):
+    """The run command cannot go on; the message says why."""
+
+
 def run(dist: Path, out: Path, names=()):
+    available = sorted(dist.glob("*.fmu"))
+    if not available:
+        raise RunError(f"no FMU in {dist}: build them first (python3 build_fmu.py, or python3 tasks.py run)")
+    fmus = [f for f in available if not names or f.stem in names]
+    unknown = [n for n in names if n not in {f.stem for f in available}]
+    if unknown:
+        raise RunError(f"no FMU named {', '.join(unknown)} in {dist}; the FMUs there are "
+                       f"{', '.join(f.stem for f in available)}")
     out.mkdir(parents=True, exist_ok=True)
-    fmus = sorted(dist.glob("*.fmu"))
-    if names:
-        fmus = [f for f in fmus if f.stem in names]
-    if not fmus:
-        raise SystemExit(f"no FMU in {dist}: run build_fmu.py first")
     summary = []
     for fmu in fmus:
         model = model_of(fmu)
@@ -247,13 +255,19 @@ def run(dist: Path, out: Path, names=()):
     return summary
 
 
-def main(argv=None):
-    ap = argparse.ArgumentParser(description="simulate every FMU's default experiment with fmpy")
-    ap.add_argument("--dist", default=str(ROOT / "dist"))
-    ap.add_argument("--out", default=str(ROOT / "results"))
-    ap.add_argument("names", nargs="*")
+def main(argv=None, prog="pogofmu run"):
+    ap = argparse.ArgumentParser(prog=prog, description="simulate each FMU's default experiment with fmpy: "
+                                 "results/<FMU>/{timeseries.csv, events.csv, figure*.png}")
+    ap.add_argument("--dist", default=str(ROOT / "dist"), help="folder of the built FMUs (default dist/)")
+    ap.add_argument("--out", default=str(ROOT / "results"), help="output folder (default results/)")
+    ap.add_argument("names", nargs="*", help="FMU names (default: every FMU in --dist)")
     args = ap.parse_args(argv)
-    run(Path(args.dist), Path(args.out), args.names)
+    try:
+        run(Path(args.dist), Path(args.out), args.names)
+    except RunError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
+    return 0
 
 
 if __name__ == "__main__":

@@ -216,8 +216,8 @@ def soil(out: Path, fmu: Path, samples_spec, n_samples, seed, stop_time, workers
     return rows
 
 
-def study_main(argv):
-    ap = argparse.ArgumentParser(prog="pogofmu study", description="studies on the sweep: CSV + PNG")
+def study_main(argv, prog="pogofmu study"):
+    ap = argparse.ArgumentParser(prog=prog, description="studies: CSV + PNG")
     sub = ap.add_subparsers(dest="study", required=True)
     wp = sub.add_parser("work-precision", help="Figs 21-22: event-time error and events located vs rel_tol")
     wp.add_argument("--out", default=str(ROOT / "results" / "work-precision"), help="output folder")
@@ -234,8 +234,16 @@ def study_main(argv):
     so.add_argument("--sample", action="append", default=[], metavar="NAME=DIST(a,b)",
                     help=f"replace a default distribution or add one (defaults: {' '.join(SOIL_DEFAULTS)})")
     add_arguments(so)
+    from pogofmu import coupling_study
+
+    coupling_study.add_parser(sub)
     args = ap.parse_args(argv)
     try:
+        if args.study == "coupling":
+            try:
+                return coupling_study.main(args)
+            except coupling_study.StudyError as exc:
+                raise SweepError(str(exc)) from None
         if args.study == "work-precision":
             work_precision(Path(args.out), Path(args.fmu), Path(args.reference) if args.reference else None, args.workers, args.scheduler,
                            not args.no_progress)

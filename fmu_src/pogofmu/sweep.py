@@ -600,10 +600,10 @@ def add_arguments(ap):
     ap.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
-def sweep_main(argv):
+def sweep_main(argv, prog="pogofmu sweep"):
     import argparse
 
-    ap = argparse.ArgumentParser(prog="pogofmu sweep", description=(
+    ap = argparse.ArgumentParser(prog=prog, description=(
         "Run an FMU for every point of a grid (Cartesian product) and/or for Monte Carlo samples on "
         "Dask; one Parquet row per run."))
     ap.add_argument("fmu", help="the FMU file, e.g. dist/PogoStick.fmu")

@@ -503,10 +503,12 @@ class HybridSlave:
 
     # ---- FMU state ----------------------------------------------------------------------------
     def _get_fmu_state(self):
+        # after initialization the parameters are fixed (a set is refused) and every output dict is
+        # a new one: both are shared, not copied (a master that rolls back saves once per step)
+        sim = self._sim
         return {
-            "sim": None if self._sim is None else self._sim.snapshot(),
-            "par": dict(self._par), "u": list(self._u),
-            "out": None if self._out is None else dict(self._out),
+            "sim": None if sim is None else sim.snapshot(),
+            "par": dict(self._par) if sim is None else self._par, "u": list(self._u), "out": self._out,
             "t_start": self._t_start, "t_stop": self._t_stop, "t_ok": self._t_ok, "failed": self._failed,
         }
 

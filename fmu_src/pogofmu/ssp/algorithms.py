@@ -16,7 +16,7 @@ import math
 import time as _time
 from typing import Dict, List
 
-from .components import Fmi3CoSimulation, StepResult
+from .components import StepResult
 from .package import SSPError
 
 MAX_EVENT_ITERATIONS = 100  # discrete iterations at one instant before the master gives up
@@ -198,7 +198,7 @@ class Synchronizer:
         order = ex.order
         for inst in order:
             inst.rollback = inst.fmi == 2 and inst.can_save and self._may_have_events(inst)
-            inst.may_stop = inst.rollback or (isinstance(inst, Fmi3CoSimulation) and inst.early_return
+            inst.may_stop = inst.rollback or (inst.fmi == 3 and getattr(inst, "early_return", False)
                                               and self._may_have_events(inst))
             if inst.fmi == 2 and self._may_have_events(inst) and not inst.can_save:
                 warn(f"warning: Component {inst.name} cannot get and set its FMU state "

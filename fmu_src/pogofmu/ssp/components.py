@@ -33,7 +33,7 @@ INTEGER_TYPES = ("Integer", "Int32", "Enumeration", "Int8", "UInt8", "Int16", "U
                  "UInt64")
 
 
-@dataclass
+@dataclass(slots=True)
 class StepResult:
     """What one step of a component did.
 
@@ -112,7 +112,8 @@ class Component:
         return self.variables[name].type
 
     def _plan(self, names):
-        """``[(kind, value references, positions in names)]``: one FMI call per kind (cached)."""
+        """``[(kind, value references, positions in names, fast call or None)]``: one FMI call
+        per kind (cached with its ctypes buffers: the master's calls cost no fmpy wrapper)."""
         key = tuple(names)
         plan = self._plans.get(key)
         if plan is None:
@@ -123,18 +124,49 @@ class Component:
                 vrs, where = groups.setdefault(kind, ([], []))
                 vrs.append(self.vr(n))
                 where.append(pos)
-            plan = self._plans[key] = [(kind, vrs, where) for kind, (vrs, where) in groups.items()]
+            plan = self._plans[key] = [(kind, vrs, where, self._fast(kind, vrs))
+                                       for kind, (vrs, where) in groups.items()]
         return plan
+
+    def _fast(self, kind, vrs):
+        """``(get(), set(values))`` calling the FMU's own functions with prebuilt buffers, for
+        reals and integers; None for the other types (fmpy's wrappers)."""
+        names = self.FAST.get(kind)
+        if names is None:
+            return None
+        ctype = ctypes.c_double if kind == "real" else ctypes.c_int32
+        n = len(vrs)
+        vr_arr = (ctypes.c_uint32 * n)(*vrs)
+        buf = (ctype * n)()
+        fget, fset = self.fmu._functions[names[0]], self.fmu._functions[names[1]]
+        comp, fmi3 = self.fmu.component, self.fmi == 3
+
+        def get():
+            status = fget(comp, vr_arr, n, buf, n) if fmi3 else fget(comp, vr_arr, n, buf)
+            if status > 1:
+                raise _call_failed(names[0], status)
+            return buf[:]
+
+        def set_(values):
+            buf[:] = values
+            status = fset(comp, vr_arr, n, buf, n) if fmi3 else fset(comp, vr_arr, n, buf)
+            if status > 1:
+                raise _call_failed(names[1], status)
+        return get, set_
 
     def set_values(self, names, values):
         """Set variables by name (reals, integers, booleans, strings each in one call)."""
-        for kind, vrs, where in self._plan(names):
-            self._set(kind, vrs, [values[i] for i in where])
+        for kind, vrs, where, fast in self._plan(names):
+            vals = [values[i] for i in where]
+            if fast is not None:
+                fast[1]([float(v) for v in vals] if kind == "real" else [int(v) for v in vals])
+            else:
+                self._set(kind, vrs, vals)
 
     def get_values(self, names) -> list:
         out = [None] * len(names)
-        for kind, vrs, where in self._plan(names):
-            for i, v in zip(where, self._get(kind, vrs)):
+        for kind, vrs, where, fast in self._plan(names):
+            for i, v in zip(where, fast[0]() if fast is not None else self._get(kind, vrs)):
                 out[i] = v
         return out
 
@@ -176,8 +208,15 @@ class Component:
 # FMI 2.0 co-simulation
 # =============================================================================================
 
+def _call_failed(function, status):
+    from fmpy.fmi1 import FMICallException
+
+    return FMICallException(function=function, status=status)
+
+
 class Fmi2CoSimulation(Component):
     fmi = 2
+    FAST = {"real": ("fmi2GetReal", "fmi2SetReal"), "int": ("fmi2GetInteger", "fmi2SetInteger")}
 
     def __init__(self, comp, workdir, echo):
         super().__init__(comp, workdir, echo)
@@ -197,6 +236,8 @@ class Fmi2CoSimulation(Component):
         self.can_save = bool(md.coSimulation.canGetAndSetFMUstate)
         self.counts_events = self.events is not None and "n_events" in self.variables \
             and "t_last_event" in self.variables
+        self._do_step = self.fmu._functions["fmi2DoStep"]
+        self._get_state = self.fmu._functions["fmi2GetFMUstate"] if self.can_save else None
 
     def _set(self, kind, vrs, values):
         f = {"real": self.fmu.setReal, "int": self.fmu.setInteger, "boolean": self.fmu.setBoolean,
@@ -219,18 +260,21 @@ class Fmi2CoSimulation(Component):
         self.t = t0
 
     def do_step(self, t, h) -> StepResult:
-        try:
-            self.fmu.doStep(currentCommunicationPoint=t, communicationStepSize=h)
-        except Exception as exc:  # noqa: BLE001 - FMICallException: status discard/error/fatal
-            raise self.fail(f"fmi2DoStep from t = {t:.10g} s (step {h:g} s)", exc) from None
+        status = self._do_step(self.fmu.component, t, h, 1)
+        if status > 1:
+            raise self.fail(f"fmi2DoStep from t = {t:.10g} s (step {h:g} s)",
+                            _call_failed("fmi2DoStep", status)) from None
         self.t = t + h
         return StepResult(self.t)
 
     def _save(self):
         if self._state is None:
             self._state = self.fmu.getFMUstate()
+            self._state_ref = ctypes.byref(self._state)
         else:
-            self.fmu.fmi2GetFMUstate(self.fmu.component, ctypes.byref(self._state))
+            status = self._get_state(self.fmu.component, self._state_ref)
+            if status > 1:
+                raise _call_failed("fmi2GetFMUstate", status)
 
     def _restore(self):
         self.fmu.setFMUstate(self._state)
@@ -240,12 +284,14 @@ class Fmi2CoSimulation(Component):
         self._state = None
 
 
+
 # =============================================================================================
 # FMI 3.0
 # =============================================================================================
 
 class _Fmi3(Component):
     fmi = 3
+    FAST = {"real": ("fmi3GetFloat64", "fmi3SetFloat64"), "int": ("fmi3GetInt32", "fmi3SetInt32")}
 
     def _logger(self):
         from fmpy.fmi3 import fmi3LogMessageCallback  # noqa: F401 (fmpy wraps the callable itself)
@@ -282,8 +328,11 @@ class _Fmi3(Component):
     def _save(self):
         if self._state is None:
             self._state = self.fmu.getFMUState()
+            self._state_ref = ctypes.byref(self._state)
         else:
-            self.fmu.fmi3GetFMUState(self.fmu.component, ctypes.byref(self._state))
+            status = self.fmu._functions["fmi3GetFMUState"](self.fmu.component, self._state_ref)
+            if status > 1:
+                raise _call_failed("fmi3GetFMUState", status)
 
     def _restore(self):
         self.fmu.setFMUState(self._state)
@@ -310,6 +359,10 @@ class Fmi3CoSimulation(_Fmi3):
         self.fmu.instantiate(loggingOn=True, eventModeUsed=self.event_mode_used,
                              earlyReturnAllowed=self.early_return, logMessage=self._logger())
         self.can_save = bool(cs.canGetAndSetFMUstate)
+        # fmi3DoStep called directly, its four results in buffers made once
+        self._flags = [ctypes.c_bool(), ctypes.c_bool(), ctypes.c_bool(), ctypes.c_double()]
+        self._flag_refs = [ctypes.byref(f) for f in self._flags]
+        self._do_step = self.fmu._functions["fmi3DoStep"]
 
     def exit_initialization(self, t0):
         self.fmu.exitInitializationMode()  # then in Event Mode when eventModeUsed (the master iterates)
@@ -322,10 +375,12 @@ class Fmi3CoSimulation(_Fmi3):
             raise self.fail(f"fmi3EnterStepMode at t = {self.t:.15g} s", exc) from None
 
     def do_step(self, t, h) -> StepResult:
-        try:
-            event, terminate, early, last = self.fmu.doStep(currentCommunicationPoint=t, communicationStepSize=h)
-        except Exception as exc:  # noqa: BLE001
-            raise self.fail(f"fmi3DoStep from t = {t:.10g} s (step {h:g} s)", exc) from None
+        e, m, r, l_ = self._flag_refs
+        status = self._do_step(self.fmu.component, t, h, True, e, m, r, l_)
+        if status > 1:
+            raise self.fail(f"fmi3DoStep from t = {t:.10g} s (step {h:g} s)",
+                            _call_failed("fmi3DoStep", status)) from None
+        event, terminate, early, last = (f.value for f in self._flags)
         end = t + h
         if early:
             if not (last >= t) or not math.isfinite(last):

@@ -24,12 +24,17 @@ def _warn(text):
     print(text, file=sys.stderr, flush=True)
 
 
+def _check_interface(comp, algorithm):
+    """The component's FMU offers what the algorithm needs (checked before anything is written)."""
+    md = comp.model_description
+    if algorithm == "model-exchange" and not (md.fmiVersion.startswith("3") and md.modelExchange is not None):
+        raise SSPError(f"Component {comp.name}: --algorithm model-exchange needs FMI 3.0 model exchange, and "
+                       f"{comp.source} is FMI {md.fmiVersion}" + ("" if md.modelExchange else " without model exchange"))
+
+
 def _instantiate(comp, work, echo, algorithm, events):
     version = comp.model_description.fmiVersion
     if algorithm == "model-exchange":
-        if not version.startswith("3"):
-            raise SSPError(f"Component {comp.name}: --algorithm model-exchange needs FMI 3.0 model exchange, "
-                           f"and {comp.source} is FMI {version}")
         return Fmi3ModelExchange(comp, work, echo)
     if version.startswith("3"):
         return Fmi3CoSimulation(comp, work, echo, events=events)
@@ -122,6 +127,7 @@ def simulate(ssp, parameters: Optional[str] = None, stop_time: Optional[float] =
         for name in order:
             comp = system.components[name]
             comp.model_description_path = root / comp.source
+            _check_interface(comp, algorithm)
         cols = [(n, c) for n in order for c in system.components[n].connectors.values()]
         columns = (["event"] + [f"{n}.{c.name}" for n, c in cols], ["Integer"] + [c.type for _, c in cols],
                    [None] + [c.unit or _fmu_unit(system.components[n].variables[c.name]) for n, c in cols],

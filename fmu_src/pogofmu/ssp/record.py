@@ -161,6 +161,9 @@ class CSVStream:
             self._flush()
         finally:
             self._file.close()
+        if not complete and self.rows == 0:  # nothing was simulated: no file at all
+            self.part.unlink(missing_ok=True)
+            return
         self.part.replace(self.path if complete else self.incomplete)
 
     def envelope(self) -> Envelope:

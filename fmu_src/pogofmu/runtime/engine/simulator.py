@@ -30,7 +30,6 @@ fires at the start time (a stick at its free length moving up lifts off at t0).
 from __future__ import annotations
 from __future__ import annotations
 
-import copy
 import math
 from collections import deque
 from dataclasses import dataclass
@@ -353,7 +352,9 @@ class Simulator:
         place are shared, not copied; closures are rebuilt on restore (the discrete state ``q`` is
         never mutated in place, so the right-hand sides kept in past segments stay valid).
         """
-        return self._copy_state({k: v for k, v in self.__dict__.items() if k not in ("fun", "active")})
+        state = self._copy_state(self.__dict__)
+        del state["fun"], state["active"]  # closures: rebuilt on restore
+        return state
 
     def restore(self, snap):
         self.__dict__.update(self._copy_state(snap))
@@ -363,10 +364,11 @@ class Simulator:
     def _copy_state(cls, state):
         """A copy of a state dict: the containers of _SHALLOW copied (shallowly: their items are
         never mutated), everything else shared."""
-        out = dict(state)
+        out = state.copy()
         for k in cls._SHALLOW:
             v = state[k]
-            out[k] = None if v is None else copy.copy(v)
+            if v is not None:
+                out[k] = v.copy()  # (lists and a deque: copy() keeps the deque's maxlen)
         return out
 
     def advance_to_event(self, t_target: float) -> bool:
