@@ -64,10 +64,15 @@ class SweepError(Exception):
 # =============================================================================================
 
 def _number(text: str, what: str) -> float:
+    """A finite number (``nan``, ``inf`` and ``1e400``, which overflows to inf, are refused here,
+    before any worker starts)."""
     try:
-        return float(text)
+        value = float(text)
     except ValueError:
         raise SweepError(f"{what}: {text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise SweepError(f"{what}: {text.strip()!r} is not a finite number")
+    return value
 
 
 def parse_grid(spec: str):
@@ -420,11 +425,12 @@ def open_cluster(workers: Optional[int] = None, scheduler: Optional[str] = None)
     if scheduler:
         try:
             return Client(scheduler, timeout="10s"), None
-        except (OSError, TimeoutError) as exc:
-            raise SweepError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
-    n = workers or os.cpu_count() or 1
-    if n < 1:
+        except (OSError, TimeoutError, ValueError, TypeError) as exc:
+            raise SweepError(f"--scheduler {scheduler!r}: cannot connect ({type(exc).__name__}: {exc}); give the "
+                             f"scheduler's address, e.g. tcp://10.0.0.5:8786") from None
+    if workers is not None and workers < 1:
         raise SweepError(f"--workers {workers}: must be >= 1")
+    n = workers or os.cpu_count() or 1
     # the workers' logs are silenced: a run's failure is its row; a closing cluster's heartbeat errors are noise;
     # the scheduler's HTTP server (dashboard off) on a free port: several sweeps may run side by side
     with dask.config.set(QUIET_CLUSTER):
@@ -441,16 +447,70 @@ def close_cluster(client, cluster):
 
 def prepare(sweep: Sweep):
     """Check the sweep against the FMU before anything runs; returns (FMU bytes, sha256, model description)."""
-    from fmpy import read_model_description
 
     fmu = Path(sweep.fmu)
     if not fmu.is_file():
         raise SweepError(f"FMU {fmu}: no such file (build it with build_fmu.py, or python3 tasks.py build)")
-    data = fmu.read_bytes()
-    md = read_model_description(str(fmu))
+    try:
+        data = fmu.read_bytes()
+    except OSError as exc:
+        raise SweepError(f"FMU {fmu}: cannot be read ({exc.strerror or exc})") from None
+    md = read_fmu_description(fmu)
     check_names(md, sweep.names, sweep.settings)
     check_point_types(md, sweep.names, sweep.points)
     return data, _sha256(data), md
+
+
+def read_fmu_description(fmu: Path):
+    """fmpy's model description of ``fmu``, or a SweepError saying what the file is instead."""
+    import zipfile
+
+    from fmpy import read_model_description
+
+    if not zipfile.is_zipfile(fmu):
+        raise SweepError(f"FMU {fmu}: not an FMU (not a zip archive)")
+    with zipfile.ZipFile(fmu) as z:
+        if "modelDescription.xml" not in z.namelist():
+            raise SweepError(f"FMU {fmu}: not an FMU (a zip archive without modelDescription.xml)")
+    try:
+        return read_model_description(str(fmu), validate=False)
+    except Exception as exc:  # noqa: BLE001 - lxml's XMLSyntaxError, fmpy's own checks, ...
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise SweepError(f"FMU {fmu}: its modelDescription.xml cannot be read ({first})") from None
+
+
+def check_output(out: Path, timeseries, overwrite: bool, resume: bool):
+    """The output is a regular file in a writable folder (or does not exist yet); its ``.parts``
+    folder and the timeseries folder are folders; an existing output is replaced only with
+    ``--overwrite``, and only if it is a regular file: a device, a folder or a link to one is never
+    replaced. Checked before any worker starts."""
+    out = Path(out)
+    if out.exists() or out.is_symlink():
+        if not out.is_file() or out.is_symlink():
+            kind = "a folder" if out.is_dir() else "a symbolic link" if out.is_symlink() else \
+                "not a regular file (a device, a pipe or a socket)"
+            raise SweepError(f"--out {out}: {kind}; give the path of a Parquet file to write (an existing output "
+                             f"is replaced only if it is a regular file, with --overwrite)")
+    parent = out.parent if str(out.parent) else Path(".")
+    if not parent.is_dir():
+        raise SweepError(f"--out {out}: the folder {parent} does not exist")
+    try:
+        with tempfile.TemporaryFile(dir=parent):
+            pass
+    except OSError as exc:
+        raise SweepError(f"--out {out}: the folder {parent} cannot be written ({exc.strerror or exc})") from None
+    parts = _parts_dir(out)
+    if (parts.exists() or parts.is_symlink()) and (not parts.is_dir() or parts.is_symlink()):
+        raise SweepError(f"{parts} exists and is not a folder of the sweep's parts: remove it or choose another --out")
+    if timeseries:
+        ts = Path(timeseries)
+        if ts.exists() and (not ts.is_dir() or ts.is_symlink()):
+            raise SweepError(f"--timeseries {ts}: exists and is not a folder")
+        if ts.is_dir() and overwrite and not resume:
+            foreign = [p.name for p in ts.iterdir() if not (p.is_dir() and p.name.startswith("run_id="))]
+            if foreign:
+                raise SweepError(f"--timeseries {ts}: holds {', '.join(sorted(foreign)[:3])}, which a sweep did not "
+                                 f"write; --overwrite replaces only a sweep's own run_id=* folders")
 
 
 def check_workers(client):
@@ -476,8 +536,8 @@ def run_sweep(sweep: Sweep, client, resume=False, overwrite=False, progress=True
     from distributed import as_completed
     from tqdm import tqdm
 
-    fmu = Path(sweep.fmu)
     data, sha, md = prepare(sweep)
+    check_output(Path(sweep.out), sweep.timeseries_dir, overwrite, resume)
     sch = schema(md, sweep.names, sweep.settings)
     spec = json.dumps(sweep.spec(sha), sort_keys=True)
     out = Path(sweep.out)
@@ -527,7 +587,7 @@ def run_sweep(sweep: Sweep, client, resume=False, overwrite=False, progress=True
     for chunk in chunks:
         futures[submit(chunk)] = chunk
     bar = tqdm(total=len(sweep.points), initial=len(done), unit="run", disable=not progress,
-               desc=fmu.stem, file=sys.stderr, smoothing=0.1)
+               desc=Path(sweep.fmu).stem, file=sys.stderr, smoothing=0.1)
     n_run = 0
     failed = 0
     try:
@@ -633,18 +693,31 @@ def sweep_main(argv, prog="pogofmu sweep"):
     try:
         if args.chunk_size is not None and args.chunk_size < 1:
             raise SweepError(f"--chunk-size {args.chunk_size}: must be >= 1")
+        if not 0 <= args.seed < 2 ** 63:
+            raise SweepError(f"--seed {args.seed}: must be a whole number >= 0 (numpy's default_rng)")
         fixed = {}
         for s in args.set:
             name, sep, value = s.partition("=")
-            if not sep:
+            if not sep or not name.strip():
                 raise SweepError(f"--set {s!r}: expected NAME=VALUE")
+            if name.strip() in fixed:
+                raise SweepError(f"--set {s!r}: {name.strip()} is set twice")
             fixed[name.strip()] = _number(value, f"--set {s!r}")
         names, points = make_points([parse_grid(g) for g in args.grid], [parse_sample(s) for s in args.sample],
                                     args.samples, args.seed)
-        settings = Settings(stop_time=args.stop_time, step=args.step, events=args.events,
-                            outputs=[o.strip() for o in args.outputs.split(",") if o.strip()] if args.outputs else None,
+        both = sorted(set(names) & set(fixed))
+        if both:
+            raise SweepError(f"{', '.join(both)}: both swept (--grid/--sample) and fixed (--set); give one")
+        outputs = None
+        if args.outputs is not None:
+            outputs = [o.strip() for o in args.outputs.split(",") if o.strip()]
+            if not outputs:
+                raise SweepError(f"--outputs {args.outputs!r}: names no output (comma-separated output names)")
+        settings = Settings(stop_time=args.stop_time, step=args.step, events=args.events, outputs=outputs,
                             timeseries=bool(args.timeseries), fixed=fixed)
         sweep = Sweep(args.fmu, names, points, settings, args.out, args.timeseries, args.chunk_size)
+        if args.workers is not None and args.workers < 1:
+            raise SweepError(f"--workers {args.workers}: must be >= 1")
         return execute(sweep, args.workers, args.scheduler, resume=args.resume, overwrite=args.overwrite,
                        progress=not args.no_progress)
     except SweepError as exc:
@@ -655,6 +728,7 @@ def sweep_main(argv, prog="pogofmu sweep"):
 def execute(sweep: Sweep, workers=None, scheduler=None, **kwargs):
     """Open the cluster, run the sweep, close the cluster (also on an interruption)."""
     prepare(sweep)  # a bad option fails before any worker starts
+    check_output(Path(sweep.out), sweep.timeseries_dir, kwargs.get("overwrite", False), kwargs.get("resume", False))
     try:
         client, cluster = open_cluster(workers, scheduler)
     except KeyboardInterrupt:
