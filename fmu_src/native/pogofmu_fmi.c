@@ -437,10 +437,14 @@ typedef struct {
     PyObject *strings; /* bytes objects behind the last GetString */
 } Inst;
 
+#define STATE_MAGIC 0x706f676fu /* 'pogo': a state handle of this launcher (any build, either FMI version) */
+
 typedef struct {
+    unsigned magic;
     PyObject *state;
     PyObject *bytes; /* serialized form, kept between SerializedFMUStateSize and Serialize */
 } StateHandle;
+
 
 typedef struct {
     int status;
@@ -1052,10 +1056,31 @@ static int keep_bytes(Inst *in, PyObject *r, void *ctx)
     return ST_OK;
 }
 
+/* The handle behind an FMU state pointer, or NULL (and an Error logged) if it is none of this
+ * launcher's: the Python side then checks whose state it is (model, build, FMI version). */
+static StateHandle *state_handle(Inst *in, void *state, const char *what)
+{
+    StateHandle *h = state;
+    if (!h || h->magic != STATE_MAGIC || !h->state) {
+        char text[200];
+        snprintf(text, sizeof text, "%s refused: %s", what,
+                 !h ? "no FMU state given (NULL)" : "not an FMU state of a pogofmu FMU (or one already freed)");
+        emit(in, ST_ERROR, "logStatusError", text);
+        return NULL;
+    }
+    return h;
+}
+
 static Status get_state(Inst *in, void **state)
 {
-    StateHandle *h = *state ? *state : calloc(1, sizeof *h);
+    StateHandle *h = *state;
+    if (h && h->magic != STATE_MAGIC) {
+        emit(in, ST_ERROR, "logStatusError", "get FMU state refused: the state to overwrite is not one of a pogofmu FMU");
+        return ST_ERROR;
+    }
+    if (!h) h = calloc(1, sizeof *h);
     if (!h) return ST_ERROR;
+    h->magic = STATE_MAGIC;
     Status st = call(in, "_get_fmu_state", keep_state, h, NULL);
     if (st <= ST_WARNING) *state = h;
     else if (!*state) free(h);
@@ -1064,23 +1089,24 @@ static Status get_state(Inst *in, void **state)
 
 static Status set_state(Inst *in, void *state)
 {
-    StateHandle *h = state;
-    if (!h || !h->state) {
-        emit(in, ST_ERROR, "logStatusError", "set FMU state: no state given");
-        return ST_ERROR;
-    }
+    StateHandle *h = state_handle(in, state, "set FMU state");
+    if (!h) return ST_ERROR;
     return call(in, "_set_fmu_state", NULL, NULL, "(O)", h->state);
 }
 
 static Status free_state(Inst *in, void **state)
 {
-    (void)in;
     StateHandle *h = state ? *state : NULL;
     if (!h) return ST_OK;
+    if (h->magic != STATE_MAGIC) {
+        emit(in, ST_ERROR, "logStatusError", "free FMU state refused: not an FMU state of a pogofmu FMU");
+        return ST_ERROR;
+    }
     GIL g = py.PyGILState_Ensure();
     if (h->state) py.Py_DecRef(h->state);
     if (h->bytes) py.Py_DecRef(h->bytes);
     py.PyGILState_Release(g);
+    h->magic = 0;
     free(h);
     *state = NULL;
     return ST_OK;
@@ -1088,8 +1114,8 @@ static Status free_state(Inst *in, void **state)
 
 static Status serialized_size(Inst *in, void *state, size_t *size)
 {
-    StateHandle *h = state;
-    if (!h || !h->state) return ST_ERROR;
+    StateHandle *h = state_handle(in, state, "serialized FMU state size");
+    if (!h) return ST_ERROR;
     Status st = call(in, "_fmu_state_to_bytes", keep_bytes, h, "(O)", h->state);
     if (st <= ST_WARNING) {
         GIL g = py.PyGILState_Ensure();
@@ -1102,9 +1128,9 @@ static Status serialized_size(Inst *in, void *state, size_t *size)
 
 static Status serialize(Inst *in, void *state, char *bytes, size_t size)
 {
-    StateHandle *h = state;
+    StateHandle *h = state_handle(in, state, "serialize FMU state");
     size_t n = 0;
-    if (!h || !h->state) return ST_ERROR;
+    if (!h) return ST_ERROR;
     if (!h->bytes) {
         Status st = serialized_size(in, state, &n);
         if (st > ST_WARNING) return st;
@@ -1125,6 +1151,7 @@ static Status deserialize(Inst *in, const char *bytes, size_t size, void **state
 {
     StateHandle *h = calloc(1, sizeof *h);
     if (!h) return ST_ERROR;
+    h->magic = STATE_MAGIC;
     GIL g = py.PyGILState_Ensure();
     PyObject *b = py.PyBytes_FromStringAndSize(bytes, (Py_ssize_t_)size);
     py.PyGILState_Release(g);

@@ -42,6 +42,7 @@ Behaviour (FMI 2.0 co-simulation):
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import struct
@@ -58,7 +59,7 @@ from .status import ERROR, FATAL, OK, WARNING, log_category
 __all__ = ["HybridSlave", "FMUError", "FmiVariable", "fmi2_variables", "LOG_CATEGORIES"]
 
 MAX_INTERNAL_STEPS_PER_CALL = 1e8  # a communication step needing more is refused before any work
-_STATE_FORMAT = "pogofmu-fmu-state-1"
+_STATE_FORMAT = "pogofmu-fmu-state-2"
 # the package this module was imported as: "_pogofmu_<Model>_<hash>" inside an FMU (one name per
 # build of one model, see build_fmu.py), "pogofmu" from the source tree
 _BUILD = __name__.rpartition(".")[0]
@@ -507,12 +508,31 @@ class HybridSlave:
         # a new one: both are shared, not copied (a master that rolls back saves once per step)
         sim = self._sim
         return {
+            "owner": self._owner(),
             "sim": None if sim is None else sim.snapshot(),
             "par": dict(self._par) if sim is None else self._par, "u": list(self._u), "out": self._out,
             "t_start": self._t_start, "t_stop": self._t_stop, "t_ok": self._t_ok, "failed": self._failed,
         }
 
+    def _owner(self):
+        """Whose state this is: the model, the build (the private package name, one per build of
+        one model) and the FMI version; a state is restored only into an instance of the same."""
+        return (type(self).model.name, _BUILD, self._api)
+
+    def _owner_text(self, owner):
+        model, build, api = owner
+        return f"model {model!r}, build {build!r}, FMI {'3.0' if api == 'fmi3' else '2.0'}"
+
+    def _check_owner(self, state, call):
+        owner = state.get("owner") if isinstance(state, dict) else None
+        if not (isinstance(owner, (tuple, list)) and len(owner) == 3):
+            raise FMUError(f"{self._fn(call)} refused: not an FMU state of a pogofmu FMU")
+        if tuple(owner) != self._owner():
+            raise FMUError(f"{self._fn(call)} refused: the state belongs to {self._owner_text(tuple(owner))}; "
+                           f"this instance is {self._owner_text(self._owner())}")
+
     def _set_fmu_state(self, state):
+        self._check_owner(state, "SetFMUstate")
         self._par = dict(state["par"])
         self._u = list(state["u"])
         self._inputs_changed = True
@@ -535,32 +555,51 @@ class HybridSlave:
 
     def _fmu_state_to_bytes(self, state):
         """fmi2SerializeFMUstate: the state as JSON (floats exact through repr), tagged with the
-        model and the build it belongs to."""
+        model, the build and the FMI version it belongs to and sealed with the SHA-256 of the rest
+        (a changed byte is found, not restored)."""
+        self._check_owner(state, "SerializeFMUstate")
         try:
             data = dict(state, sim=None if state["sim"] is None else snapshot_to_data(state["sim"]))
-            text = json.dumps({"format": _STATE_FORMAT, "model": type(self).model.name, "build": _BUILD,
-                               "state": data}, separators=(",", ":"))
+            data["owner"] = list(data["owner"])
+            body = json.dumps({"format": _STATE_FORMAT, "owner": data.pop("owner"), "state": data},
+                              separators=(",", ":"), sort_keys=True)
         except (TypeError, ValueError) as exc:
             raise FMUError(f"{self._fn('SerializeFMUstate')}: the state cannot be serialized ({exc})") from None
-        return text.encode()
+        return (body + "\n" + hashlib.sha256(body.encode()).hexdigest()).encode()
 
     def _fmu_state_from_bytes(self, data):
-        """fmi2DeSerializeFMUstate: the inverse of :meth:`_fmu_state_to_bytes`; a state of another
-        model or of another build of this FMU is refused with a message saying whose it is."""
-        model = type(self).model
+        """fmi2DeSerializeFMUstate: the inverse of :meth:`_fmu_state_to_bytes`. Refused, naming
+        the cause: bytes that are no pogofmu state, a state whose seal does not match (damaged),
+        one of another model, build or FMI version (both named)."""
+        call = self._fn("DeSerializeFMUstate")
+        raw = bytes(data)
+        body, sep, seal = raw.rpartition(b"\n")
+        if not sep or not body.startswith(b'{"format":"pogofmu-fmu-state-'):
+            raise FMUError(f"{call} refused: the {len(raw)} bytes are not a serialized pogofmu FMU state")
+        if hashlib.sha256(body).hexdigest().encode() != seal.strip():
+            raise FMUError(f"{call} refused: the serialized state is damaged (its SHA-256 seal does not match "
+                           f"its {len(body)} bytes)")
         try:
-            try:
-                doc = json.loads(bytes(data).decode())
-            except ValueError as exc:  # also UnicodeDecodeError
-                raise ValueError(f"not a serialized pogofmu FMU state ({len(data)} bytes; {exc})") from None
-            if not isinstance(doc, dict) or doc.get("format") != _STATE_FORMAT:
-                raise ValueError(f"not a serialized pogofmu FMU state ({len(data)} bytes)")
-            if doc.get("model") != model.name or doc.get("build") != _BUILD:
-                raise ValueError(f"it belongs to model {doc.get('model')!r}, build {doc.get('build')!r}; "
-                                 f"this FMU is model {model.name!r}, build {_BUILD!r}")
-            state = doc["state"]
+            doc = json.loads(body.decode())
+        except ValueError as exc:  # (sealed, so written so: a state of an incompatible writer)
+            raise FMUError(f"{call} refused: the sealed state cannot be read ({exc})") from None
+        if not isinstance(doc, dict) or doc.get("format") != _STATE_FORMAT:
+            fmt = doc.get("format") if isinstance(doc, dict) else None
+            raise FMUError(f"{call} refused: a pogofmu FMU state of format {fmt!r}; this FMU reads {_STATE_FORMAT!r}")
+        owner = doc.get("owner")
+        state = doc.get("state")
+        if not isinstance(state, dict):
+            raise FMUError(f"{call} refused: the sealed state has no state record")
+        state["owner"] = tuple(owner) if isinstance(owner, list) else owner
+        try:
+            self._check_owner(state, "DeSerializeFMUstate")
+        except FMUError as exc:
+            raise FMUError(str(exc).replace(self._fn("DeSerializeFMUstate") + " refused:", call + " refused:")) from None
+        try:
             if state["sim"] is not None:
-                state["sim"] = snapshot_from_data(model, state["sim"])
-        except (ValueError, KeyError, TypeError) as exc:
-            raise FMUError(f"{self._fn('DeSerializeFMUstate')} refused: {exc}") from None
+                state["sim"] = snapshot_from_data(type(self).model, state["sim"])
+            for key in ("par", "u", "out", "t_start", "t_stop", "t_ok", "failed"):
+                state[key]  # noqa: B018 - every record is there
+        except (ValueError, KeyError, TypeError, IndexError, AttributeError) as exc:
+            raise FMUError(f"{call} refused: the state record is incomplete ({type(exc).__name__}: {exc})") from None
         return state
