@@ -171,3 +171,76 @@ def test_fmi3_refuses_the_fmi2_builds_state_and_every_flipped_bit():
         two.close()
         three.terminate()
         three.freeInstance()
+
+
+# ---------------------------------------------------------------------------------------------
+# 1. concurrent first instantiation: one interpreter start, one import of a build, any thread
+# ---------------------------------------------------------------------------------------------
+
+import json  # noqa: E402
+
+from support import ROOT, compile_c_host  # noqa: E402
+
+SAME = ["PogoStick"] * 4
+MIXED = ["PogoStick", "PogoStickMem", "Penetrator", "HopController", "PogoStickSMA"]
+
+
+def _sequential(names):
+    """What each thread must report: the same FMU alone, 100 steps of 1 ms (fmpy, this process)."""
+    out = {}
+    for n in set(names):
+        inst = Instance(n, "alone").init()
+        try:
+            for k in range(100):  # the threads' communication points, k * 1e-3
+                inst.fmu.doStep(currentCommunicationPoint=k * 1e-3, communicationStepSize=1e-3)
+            y = next(v for v in inst.md.modelVariables if v.causality == "output" and v.type == "Real")
+            out[n] = (y.name, inst.get(y.name))
+        finally:
+            inst.close()
+    return out
+
+
+@pytest.mark.parametrize("names", [SAME, MIXED], ids=["same FMU x4", "five FMUs"])
+def test_first_instantiations_from_threads_in_fmpy(names):
+    """Each of 5 fresh processes releases the threads together before fmi2Instantiate: every one
+    instantiates (3 of 4 returned NULL before) and computes what the FMU computes alone."""
+    expected = _sequential(names)
+    for _ in range(5):
+        proc = subprocess.run([sys.executable, str(ROOT / "tests" / "_threads_fmpy.py"), str(DIST), ",".join(names)],
+                              capture_output=True, text=True, timeout=300)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        got = json.loads(proc.stdout.strip().splitlines()[-1])
+        for n, r in zip(names, got):
+            assert r == ["ok", *expected[n]], (n, r, proc.stderr[-1000:])
+
+
+def _unzipped(tmp_path, name):
+    d = tmp_path / name
+    if not d.exists():
+        with zipfile.ZipFile(DIST / f"{name}.fmu") as z:
+            z.extractall(d)
+    return d
+
+
+@pytest.mark.parametrize("names", [SAME, MIXED, SAME[:2] + MIXED], ids=["same FMU x4", "five FMUs", "seven"])
+def test_first_instantiations_from_pthreads_in_a_c_host_without_python(names, tmp_path):
+    """A pthreads C host with an empty environment: the threads call fmi2Instantiate of the same or of
+    different FMUs at once (each library used to start the interpreter under its own lock: SIGSEGV,
+    SIGABRT). 8 fresh processes each, every thread ends with the value the FMU computes alone."""
+    from fmpy import read_model_description
+
+    host = compile_c_host(ROOT / "tests" / "c_host" / "fmi2_threads.c", tmp_path / "fmi2_threads")
+    expected = _sequential(names)
+    args = []
+    for n in names:
+        d = _unzipped(tmp_path, n)
+        md = read_model_description(str(d / "modelDescription.xml"))
+        vr = next(v.valueReference for v in md.modelVariables if v.name == expected[n][0])
+        args.append(f"{d}:{n}:{md.guid}#{vr}")
+    for _ in range(8):
+        proc = subprocess.run([str(host), *args], capture_output=True, text=True, timeout=300,
+                              env={"PATH": "/usr/bin:/bin"})
+        assert proc.returncode == 0, (proc.returncode, proc.stdout, proc.stderr[-2000:])
+        for line, n in zip(proc.stdout.splitlines(), names):
+            _, status, t, y = line.split()
+            assert status == "ok" and float(y) == expected[n][1], (n, line)

@@ -66,8 +66,25 @@ def _repoint_package(package, package_dir):
                 paths[:] = [package_dir + p[len(old):] if p.startswith(old) else p for p in paths]
 
 
+def _process_lock():
+    """One lock for the whole process, whichever FMU's copy of this file takes it (each FMU library
+    compiles its own): two threads instantiating at once must not both import a build's modules
+    (the second saw the first's half-executed module). Created once: dict.setdefault is atomic."""
+    lock = getattr(sys, "_pogofmu_boot_lock", None)
+    if lock is None:
+        import threading
+
+        lock = sys.__dict__.setdefault("_pogofmu_boot_lock", threading.RLock())
+    return lock
+
+
 def load(resources):
     """The slave class of the FMU whose resources folder is ``resources``."""
+    with _process_lock():
+        return _load(resources)
+
+
+def _load(resources):
     conf = read_launch_file(resources)
     package, module, cls = conf["package"][0], conf["module"][0], conf["class"][0]
     package_dir = os.path.join(resources, package)

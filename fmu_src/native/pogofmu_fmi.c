@@ -29,12 +29,15 @@
  */
 #define _GNU_SOURCE
 #include <dlfcn.h>
+#include <errno.h>
+#include <fcntl.h>
 #include <limits.h>
 #include <pthread.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/file.h>
 #include <unistd.h>
 #include <wchar.h>
 
@@ -124,7 +127,36 @@ static struct {
 
 enum { Py_file_input = 257 };
 
-static pthread_mutex_t boot_lock = PTHREAD_MUTEX_INITIALIZER;
+static pthread_mutex_t boot_lock = PTHREAD_MUTEX_INITIALIZER; /* this copy's statics below */
+
+/* The interpreter of the process is started once, whichever copy of this launcher gets there
+ * first: every FMU carries its own copy of the library (loaded RTLD_LOCAL, with its own statics
+ * and its own boot_lock), and two copies starting (or one checking while another starts) the one
+ * CPython of the process crash it. What all copies share is the libpython they load: an exclusive
+ * flock(2) on that file, taken around "is it running? else start it", orders them (it orders the
+ * start-ups of other processes too, a few milliseconds each, which is harmless). Where the lock
+ * cannot be had (no file, a file system without locks) the start goes on unordered, as before. */
+static int lock_interpreter_start(const void *libpython_symbol)
+{
+    Dl_info info;
+    if (!dladdr(libpython_symbol, &info) || !info.dli_fname) return -1;
+    int fd = open(info.dli_fname, O_RDONLY | O_CLOEXEC);
+    if (fd < 0) return -1;
+    while (flock(fd, LOCK_EX) != 0) {
+        if (errno != EINTR) {
+            close(fd);
+            return -1;
+        }
+    }
+    return fd;
+}
+
+static void unlock_interpreter_start(int fd)
+{
+    if (fd < 0) return;
+    flock(fd, LOCK_UN);
+    close(fd);
+}
 static int python_ready = 0;    /* py.* resolved and an interpreter running */
 static char python_report[4096]; /* what was tried, for the error message */
 static PyObject *boot = NULL;    /* globals of pogofmu_boot.py (compiled once per process) */
@@ -241,8 +273,10 @@ static int try_library(const char *path)
         report("  %s: CPython %.*s, need >= 3.10\n", path, (int)strcspn(py.Py_GetVersion(), " "), py.Py_GetVersion());
         return 0;
     }
-    if (py.Py_IsInitialized()) return 1; /* already running in this process (another FMU) */
-    if (start_interpreter(handle)) return 1;
+    int fd = lock_interpreter_start(*(void **)&py.Py_GetVersion);
+    int ok = py.Py_IsInitialized() /* already running in this process (another FMU) */ || start_interpreter(handle);
+    unlock_interpreter_start(fd);
+    if (ok) return 1;
     report("  %s: could not start an interpreter\n", path);
     return 0;
 }
@@ -371,15 +405,17 @@ static int ensure_python(const char *resources)
         python_report[0] = '\0';
         if (dlsym(RTLD_DEFAULT, "Py_IsInitialized") && resolve(RTLD_DEFAULT, &missing)) {
             int minor;
-            if (!py.Py_IsInitialized()) {
-                python_ready = start_interpreter(RTLD_DEFAULT);
-                if (!python_ready) report("  the CPython linked into this process could not be started\n");
-            } else if (!version_ok(py.Py_GetVersion(), &minor)) {
+            int fd = lock_interpreter_start(*(void **)&py.Py_GetVersion);
+            if (!version_ok(py.Py_GetVersion(), &minor)) {
                 report("  the host's CPython is %.*s, need >= 3.10\n", (int)strcspn(py.Py_GetVersion(), " "),
                        py.Py_GetVersion());
-            } else {
+            } else if (py.Py_IsInitialized()) {
                 python_ready = 1;
+            } else {
+                python_ready = start_interpreter(RTLD_DEFAULT);
+                if (!python_ready) report("  the CPython linked into this process could not be started\n");
             }
+            unlock_interpreter_start(fd);
         } else {
             /* an explicit choice is authoritative: that library or a clear error */
             python_ready = (env && *env) ? try_library(env)
