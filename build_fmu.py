@@ -146,7 +146,9 @@ def compile_launcher(fmi_version: int = 2, cache: Path = CACHE):
               "project's launcher and run only inside a Python process (fmpy, libcosimpy), not in a C "
               "importer", file=sys.stderr)
         return None
-    digest = hashlib.sha256(source.read_bytes() + " ".join(flags + libs).encode())
+    digest = hashlib.sha256(" ".join(flags + libs).encode())
+    for part in sorted(NATIVE.glob("*.[ch]")):  # the launcher and the headers it includes
+        digest.update(part.name.encode() + b"\0" + part.read_bytes())
     for header in sorted(fmi_headers().glob(f"fmi{fmi_version}*.h")):
         digest.update(header.read_bytes())
     cache.mkdir(parents=True, exist_ok=True)

@@ -153,8 +153,14 @@ class Instance:
             self.step(h)
 
     def close(self):
+        """Terminate (where the standard allows it: not after a failed initialization, which the
+        FMU refuses with Error) and free."""
+        from fmpy.fmi1 import FMICallException
+
         try:
             self.fmu.terminate()
+        except FMICallException:
+            pass
         finally:
             self.fmu.freeInstance()
 

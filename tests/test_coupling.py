@@ -173,8 +173,7 @@ def _me_instance(name):
     fmu.instantiate()
     fmu.enterInitializationMode()
     fmu.exitInitializationMode()
-    fmu.updateDiscreteStates()
-    fmu.enterContinuousTimeMode()
+    fmu.updateDiscreteStates()  # and stay in Event Mode, where every input may be set (FMI 3.0)
     return md, fmu
 
 

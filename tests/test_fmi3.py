@@ -214,17 +214,22 @@ class MEInstance:
         self.fmu.enterInitializationMode(startTime=0.0)
         for k, v in params.items():
             self.set(k, v)
-        self.fmu.exitInitializationMode()
+        self.fmu.exitInitializationMode()  # now in Event Mode
         self.nx, self.nz = self.md.numberOfContinuousStates, self.md.numberOfEventIndicators
-        self.update()
+        flags = self.fmu.updateDiscreteStates()
+        assert flags[0] is False and flags[1] is False
         self.fmu.enterContinuousTimeMode()
 
     def set(self, name, value):
+        """A real input at once; a discrete one (FMI 3.0: only in Event Mode) through Event Mode."""
         v = self.vars[name]
         if v.type == "Float64":
             self.fmu.setFloat64([v.valueReference], [float(value)])
         else:
+            self.fmu.enterEventMode()
             self.fmu.setInt32([v.valueReference], [int(value)])
+            self.fmu.updateDiscreteStates()
+            self.fmu.enterContinuousTimeMode()
 
     def get(self, name):
         v = self.vars[name]

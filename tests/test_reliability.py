@@ -244,3 +244,141 @@ def test_first_instantiations_from_pthreads_in_a_c_host_without_python(names, tm
         for line, n in zip(proc.stdout.splitlines(), names):
             _, status, t, y = line.split()
             assert status == "ok" and float(y) == expected[n][1], (n, line)
+
+
+# ---------------------------------------------------------------------------------------------
+# 3. the standard's call sequence: refused with Error naming the function and the state
+# ---------------------------------------------------------------------------------------------
+
+def _raw(fmu, name, *args):
+    """The FMU's own function, its status returned (fmpy's wrappers raise on Error)."""
+    return fmu._functions[name](fmu.component, *args)
+
+
+def _fmi2(name="PogoStick"):
+    inst = Instance(name, "calls")
+    return inst, inst.fmu
+
+
+def _last(inst):
+    return inst.messages[-1][2] if inst.messages else ""
+
+
+def test_fmi2_calls_out_of_sequence_are_refused_and_the_instance_goes_on():
+    import ctypes
+
+    inst, fmu = _fmi2()
+    try:
+        F = ctypes.c_double
+        # before initialization: no step, no exit, no terminate
+        assert _raw(fmu, "fmi2ExitInitializationMode") == 3
+        assert "fmi2ExitInitializationMode refused: not allowed in Instantiated" in _last(inst)
+        assert _raw(fmu, "fmi2DoStep", F(0.0), F(1e-3), 1) == 3 and "fmi2DoStep refused" in _last(inst)
+        # a bad tolerance, an unknown log category
+        assert _raw(fmu, "fmi2SetupExperiment", 1, F(-1.0), F(0.0), 0, F(0.0)) == 3
+        assert "tolerance = -1 violates the rule" in _last(inst)
+        cats = (ctypes.c_char_p * 1)(b"logNoSuchThing")
+        assert _raw(fmu, "fmi2SetDebugLogging", 1, 1, cats) == 3
+        assert "'logNoSuchThing' is not a log category of this FMU" in _last(inst) and "logEvents" in _last(inst)
+        # the legal sequence still works
+        assert _raw(fmu, "fmi2SetupExperiment", 0, F(0.0), F(0.0), 0, F(0.0)) == 0
+        assert _raw(fmu, "fmi2EnterInitializationMode") == 0
+        assert _raw(fmu, "fmi2EnterInitializationMode") == 3  # a second one
+        assert "not allowed in Initialization Mode" in _last(inst)
+        assert _raw(fmu, "fmi2ExitInitializationMode") == 0
+        assert _raw(fmu, "fmi2SetupExperiment", 0, F(0.0), F(0.0), 0, F(0.0)) == 3  # after initialization
+        assert "fmi2SetupExperiment refused: not allowed in Step Complete" in _last(inst)
+        assert _raw(fmu, "fmi2DoStep", F(0.0), F(1e-3), 1) == 0
+        assert _raw(fmu, "fmi2Terminate") == 0
+        assert _raw(fmu, "fmi2DoStep", F(1e-3), F(1e-3), 1) == 3  # after terminate
+        assert "fmi2DoStep refused: not allowed in Terminated" in _last(inst)
+        assert not [m for m in inst.messages if m[0] >= 4]  # nothing fatal
+        assert _raw(fmu, "fmi2Reset") == 0
+        inst.init().run_to(0.01, 1e-3)  # usable after every refusal
+    finally:
+        fmu.freeInstance()
+
+
+def _fmi3_raw(name, interface="cs", event_mode=False):
+    from fmpy import extract, read_model_description
+    from fmpy.fmi3 import FMU3Model, FMU3Slave
+
+    path = DIST / "fmi3" / f"{name}.fmu"
+    md = read_model_description(str(path))
+    messages = []
+    log = lambda env, status, cat, msg: messages.append((status, msg.decode()))  # noqa: E731
+    if interface == "cs":
+        fmu = FMU3Slave(guid=md.guid, unzipDirectory=extract(str(path)), modelIdentifier=md.coSimulation.modelIdentifier,
+                        instanceName="calls3")
+        fmu.instantiate(loggingOn=True, eventModeUsed=event_mode, earlyReturnAllowed=event_mode, logMessage=log)
+    else:
+        fmu = FMU3Model(guid=md.guid, unzipDirectory=extract(str(path)), modelIdentifier=md.modelExchange.modelIdentifier,
+                        instanceName="calls3")
+        fmu.instantiate(loggingOn=True, logMessage=log)
+    return fmu, messages
+
+
+def test_fmi3_calls_out_of_sequence_are_refused():
+    import ctypes
+
+    B = ctypes.c_bool
+    flags = [B(), B(), B(), B(), B()]
+    refs = [ctypes.byref(f) for f in flags] + [ctypes.byref(ctypes.c_double())]
+    # co-simulation without event mode: no Event Mode at all
+    fmu, messages = _fmi3_raw("PogoStick", "cs", event_mode=False)
+    try:
+        fmu.enterInitializationMode()
+        fmu.exitInitializationMode()  # -> Step Mode
+        assert _raw(fmu, "fmi3UpdateDiscreteStates", *refs) == 3
+        assert "fmi3UpdateDiscreteStates refused: not allowed in Step Mode" in messages[-1][1]
+        assert _raw(fmu, "fmi3EnterEventMode") == 3 and "eventModeUsed = false" in messages[-1][1]
+        assert _raw(fmu, "fmi3EnterStepMode") == 3 and "fmi3EnterStepMode refused: not allowed in Step Mode" in \
+            messages[-1][1]
+        fmu.doStep(0.0, 1e-3)  # still usable
+    finally:
+        fmu.terminate()
+        fmu.freeInstance()
+    # with event mode: Event Mode twice in a row
+    fmu, messages = _fmi3_raw("PogoStick", "cs", event_mode=True)
+    try:
+        fmu.enterInitializationMode()
+        fmu.exitInitializationMode()  # -> Event Mode
+        assert _raw(fmu, "fmi3EnterEventMode") == 3 and "not allowed in Event Mode" in messages[-1][1]
+        fmu.updateDiscreteStates()
+        fmu.enterStepMode()
+        fmu.enterEventMode()
+        assert _raw(fmu, "fmi3EnterEventMode") == 3 and "fmi3EnterEventMode refused" in messages[-1][1]
+    finally:
+        fmu.terminate()
+        fmu.freeInstance()
+    # a co-simulation function on a model-exchange instance
+    fmu, messages = _fmi3_raw("PogoStick", "me")
+    try:
+        fmu.enterInitializationMode()
+        fmu.exitInitializationMode()
+        assert _raw(fmu, "fmi3EnterStepMode") == 3
+        assert "it is a co-simulation function, and this instance is a model-exchange instance" in messages[-1][1]
+    finally:
+        fmu.freeInstance()
+
+
+def test_model_exchange_counts_are_checked_naming_nx_and_nz():
+    import ctypes
+
+    fmu, messages = _fmi3_raw("PogoStick", "me")
+    try:
+        fmu.enterInitializationMode()
+        fmu.exitInitializationMode()
+        fmu.updateDiscreteStates()
+        fmu.enterContinuousTimeMode()
+        buf = (ctypes.c_double * 32)()
+        for function, n, words in (("fmi3GetContinuousStates", 2, "nContinuousStates = 2, and this FMU has nx = 7"),
+                                   ("fmi3GetEventIndicators", 17, "nEventIndicators = 17, and this FMU has nz = 2"),
+                                   ("fmi3GetContinuousStateDerivatives", 0, "nContinuousStates = 0, and this FMU has nx = 7"),
+                                   ("fmi3SetContinuousStates", 3, "nContinuousStates = 3, and this FMU has nx = 7")):
+            assert _raw(fmu, function, buf, n) == 3, function
+            assert f"{function} refused: {words}" in messages[-1][1], messages[-1]
+            assert "internal error" not in messages[-1][1]
+        assert _raw(fmu, "fmi3GetContinuousStates", buf, 7) == 0
+    finally:
+        fmu.freeInstance()

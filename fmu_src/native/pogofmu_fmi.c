@@ -32,6 +32,7 @@
 #include <errno.h>
 #include <fcntl.h>
 #include <limits.h>
+#include <math.h>
 #include <pthread.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -471,12 +472,45 @@ typedef struct {
     int *real_slot, *int_slot; /* value reference -> buffer slot, -1 if not buffered */
     size_t n_slots;
     PyObject *strings; /* bytes objects behind the last GetString */
+    unsigned mode;     /* the call state (call_states.h) */
+    int me;            /* FMI 3.0: a model-exchange instance */
+    int event_mode_used;
+    size_t nx, nz;     /* FMI 3.0: continuous states, event indicators */
+    char **known;      /* the FMU's log categories */
+    size_t n_known;
 } Inst;
+
+#include "call_states.h"
+
+static void emit(Inst *in, int status, const char *category, const char *message);
+
+/* The standard's call states: refuse a call the instance's state does not allow (call_states.h),
+ * with Error and a message naming the function, the state and where the standard allows it. */
+static int allowed(Inst *in, int rule, const char *function)
+{
+    const CallRule *r = &CALL_RULES[rule];
+    unsigned mask = in->me ? r->me : r->cs;
+    char text[700], where[400];
+    const int fmi3 = POGOFMU_FMI == 3;
+    if (!mask) {
+        snprintf(text, sizeof text, "%s refused: it is a %s function, and this instance is a %s instance", function,
+                 in->me ? "co-simulation" : "model-exchange", in->me ? "model-exchange" : "co-simulation");
+    } else if (!(in->mode & mask)) {
+        mode_list(mask, fmi3, where, sizeof where);
+        snprintf(text, sizeof text, "%s refused: not allowed in %s (the standard allows it in %s)", function,
+                 mode_name(in->mode, fmi3), where);
+    } else {
+        return 1;
+    }
+    emit(in, ST_ERROR, "logStatusError", text);
+    return 0;
+}
 
 #define STATE_MAGIC 0x706f676fu /* 'pogo': a state handle of this launcher (any build, either FMI version) */
 
 typedef struct {
     unsigned magic;
+    unsigned mode; /* the instance's call state when the state was taken */
     PyObject *state;
     PyObject *bytes; /* serialized form, kept between SerializedFMUStateSize and Serialize */
 } StateHandle;
@@ -977,10 +1011,45 @@ static void free_inst(Inst *in)
     }
     for (size_t i = 0; i < in->n_categories; ++i) free(in->categories[i]);
     free(in->categories);
+    for (size_t i = 0; i < in->n_known; ++i) free(in->known[i]);
+    free(in->known);
     free(in->real_slot);
     free(in->int_slot);
     free(in->name);
     free(in);
+}
+
+/* What the entry points check without asking Python: the FMU's log categories, and (FMI 3.0)
+ * the numbers of continuous states and event indicators. Needs the GIL. */
+static void read_interface(Inst *in)
+{
+    PyObject *cats = NULL;
+    PyObject *seq = py.PyObject_GetAttrString(in->obj, "log_category_names"); /* a tuple of str */
+    Py_ssize_t_ n = seq ? py.PySequence_Size(seq) : 0;
+    if (n > 0 && (in->known = calloc((size_t)n, sizeof(char *)))) {
+        for (Py_ssize_t_ i = 0; i < n; ++i) {
+            PyObject *item = py.PySequence_GetItem(seq, i);
+            char *name = item ? utf8_of(item) : NULL;
+            if (item) py.Py_DecRef(item);
+            if (name) in->known[in->n_known++] = name;
+        }
+    }
+    if (seq) py.Py_DecRef(seq);
+    if (cats) py.Py_DecRef(cats);
+#if POGOFMU_FMI == 3
+    const char *names[2] = {"number_of_continuous_states", "number_of_event_indicators"};
+    size_t *dest[2] = {&in->nx, &in->nz};
+    for (int k = 0; k < 2; ++k) {
+        PyObject *m = py.PyObject_GetAttrString(in->obj, names[k]);
+        PyObject *r = m ? py.PyObject_CallObject(m, NULL) : NULL;
+        if (m) py.Py_DecRef(m);
+        if (r) {
+            *dest[k] = (size_t)py.PyLong_AsLong(r);
+            py.Py_DecRef(r);
+        }
+    }
+#endif
+    py.PyErr_Clear();
 }
 
 /* Create the Python slave.  `mode` is passed to _native_attach: "cs" or "me"; for FMI 3 CS the
@@ -1029,6 +1098,7 @@ static Inst *instantiate(Inst *in, const char *location, const char *token, int 
     if (buffers) {
         in->queue = py.PyObject_GetAttrString(in->obj, "log_queue");
         attach_buffers(in, buffers);
+        read_interface(in);
     }
     if (py.PyErr_Occurred() || !buffers) {
         if (py.PyErr_Occurred()) take_exception(&error);
@@ -1049,11 +1119,27 @@ static Inst *instantiate(Inst *in, const char *location, const char *token, int 
         free_inst(in);
         return NULL;
     }
+    in->mode = MODE_INSTANTIATED;
     return in;
 }
 
-static Status set_logging(Inst *in, int on, size_t n, const char *const categories[])
+static Status set_logging(Inst *in, int on, size_t n, const char *const categories[], const char *function)
 {
+    for (size_t i = 0; i < n; ++i) { /* every category must be one of the FMU's (the modelDescription's) */
+        int known = 0;
+        for (size_t k = 0; k < in->n_known && !known; ++k) known = categories[i] && strcmp(categories[i], in->known[k]) == 0;
+        if (!known && in->n_known) {
+            char text[1200];
+            size_t used = (size_t)snprintf(text, sizeof text, "%s refused: %s%s%s is not a log category of this FMU "
+                                           "(the categories are", function, categories[i] ? "'" : "",
+                                           categories[i] ? categories[i] : "NULL", categories[i] ? "'" : "");
+            for (size_t k = 0; k < in->n_known && used < sizeof text; ++k)
+                used += (size_t)snprintf(text + used, sizeof text - used, "%s%s", k ? ", " : " ", in->known[k]);
+            if (used < sizeof text) snprintf(text + used, sizeof text - used, ")");
+            emit(in, ST_ERROR, "logStatusError", text);
+            return ST_ERROR;
+        }
+    }
     for (size_t i = 0; i < in->n_categories; ++i) free(in->categories[i]);
     free(in->categories);
     in->categories = NULL;
@@ -1118,6 +1204,7 @@ static Status get_state(Inst *in, void **state)
     if (!h) return ST_ERROR;
     h->magic = STATE_MAGIC;
     Status st = call(in, "_get_fmu_state", keep_state, h, NULL);
+    h->mode = in->mode;
     if (st <= ST_WARNING) *state = h;
     else if (!*state) free(h);
     return st;
@@ -1127,7 +1214,9 @@ static Status set_state(Inst *in, void *state)
 {
     StateHandle *h = state_handle(in, state, "set FMU state");
     if (!h) return ST_ERROR;
-    return call(in, "_set_fmu_state", NULL, NULL, "(O)", h->state);
+    Status st = call(in, "_set_fmu_state", NULL, NULL, "(O)", h->state);
+    if (st <= ST_WARNING && h->mode) in->mode = h->mode; /* back in the call state it was taken in */
+    return st;
 }
 
 static Status free_state(Inst *in, void **state)
@@ -1199,8 +1288,15 @@ static Status deserialize(Inst *in, const char *bytes, size_t size, void **state
 
 /* start time, stop time and tolerance to the Python side (None where not defined) */
 static Status setup_experiment(Inst *in, int tolerance_defined, double tolerance, double start, int stop_defined,
-                               double stop_time)
+                               double stop_time, const char *function)
 {
+    if (tolerance_defined && !(tolerance > 0 && tolerance < HUGE_VAL)) {
+        char text[300];
+        snprintf(text, sizeof text, "%s refused: tolerance = %g violates the rule: with toleranceDefined the "
+                 "tolerance is a number > 0 and finite", function, tolerance);
+        emit(in, ST_ERROR, "logStatusError", text);
+        return ST_ERROR;
+    }
     GIL g = py.PyGILState_Ensure();
     PyObject *stop = stop_defined ? py.PyFloat_FromDouble(stop_time) : (py.Py_IncRef(py.none), py.none);
     PyObject *tol = tolerance_defined ? py.PyFloat_FromDouble(tolerance) : (py.Py_IncRef(py.none), py.none);
@@ -1218,6 +1314,9 @@ static Status unsupported(Inst *in, const char *what)
 
 #define INST ((Inst *)c)
 #define CHECK(c) do { if (!(c)) return ST_ERROR; } while (0)
+/* the call-state check of an entry point, and the state a successful call leads to */
+#define REQUIRE(rule, function) do { if (!allowed(INST, RULE_##rule, function)) return ST_ERROR; } while (0)
+#define LEADS_TO(st, m) do { if ((st) <= ST_WARNING) INST->mode = (m); } while (0)
 
 /* ============================================================================================
  * FMI 2.0 co-simulation
@@ -1230,7 +1329,8 @@ const char *fmi2GetVersion(void) { return fmi2Version; }
 fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nCategories, const fmi2String categories[])
 {
     CHECK(c);
-    return set_logging(INST, loggingOn, nCategories, categories);
+    REQUIRE(fmi2SetDebugLogging, "fmi2SetDebugLogging");
+    return set_logging(INST, loggingOn, nCategories, categories, "fmi2SetDebugLogging");
 }
 
 fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
@@ -1259,23 +1359,51 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fm
                                fmi2Real startTime, fmi2Boolean stopTimeDefined, fmi2Real stopTime)
 {
     CHECK(c);
-    return setup_experiment(INST, toleranceDefined, tolerance, startTime, stopTimeDefined, stopTime);
+    REQUIRE(fmi2SetupExperiment, "fmi2SetupExperiment");
+    return setup_experiment(INST, toleranceDefined, tolerance, startTime, stopTimeDefined, stopTime, "fmi2SetupExperiment");
 }
 
-fmi2Status fmi2EnterInitializationMode(fmi2Component c) { CHECK(c); return call(INST, "enter_initialization_mode", NULL, NULL, NULL); }
-fmi2Status fmi2ExitInitializationMode(fmi2Component c) { CHECK(c); return call(INST, "exit_initialization_mode", NULL, NULL, NULL); }
-fmi2Status fmi2Terminate(fmi2Component c) { CHECK(c); return call(INST, "terminate", NULL, NULL, NULL); }
+fmi2Status fmi2EnterInitializationMode(fmi2Component c)
+{
+    CHECK(c);
+    REQUIRE(fmi2EnterInitializationMode, "fmi2EnterInitializationMode");
+    Status st = call(INST, "enter_initialization_mode", NULL, NULL, NULL);
+    LEADS_TO(st, MODE_INITIALIZATION);
+    return st;
+}
+
+fmi2Status fmi2ExitInitializationMode(fmi2Component c)
+{
+    CHECK(c);
+    REQUIRE(fmi2ExitInitializationMode, "fmi2ExitInitializationMode");
+    Status st = call(INST, "exit_initialization_mode", NULL, NULL, NULL);
+    LEADS_TO(st, MODE_STEP);
+    return st;
+}
+
+fmi2Status fmi2Terminate(fmi2Component c)
+{
+    CHECK(c);
+    REQUIRE(fmi2Terminate, "fmi2Terminate");
+    Status st = call(INST, "terminate", NULL, NULL, NULL);
+    LEADS_TO(st, MODE_TERMINATED);
+    return st;
+}
 
 fmi2Status fmi2Reset(fmi2Component c)
 {
     CHECK(c);
+    REQUIRE(fmi2Reset, "fmi2Reset");
     INST->dead = 0; /* a reset instance starts over */
-    return call(INST, "reset", NULL, NULL, NULL);
+    Status st = call(INST, "reset", NULL, NULL, NULL);
+    LEADS_TO(st, MODE_INSTANTIATED);
+    return st;
 }
 
 fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[])
 {
     CHECK(c);
+    REQUIRE(fmi2GetValues, "fmi2GetReal");
     if (from_buffer(INST, vr, nvr, 'd', value)) return fmi2OK;
     return get_values(INST, "get_real", 'd', vr, nvr, value);
 }
@@ -1283,6 +1411,7 @@ fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
 fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Integer value[])
 {
     CHECK(c);
+    REQUIRE(fmi2GetValues, "fmi2GetInteger");
     if (from_buffer(INST, vr, nvr, 'i', value)) return fmi2OK;
     return get_values(INST, "get_integer", 'i', vr, nvr, value);
 }
@@ -1290,58 +1419,84 @@ fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
 fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Boolean value[])
 {
     CHECK(c);
+    REQUIRE(fmi2GetValues, "fmi2GetBoolean");
     return get_values(INST, "get_boolean", 'b', vr, nvr, value);
 }
 
 fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2String value[])
 {
     CHECK(c);
+    REQUIRE(fmi2GetValues, "fmi2GetString");
     return get_values(INST, "get_string", 's', vr, nvr, value);
 }
 
 fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[])
 {
     CHECK(c);
+    REQUIRE(fmi2SetValues, "fmi2SetReal");
     return set_values(INST, "set_real", 'd', vr, nvr, value);
 }
 
 fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Integer value[])
 {
     CHECK(c);
+    REQUIRE(fmi2SetValues, "fmi2SetInteger");
     return set_values(INST, "set_integer", 'i', vr, nvr, value);
 }
 
 fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Boolean value[])
 {
     CHECK(c);
+    REQUIRE(fmi2SetValues, "fmi2SetBoolean");
     return set_values(INST, "set_boolean", 'b', vr, nvr, value);
 }
 
 fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2String value[])
 {
     CHECK(c);
+    REQUIRE(fmi2SetValues, "fmi2SetString");
     return set_values(INST, "set_string", 's', vr, nvr, value);
 }
 
-fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) { CHECK(c && FMUstate); return get_state(INST, FMUstate); }
-fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate) { CHECK(c); return set_state(INST, FMUstate); }
-fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) { CHECK(c); return free_state(INST, FMUstate); }
+fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
+{
+    CHECK(c && FMUstate);
+    REQUIRE(fmi2FMUstate, "fmi2GetFMUstate");
+    return get_state(INST, FMUstate);
+}
+
+fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate)
+{
+    CHECK(c);
+    REQUIRE(fmi2FMUstate, "fmi2SetFMUstate");
+    return set_state(INST, FMUstate);
+}
+
+fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
+{
+    CHECK(c);
+    REQUIRE(fmi2FMUstate, "fmi2FreeFMUstate");
+    return free_state(INST, FMUstate);
+}
 
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate, size_t *size)
 {
     CHECK(c && size);
+    REQUIRE(fmi2FMUstate, "fmi2SerializedFMUstateSize");
     return serialized_size(INST, FMUstate, size);
 }
 
 fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate, fmi2Byte serializedState[], size_t size)
 {
     CHECK(c && serializedState);
+    REQUIRE(fmi2FMUstate, "fmi2SerializeFMUstate");
     return serialize(INST, FMUstate, serializedState, size);
 }
 
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedState[], size_t size, fmi2FMUstate *FMUstate)
 {
     CHECK(c && serializedState && FMUstate);
+    REQUIRE(fmi2FMUstate, "fmi2DeSerializeFMUstate");
     return deserialize(INST, serializedState, size, FMUstate);
 }
 
@@ -1349,18 +1504,24 @@ fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReferenc
                                         const fmi2ValueReference vKnown_ref[], size_t nKnown,
                                         const fmi2Real dvKnown[], fmi2Real dvUnknown[])
 {
+    CHECK(c);
+    REQUIRE(fmi2GetDirectionalDerivative, "fmi2GetDirectionalDerivative");
     return unsupported(INST, "fmi2GetDirectionalDerivative (providesDirectionalDerivative = false)");
 }
 
 fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                                        const fmi2Integer order[], const fmi2Real value[])
 {
+    CHECK(c);
+    REQUIRE(fmi2SetRealInputDerivatives, "fmi2SetRealInputDerivatives");
     return unsupported(INST, "fmi2SetRealInputDerivatives (canInterpolateInputs = false)");
 }
 
 fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                                         const fmi2Integer order[], fmi2Real value[])
 {
+    CHECK(c);
+    REQUIRE(fmi2GetRealOutputDerivatives, "fmi2GetRealOutputDerivatives");
     return unsupported(INST, "fmi2GetRealOutputDerivatives (maxOutputDerivativeOrder = 0)");
 }
 
@@ -1368,40 +1529,53 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
                       fmi2Boolean noSetFMUStatePriorToCurrentPoint)
 {
     CHECK(c);
-    return step_call(INST, "do_step", step_result, NULL, currentCommunicationPoint, communicationStepSize);
+    REQUIRE(fmi2DoStep, "fmi2DoStep");
+    Status st = step_call(INST, "do_step", step_result, NULL, currentCommunicationPoint, communicationStepSize);
+    if (st == fmi2Discard) INST->mode = MODE_STEP_FAILED;
+    return st;
 }
 
 fmi2Status fmi2CancelStep(fmi2Component c)
 {
+    CHECK(c);
+    REQUIRE(fmi2CancelStep, "fmi2CancelStep");
     return unsupported(INST, "fmi2CancelStep (fmi2DoStep never returns fmi2Pending)");
 }
 
 fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status *value)
 {
+    CHECK(c);
+    REQUIRE(fmi2GetStatus, "fmi2GetStatus");
     return unsupported(INST, "fmi2GetStatus (fmi2DoStep never returns fmi2Pending)");
 }
 
 fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real *value)
 {
     CHECK(c && value);
+    REQUIRE(fmi2GetStatus, "fmi2GetRealStatus");
     if (s != fmi2LastSuccessfulTime) return unsupported(INST, "fmi2GetRealStatus for this status kind");
     return call(INST, "get_status", read_double, value, "(s)", "last_successful_time");
 }
 
 fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Integer *value)
 {
+    CHECK(c);
+    REQUIRE(fmi2GetStatus, "fmi2GetIntegerStatus");
     return unsupported(INST, "fmi2GetIntegerStatus");
 }
 
 fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean *value)
 {
     CHECK(c && value);
+    REQUIRE(fmi2GetStatus, "fmi2GetBooleanStatus");
     if (s != fmi2Terminated) return unsupported(INST, "fmi2GetBooleanStatus for this status kind");
     return call(INST, "get_status", read_bool, value, "(s)", "terminated");
 }
 
 fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2String *value)
 {
+    CHECK(c);
+    REQUIRE(fmi2GetStatus, "fmi2GetStringStatus");
     return unsupported(INST, "fmi2GetStringStatus");
 }
 
@@ -1464,7 +1638,8 @@ const char *fmi3GetVersion(void) { return fmi3Version; }
 fmi3Status fmi3SetDebugLogging(fmi3Instance c, fmi3Boolean loggingOn, size_t nCategories, const fmi3String categories[])
 {
     CHECK(c);
-    return set_logging(INST, loggingOn, nCategories, categories);
+    REQUIRE(fmi3SetDebugLogging, "fmi3SetDebugLogging");
+    return set_logging(INST, loggingOn, nCategories, categories, "fmi3SetDebugLogging");
 }
 
 static Inst *new_inst(fmi3String instanceName, fmi3Boolean loggingOn, fmi3InstanceEnvironment env,
@@ -1486,6 +1661,7 @@ fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String in
 {
     Inst *in = new_inst(instanceName, loggingOn, instanceEnvironment, logMessage);
     if (!in) return NULL;
+    in->me = 1;
     return instantiate(in, resourcePath, instantiationToken, visible, "me", 0, 0);
 }
 
@@ -1506,6 +1682,7 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
         free_inst(in);
         return NULL;
     }
+    in->event_mode_used = eventModeUsed != 0;
     return instantiate(in, resourcePath, instantiationToken, visible, "cs", eventModeUsed, earlyReturnAllowed);
 }
 
@@ -1529,21 +1706,57 @@ fmi3Status fmi3EnterInitializationMode(fmi3Instance c, fmi3Boolean toleranceDefi
                                        fmi3Float64 startTime, fmi3Boolean stopTimeDefined, fmi3Float64 stopTime)
 {
     CHECK(c);
-    Status st = setup_experiment(INST, toleranceDefined, tolerance, startTime, stopTimeDefined, stopTime);
+    REQUIRE(fmi3EnterInitializationMode, "fmi3EnterInitializationMode");
+    Status st = setup_experiment(INST, toleranceDefined, tolerance, startTime, stopTimeDefined, stopTime,
+                                 "fmi3EnterInitializationMode");
     if (st > ST_WARNING) return st;
     Status st2 = call(INST, "enter_initialization_mode", NULL, NULL, NULL);
-    return st2 > st ? st2 : st;
+    st = st2 > st ? st2 : st;
+    LEADS_TO(st, MODE_INITIALIZATION);
+    return st;
 }
 
-fmi3Status fmi3ExitInitializationMode(fmi3Instance c) { CHECK(c); return call(INST, "exit_initialization_mode", NULL, NULL, NULL); }
-fmi3Status fmi3EnterEventMode(fmi3Instance c) { CHECK(c); return call(INST, "enter_event_mode", NULL, NULL, NULL); }
-fmi3Status fmi3Terminate(fmi3Instance c) { CHECK(c); return call(INST, "terminate", NULL, NULL, NULL); }
+fmi3Status fmi3ExitInitializationMode(fmi3Instance c)
+{
+    CHECK(c);
+    REQUIRE(fmi3ExitInitializationMode, "fmi3ExitInitializationMode");
+    Status st = call(INST, "exit_initialization_mode", NULL, NULL, NULL);
+    /* model exchange, and co-simulation with eventModeUsed, go on in Event Mode */
+    LEADS_TO(st, (INST->me || INST->event_mode_used) ? MODE_EVENT : MODE_STEP);
+    return st;
+}
+
+fmi3Status fmi3EnterEventMode(fmi3Instance c)
+{
+    CHECK(c);
+    REQUIRE(fmi3EnterEventMode, "fmi3EnterEventMode");
+    if (!INST->me && !INST->event_mode_used) {
+        emit(INST, ST_ERROR, "logStatusError", "fmi3EnterEventMode refused: this co-simulation instance was "
+             "instantiated with eventModeUsed = false (it handles its events inside fmi3DoStep)");
+        return ST_ERROR;
+    }
+    Status st = call(INST, "enter_event_mode", NULL, NULL, NULL);
+    LEADS_TO(st, MODE_EVENT);
+    return st;
+}
+
+fmi3Status fmi3Terminate(fmi3Instance c)
+{
+    CHECK(c);
+    REQUIRE(fmi3Terminate, "fmi3Terminate");
+    Status st = call(INST, "terminate", NULL, NULL, NULL);
+    LEADS_TO(st, MODE_TERMINATED);
+    return st;
+}
 
 fmi3Status fmi3Reset(fmi3Instance c)
 {
     CHECK(c);
+    REQUIRE(fmi3Reset, "fmi3Reset");
     INST->dead = 0; /* a reset instance starts over */
-    return call(INST, "reset", NULL, NULL, NULL);
+    Status st = call(INST, "reset", NULL, NULL, NULL);
+    LEADS_TO(st, MODE_INSTANTIATED);
+    return st;
 }
 
 /* ---- variables --------------------------------------------------------------------------- */
@@ -1551,6 +1764,7 @@ fmi3Status fmi3Reset(fmi3Instance c)
 fmi3Status fmi3GetFloat64(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, fmi3Float64 values[], size_t nValues)
 {
     CHECK(c);
+    REQUIRE(fmi3GetValues, "fmi3GetFloat64");
     if (nValues != nvr) return unsupported(INST, "fmi3GetFloat64 with nValues != nValueReferences (arrays)");
     if (from_buffer(INST, vr, nvr, 'd', values)) return ST_OK;
     return get_values(INST, "get_real", 'd', vr, nvr, values);
@@ -1559,6 +1773,7 @@ fmi3Status fmi3GetFloat64(fmi3Instance c, const fmi3ValueReference vr[], size_t 
 fmi3Status fmi3GetInt32(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, fmi3Int32 values[], size_t nValues)
 {
     CHECK(c);
+    REQUIRE(fmi3GetValues, "fmi3GetInt32");
     if (nValues != nvr) return unsupported(INST, "fmi3GetInt32 with nValues != nValueReferences (arrays)");
     if (from_buffer(INST, vr, nvr, 'i', values)) return ST_OK;
     return get_values(INST, "get_integer", 'i', vr, nvr, values);
@@ -1567,18 +1782,21 @@ fmi3Status fmi3GetInt32(fmi3Instance c, const fmi3ValueReference vr[], size_t nv
 fmi3Status fmi3GetBoolean(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, fmi3Boolean values[], size_t nValues)
 {
     CHECK(c);
+    REQUIRE(fmi3GetValues, "fmi3GetBoolean");
     return get_values(INST, "get_boolean", 'b', vr, nvr, values);
 }
 
 fmi3Status fmi3GetString(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, fmi3String values[], size_t nValues)
 {
     CHECK(c);
+    REQUIRE(fmi3GetValues, "fmi3GetString");
     return get_values(INST, "get_string", 's', vr, nvr, values);
 }
 
 fmi3Status fmi3SetFloat64(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, const fmi3Float64 values[], size_t nValues)
 {
     CHECK(c);
+    REQUIRE(fmi3SetFloat, "fmi3SetFloat64");
     if (nValues != nvr) return unsupported(INST, "fmi3SetFloat64 with nValues != nValueReferences (arrays)");
     return set_values(INST, "set_real", 'd', vr, nvr, values);
 }
@@ -1586,6 +1804,7 @@ fmi3Status fmi3SetFloat64(fmi3Instance c, const fmi3ValueReference vr[], size_t 
 fmi3Status fmi3SetInt32(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, const fmi3Int32 values[], size_t nValues)
 {
     CHECK(c);
+    REQUIRE(fmi3SetDiscrete, "fmi3SetInt32");
     if (nValues != nvr) return unsupported(INST, "fmi3SetInt32 with nValues != nValueReferences (arrays)");
     return set_values(INST, "set_integer", 'i', vr, nvr, values);
 }
@@ -1593,12 +1812,14 @@ fmi3Status fmi3SetInt32(fmi3Instance c, const fmi3ValueReference vr[], size_t nv
 fmi3Status fmi3SetBoolean(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, const fmi3Boolean values[], size_t nValues)
 {
     CHECK(c);
+    REQUIRE(fmi3SetDiscrete, "fmi3SetBoolean");
     return set_values(INST, "set_boolean", 'b', vr, nvr, values);
 }
 
 fmi3Status fmi3SetString(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, const fmi3String values[], size_t nValues)
 {
     CHECK(c);
+    REQUIRE(fmi3SetDiscrete, "fmi3SetString");
     return set_values(INST, "set_string", 's', vr, nvr, values);
 }
 
@@ -1655,25 +1876,45 @@ fmi3Status fmi3GetVariableDependencies(fmi3Instance c, fmi3ValueReference depend
 
 /* ---- FMU states -------------------------------------------------------------------------- */
 
-fmi3Status fmi3GetFMUState(fmi3Instance c, fmi3FMUState *FMUState) { CHECK(c && FMUState); return get_state(INST, FMUState); }
-fmi3Status fmi3SetFMUState(fmi3Instance c, fmi3FMUState FMUState) { CHECK(c); return set_state(INST, FMUState); }
-fmi3Status fmi3FreeFMUState(fmi3Instance c, fmi3FMUState *FMUState) { CHECK(c); return free_state(INST, FMUState); }
+fmi3Status fmi3GetFMUState(fmi3Instance c, fmi3FMUState *FMUState)
+{
+    CHECK(c && FMUState);
+    REQUIRE(fmi3FMUState, "fmi3GetFMUState");
+    return get_state(INST, FMUState);
+}
+
+fmi3Status fmi3SetFMUState(fmi3Instance c, fmi3FMUState FMUState)
+{
+    CHECK(c);
+    REQUIRE(fmi3FMUState, "fmi3SetFMUState");
+    return set_state(INST, FMUState);
+}
+
+fmi3Status fmi3FreeFMUState(fmi3Instance c, fmi3FMUState *FMUState)
+{
+    CHECK(c);
+    REQUIRE(fmi3FMUState, "fmi3FreeFMUState");
+    return free_state(INST, FMUState);
+}
 
 fmi3Status fmi3SerializedFMUStateSize(fmi3Instance c, fmi3FMUState FMUState, size_t *size)
 {
     CHECK(c && size);
+    REQUIRE(fmi3FMUState, "fmi3SerializedFMUStateSize");
     return serialized_size(INST, FMUState, size);
 }
 
 fmi3Status fmi3SerializeFMUState(fmi3Instance c, fmi3FMUState FMUState, fmi3Byte serializedState[], size_t size)
 {
     CHECK(c && serializedState);
+    REQUIRE(fmi3FMUState, "fmi3SerializeFMUState");
     return serialize(INST, FMUState, (char *)serializedState, size);
 }
 
 fmi3Status fmi3DeserializeFMUState(fmi3Instance c, const fmi3Byte serializedState[], size_t size, fmi3FMUState *FMUState)
 {
     CHECK(c && serializedState && FMUState);
+    REQUIRE(fmi3FMUState, "fmi3DeserializeFMUState");
     return deserialize(INST, (const char *)serializedState, size, FMUState);
 }
 
@@ -1683,6 +1924,8 @@ fmi3Status fmi3GetDirectionalDerivative(fmi3Instance c, const fmi3ValueReference
                                         const fmi3ValueReference knowns[], size_t nKnowns, const fmi3Float64 seed[],
                                         size_t nSeed, fmi3Float64 sensitivity[], size_t nSensitivity)
 {
+    CHECK(c);
+    REQUIRE(fmi3GetDirectionalDerivative, "fmi3GetDirectionalDerivative");
     return unsupported(INST, "fmi3GetDirectionalDerivative (providesDirectionalDerivative = false)");
 }
 
@@ -1690,6 +1933,8 @@ fmi3Status fmi3GetAdjointDerivative(fmi3Instance c, const fmi3ValueReference unk
                                     const fmi3ValueReference knowns[], size_t nKnowns, const fmi3Float64 seed[],
                                     size_t nSeed, fmi3Float64 sensitivity[], size_t nSensitivity)
 {
+    CHECK(c);
+    REQUIRE(fmi3GetDirectionalDerivative, "fmi3GetAdjointDerivative");
     return unsupported(INST, "fmi3GetAdjointDerivative (providesAdjointDerivatives = false)");
 }
 
@@ -1726,6 +1971,8 @@ fmi3Status fmi3ActivateModelPartition(fmi3Instance c, fmi3ValueReference clockRe
 fmi3Status fmi3GetOutputDerivatives(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, const fmi3Int32 orders[],
                                     fmi3Float64 values[], size_t nValues)
 {
+    CHECK(c);
+    REQUIRE(fmi3GetOutputDerivatives, "fmi3GetOutputDerivatives");
     return unsupported(INST, "fmi3GetOutputDerivatives (maxOutputDerivativeOrder = 0)");
 }
 
@@ -1737,6 +1984,7 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance c, fmi3Boolean *discreteStatesN
                                     fmi3Float64 *nextEventTime)
 {
     CHECK(c);
+    REQUIRE(fmi3UpdateDiscreteStates, "fmi3UpdateDiscreteStates");
     Flags f = {5, {discreteStatesNeedUpdate, terminateSimulation, nominalsOfContinuousStatesChanged,
                    valuesOfContinuousStatesChanged, nextEventTimeDefined}, nextEventTime};
     return call(INST, "update_discrete_states", read_flags, &f, NULL);
@@ -1744,21 +1992,47 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance c, fmi3Boolean *discreteStatesN
 
 /* ---- model exchange ---------------------------------------------------------------------- */
 
-fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance c) { CHECK(c); return call(INST, "enter_continuous_time_mode", NULL, NULL, NULL); }
+fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance c)
+{
+    CHECK(c);
+    REQUIRE(fmi3EnterContinuousTimeMode, "fmi3EnterContinuousTimeMode");
+    Status st = call(INST, "enter_continuous_time_mode", NULL, NULL, NULL);
+    LEADS_TO(st, MODE_CONTINUOUS);
+    return st;
+}
+
+/* A count an importer passes must be the FMU's: the message names both. */
+static int right_count(Inst *in, const char *function, const char *arg, size_t given, size_t have, const char *what)
+{
+    if (given == have) return 1;
+    char text[300];
+    snprintf(text, sizeof text, "%s refused: %s = %zu, and this FMU has %s = %zu", function, arg, given, what, have);
+    emit(in, ST_ERROR, "logStatusError", text);
+    return 0;
+}
 
 fmi3Status fmi3CompletedIntegratorStep(fmi3Instance c, fmi3Boolean noSetFMUStatePriorToCurrentPoint,
                                        fmi3Boolean *enterEventMode, fmi3Boolean *terminateSimulation)
 {
     CHECK(c);
+    REQUIRE(fmi3CompletedIntegratorStep, "fmi3CompletedIntegratorStep");
     Flags f = {2, {enterEventMode, terminateSimulation}, NULL};
     return call(INST, "completed_integrator_step", read_flags, &f, NULL);
 }
 
-fmi3Status fmi3SetTime(fmi3Instance c, fmi3Float64 time) { CHECK(c); return call(INST, "set_time", NULL, NULL, "(d)", time); }
+fmi3Status fmi3SetTime(fmi3Instance c, fmi3Float64 time)
+{
+    CHECK(c);
+    REQUIRE(fmi3SetTime, "fmi3SetTime");
+    return call(INST, "set_time", NULL, NULL, "(d)", time);
+}
 
 fmi3Status fmi3SetContinuousStates(fmi3Instance c, const fmi3Float64 continuousStates[], size_t nContinuousStates)
 {
     CHECK(c);
+    REQUIRE(fmi3SetContinuousStates, "fmi3SetContinuousStates");
+    if (!right_count(INST, "fmi3SetContinuousStates", "nContinuousStates", nContinuousStates, INST->nx, "nx"))
+        return ST_ERROR;
     GIL g = py.PyGILState_Ensure();
     PyObject *x = value_list('d', continuousStates, nContinuousStates);
     py.PyGILState_Release(g);
@@ -1768,24 +2042,32 @@ fmi3Status fmi3SetContinuousStates(fmi3Instance c, const fmi3Float64 continuousS
 fmi3Status fmi3GetContinuousStateDerivatives(fmi3Instance c, fmi3Float64 derivatives[], size_t nContinuousStates)
 {
     CHECK(c);
+    REQUIRE(fmi3GetContinuous, "fmi3GetContinuousStateDerivatives");
+    if (!right_count(INST, "fmi3GetContinuousStateDerivatives", "nContinuousStates", nContinuousStates, INST->nx, "nx")) return ST_ERROR;
     return get_array(INST, "get_derivatives", derivatives, nContinuousStates);
 }
 
 fmi3Status fmi3GetEventIndicators(fmi3Instance c, fmi3Float64 eventIndicators[], size_t nEventIndicators)
 {
     CHECK(c);
+    REQUIRE(fmi3GetContinuous, "fmi3GetEventIndicators");
+    if (!right_count(INST, "fmi3GetEventIndicators", "nEventIndicators", nEventIndicators, INST->nz, "nz")) return ST_ERROR;
     return get_array(INST, "get_event_indicators", eventIndicators, nEventIndicators);
 }
 
 fmi3Status fmi3GetContinuousStates(fmi3Instance c, fmi3Float64 continuousStates[], size_t nContinuousStates)
 {
     CHECK(c);
+    REQUIRE(fmi3GetContinuous, "fmi3GetContinuousStates");
+    if (!right_count(INST, "fmi3GetContinuousStates", "nContinuousStates", nContinuousStates, INST->nx, "nx")) return ST_ERROR;
     return get_array(INST, "get_continuous_states", continuousStates, nContinuousStates);
 }
 
 fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance c, fmi3Float64 nominals[], size_t nContinuousStates)
 {
     CHECK(c);
+    REQUIRE(fmi3GetContinuous, "fmi3GetNominalsOfContinuousStates");
+    if (!right_count(INST, "fmi3GetNominalsOfContinuousStates", "nContinuousStates", nContinuousStates, INST->nx, "nx")) return ST_ERROR;
     return get_array(INST, "get_nominals", nominals, nContinuousStates);
 }
 
@@ -1799,24 +2081,34 @@ static int read_size(Inst *in, PyObject *r, void *ctx)
 fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance c, size_t *nEventIndicators)
 {
     CHECK(c && nEventIndicators);
+    REQUIRE(fmi3GetNumbers, "fmi3GetNumberOfEventIndicators");
     return call(INST, "number_of_event_indicators", read_size, nEventIndicators, NULL);
 }
 
 fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance c, size_t *nContinuousStates)
 {
     CHECK(c && nContinuousStates);
+    REQUIRE(fmi3GetNumbers, "fmi3GetNumberOfContinuousStates");
     return call(INST, "number_of_continuous_states", read_size, nContinuousStates, NULL);
 }
 
 /* ---- co-simulation ----------------------------------------------------------------------- */
 
-fmi3Status fmi3EnterStepMode(fmi3Instance c) { CHECK(c); return call(INST, "enter_step_mode", NULL, NULL, NULL); }
+fmi3Status fmi3EnterStepMode(fmi3Instance c)
+{
+    CHECK(c);
+    REQUIRE(fmi3EnterStepMode, "fmi3EnterStepMode");
+    Status st = call(INST, "enter_step_mode", NULL, NULL, NULL);
+    LEADS_TO(st, MODE_STEP);
+    return st;
+}
 
 fmi3Status fmi3DoStep(fmi3Instance c, fmi3Float64 currentCommunicationPoint, fmi3Float64 communicationStepSize,
                       fmi3Boolean noSetFMUStatePriorToCurrentPoint, fmi3Boolean *eventHandlingNeeded,
                       fmi3Boolean *terminateSimulation, fmi3Boolean *earlyReturn, fmi3Float64 *lastSuccessfulTime)
 {
     CHECK(c);
+    REQUIRE(fmi3DoStep, "fmi3DoStep");
     Flags f = {3, {eventHandlingNeeded, terminateSimulation, earlyReturn}, lastSuccessfulTime};
     return step_call(INST, "do_step3", read_flags, &f, currentCommunicationPoint, communicationStepSize);
 }

@@ -219,6 +219,11 @@ class HybridSlave:
         self._native = True
         return (self._real_out_vrs, self._int_out_vrs, self._obuf, self._ctl)
 
+    @property
+    def log_category_names(self):
+        """The FMU's log categories (the launcher checks fmi2SetDebugLogging against them)."""
+        return tuple(self.log_categories)
+
     def _get_log_queue(self):  # pythonfmu's binary
         return self.log_queue
 

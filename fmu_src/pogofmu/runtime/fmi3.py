@@ -306,11 +306,28 @@ class Fmi3Slave(HybridSlave):
     def get_nominals(self):
         return [1.0] * len(type(self).model.states)
 
+    def _initial_point(self, what):
+        """Initialization Mode (no engine yet): the initial state and mode from the parameters set so
+        far, ``(t, x, q, u, p)``; a parameter that breaks a rule is refused naming it."""
+        model = type(self).model
+        try:
+            p = self._model_params()
+            x, q = model.initial(p)
+        except (ModelError, ArithmeticError, ValueError, TypeError) as exc:
+            raise FMUError(f"{what} refused: no initial state with these parameters: {exc}") from None
+        return self._t_start, [float(v) for v in x], q, tuple(self._u), p
+
     def get_derivatives(self):
+        if self._sim is None and self._mode == "me":
+            t, x, q, u, p = self._initial_point("fmi3GetContinuousStateDerivatives")
+            return type(self).model.flow(t, x, q, u, p) if x else []
         sim = self._me_instance("fmi3GetContinuousStateDerivatives")
         return sim.fun(self._me_t, self._me_x) if self._me_x else []
 
     def get_event_indicators(self):
+        if self._sim is None and self._mode == "me":
+            t, x, q, u, p = self._initial_point("fmi3GetEventIndicators")
+            return _indicators(type(self).model.events, x, q, u, p)
         sim = self._me_instance("fmi3GetEventIndicators")
         q, u, p, x = sim.q, sim.u, sim.p, self._me_x
         armed = self._armed

@@ -16,7 +16,7 @@ import math
 import time as _time
 from typing import Dict, List
 
-from .components import StepResult
+from .components import REAL_TYPES, StepResult
 from .package import SSPError
 
 MAX_EVENT_ITERATIONS = 100  # discrete iterations at one instant before the master gives up
@@ -47,12 +47,15 @@ class Exchange:
         """Every input of ``inst`` has a source value."""
         return all((c.start_element, c.start_connector) in self.value for c in self.incoming[inst.name])
 
-    def feed(self, inst, only=None) -> bool:
-        """Set the inputs of ``inst`` from the latest outputs (``only``: of those components); True
-        if any value changed."""
+    def feed(self, inst, only=None, continuous=False) -> bool:
+        """Set the inputs of ``inst`` from the latest outputs (``only``: of those components;
+        ``continuous``: the real-valued inputs only, as FMI 3.0 allows in Continuous-Time Mode);
+        True if any value changed."""
         names, values, changed = [], [], False
         for c in self.incoming[inst.name]:
             if only is not None and c.start_element not in only:
+                continue
+            if continuous and inst.type_of(c.end_connector) not in REAL_TYPES:
                 continue
             v = self.value[(c.start_element, c.start_connector)]
             key = (c.end_element, c.end_connector)

@@ -147,11 +147,11 @@ class CoupledSystem:
         for inst in self.insts:
             inst.set_time(t)
             inst.set_states(x, self.xoff[inst.name])
-        for inst in self.insts:
-            ex.feed(inst)
+        for inst in self.insts:  # (discrete inputs change only at events, in Event Mode)
+            ex.feed(inst, continuous=True)
             ex.read(inst)
         for inst in self.insts:  # inputs fed by components later in the order (no feed-through)
-            ex.feed(inst)
+            ex.feed(inst, continuous=True)
 
     def rhs(self, t, x, dx):
         self.evaluate(t, x)
@@ -176,14 +176,16 @@ class CoupledSystem:
             enter |= e
         return enter
 
-    def event(self, t):
-        """Event Mode for every component at ``t``, iterated until no component asks for another
-        discrete update and no connected value changes; back to Continuous-Time Mode. Returns
-        whether a state or an output changed."""
+    def event(self, t, in_event_mode=False):
+        """Event Mode for every component at ``t`` (``in_event_mode``: they are already, after
+        initialization), iterated until no component asks for another discrete update and no
+        connected value changes; back to Continuous-Time Mode. Returns whether a state or an output
+        changed."""
         ex = self.ex
         before = dict(ex.value)
-        for inst in self.insts:
-            inst.enter_event_mode()
+        if not in_event_mode:
+            for inst in self.insts:
+                inst.enter_event_mode()
         busy = []
         for k in range(MAX_EVENT_ITERATIONS):
             busy = []
@@ -209,9 +211,9 @@ def model_exchange(ex, t0, t_end, step, rel_tol=1e-10, abs_tol=1e-12, progress=N
     """Integrate the coupled system on the output grid ``t0 + k step`` (rows at every grid point,
     and the left and right limits at every event)."""
     sys_ = CoupledSystem(ex)
-    for inst in sys_.insts:  # in Event Mode after initialization
+    for inst in sys_.insts:
         inst.t = t0
-    sys_.event(t0)
+    sys_.event(t0, in_event_mode=True)  # (model exchange is in Event Mode after initialization)
     x = sys_.states()
     sys_.evaluate(t0, x)
     ex.row(t0)

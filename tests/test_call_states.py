@@ -1,0 +1,299 @@
+"""Model-based testing of the FMI call sequence: hypothesis state machines drive each FMU through
+random sequences of calls, legal and illegal, and check every status against the standard's state
+machine, written out here (FMI 2.0 co-simulation; FMI 3.0 co-simulation with and without event
+mode; FMI 3.0 model exchange): a legal call succeeds, an illegal one returns Error naming the
+function, nothing is ever Fatal, and the instance stays usable after every Error (the next legal
+call succeeds).
+
+Derandomized and short by default; ``POGOFMU_STATEFUL_EXAMPLES=500`` for a long run.
+"""
+import ctypes
+import os
+
+import pytest
+from hypothesis import HealthCheck, settings
+from hypothesis import strategies as st
+from hypothesis.stateful import RuleBasedStateMachine, precondition, rule
+
+from support import DIST
+
+EXAMPLES = int(os.environ.get("POGOFMU_STATEFUL_EXAMPLES", "10"))
+SETTINGS = settings(max_examples=EXAMPLES, stateful_step_count=30, derandomize=True, deadline=None,
+                    suppress_health_check=list(HealthCheck))
+D, B = ctypes.c_double, ctypes.c_bool
+OK, ERROR = 0, 3
+
+# the standard's states (FMI 2.0 co-simulation; FMI 3.0), as the tests model them
+I, INIT, STEP, EVENT, CONT, TERM = "Instantiated", "Initialization", "Step", "Event", "ContinuousTime", "Terminated"
+ANY = {I, INIT, STEP, EVENT, CONT, TERM}
+
+
+class Machine(RuleBasedStateMachine):
+    """Common bookkeeping: the modelled state, the communication time, the saved FMU states."""
+
+    NAME = "PogoStick"
+
+    def __init__(self):
+        super().__init__()
+        self.messages = []
+        self.mode, self.t, self.saved = I, 0.0, []
+        self.fmu = self.make()
+
+    def log(self, *args):
+        self.messages.append((int(args[-3]) if len(args) >= 3 else 0, args[-1].decode(errors="replace")
+                              if isinstance(args[-1], bytes) else str(args[-1])))
+
+    def raw(self, name, *args):
+        return self.fmu._functions[name](self.fmu.component, *args)
+
+    def expect(self, name, allowed, status, *, legal_args=True):
+        assert status != 4, f"{name}: Fatal ({self.messages[-1:]})"
+        if allowed and legal_args:
+            assert status in (OK, 1), f"{name} in {self.mode}: status {status} ({self.messages[-3:]})"
+        elif not allowed:
+            assert status == ERROR, f"{name} in {self.mode}: status {status}, expected Error"
+            assert name in self.messages[-1][1] and "refused" in self.messages[-1][1], self.messages[-1]
+        return status in (OK, 1)
+
+    # ---- state save / restore: allowed in every state ------------------------------------------
+    @rule()
+    def get_state(self):
+        state = ctypes.c_void_p()
+        ok = self.expect(self.GET_STATE, True, self.raw(self.GET_STATE, ctypes.byref(state)))
+        if ok:
+            self.saved.append((state, self.mode, self.t))
+
+    @precondition(lambda self: self.saved)
+    @rule(data=st.data())
+    def set_state(self, data):
+        state, mode, t = data.draw(st.sampled_from(self.saved))
+        if self.expect(self.SET_STATE, True, self.raw(self.SET_STATE, state)):
+            self.mode, self.t = mode, t
+
+    @rule()
+    def reset(self):
+        if self.expect(self.RESET, True, self.raw(self.RESET)):
+            self.mode, self.t = I, 0.0
+
+    def teardown(self):
+        for state, _, _ in self.saved:
+            self.raw(self.FREE_STATE, ctypes.byref(state))
+        self.fmu.freeInstance()
+
+
+# =============================================================================================
+# FMI 2.0 co-simulation
+# =============================================================================================
+
+class Fmi2CoSimulation(Machine):
+    GET_STATE, SET_STATE, FREE_STATE, RESET = "fmi2GetFMUstate", "fmi2SetFMUstate", "fmi2FreeFMUstate", "fmi2Reset"
+
+    def make(self):
+        from fmpy import calloc, extract, free, read_model_description
+        from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
+                               fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
+
+        path = DIST / f"{self.NAME}.fmu"
+        md = read_model_description(str(path))
+        self.vars = {v.name: v for v in md.modelVariables}
+        fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(str(path)), modelIdentifier=md.coSimulation.modelIdentifier,
+                        instanceName="machine")
+        cb = fmi2CallbackFunctions()
+        cb.logger = fmi2CallbackLoggerTYPE(lambda c, inst, status, cat, msg: self.messages.append((status, msg.decode())))
+        cb.allocateMemory, cb.freeMemory = fmi2CallbackAllocateMemoryTYPE(calloc), fmi2CallbackFreeMemoryTYPE(free)
+        self._cb = cb
+        fmu.instantiate(loggingOn=True, callbacks=cb)
+        return fmu
+
+    @rule()
+    def setup(self):
+        self.expect("fmi2SetupExperiment", self.mode == I, self.raw("fmi2SetupExperiment", 0, D(0.0), D(0.0), 0, D(0.0)))
+
+    @rule()
+    def enter_initialization(self):
+        if self.expect("fmi2EnterInitializationMode", self.mode == I, self.raw("fmi2EnterInitializationMode")):
+            self.mode = INIT
+
+    @rule()
+    def exit_initialization(self):
+        if self.expect("fmi2ExitInitializationMode", self.mode == INIT, self.raw("fmi2ExitInitializationMode")):
+            self.mode, self.t = STEP, 0.0
+
+    @rule(h=st.sampled_from([1e-3, 4e-3]))
+    def do_step(self, h):
+        if self.expect("fmi2DoStep", self.mode == STEP, self.raw("fmi2DoStep", D(self.t), D(h), 1)):
+            self.t += h
+
+    @rule(h=st.sampled_from([-1e-3, float("nan")]))
+    def bad_step(self, h):
+        """Any state: refused (by state, or by the argument), never worse."""
+        status = self.raw("fmi2DoStep", D(self.t), D(h), 1)
+        assert status == ERROR and not any(m[0] >= 4 for m in self.messages)
+
+    @rule()
+    def terminate(self):
+        if self.expect("fmi2Terminate", self.mode == STEP, self.raw("fmi2Terminate")):
+            self.mode = TERM
+
+    @rule()
+    def get_output(self):
+        vr = (ctypes.c_uint32 * 1)(self.vars["y"].valueReference if "y" in self.vars else self.vars["F_ext"].valueReference)
+        self.expect("fmi2GetReal", self.mode in {INIT, STEP, TERM}, self.raw("fmi2GetReal", vr, 1, (D * 1)()))
+
+    @rule(value=st.floats(-2.0, 2.0))
+    def set_input(self, value):
+        name = "F_ext" if "F_ext" in self.vars and self.vars["F_ext"].causality == "input" else "ydot"
+        vr = (ctypes.c_uint32 * 1)(self.vars[name].valueReference)
+        self.expect("fmi2SetReal", self.mode in {I, INIT, STEP}, self.raw("fmi2SetReal", vr, 1, (D * 1)(value)))
+
+    @rule(known=st.booleans())
+    def debug_logging(self, known):
+        cats = (ctypes.c_char_p * 1)(b"logEvents" if known else b"logNoSuchCategory")
+        status = self.raw("fmi2SetDebugLogging", 1, 1, cats)
+        if known:
+            self.expect("fmi2SetDebugLogging", True, status)
+        else:
+            assert status == ERROR and "not a log category" in self.messages[-1][1]
+
+
+class Fmi2Controller(Fmi2CoSimulation):
+    NAME = "HopController"
+
+
+# =============================================================================================
+# FMI 3.0
+# =============================================================================================
+
+class Fmi3Machine(Machine):
+    GET_STATE, SET_STATE, FREE_STATE, RESET = "fmi3GetFMUState", "fmi3SetFMUState", "fmi3FreeFMUState", "fmi3Reset"
+    INTERFACE, EVENT_MODE = "cs", True
+
+    def make(self):
+        from fmpy import extract, read_model_description
+        from fmpy.fmi3 import FMU3Model, FMU3Slave
+
+        path = DIST / "fmi3" / f"{self.NAME}.fmu"
+        md = read_model_description(str(path))
+        self.vars = {v.name: v for v in md.modelVariables}
+        self.nx, self.nz = len(md.derivatives), len(md.eventIndicators)
+        log = lambda env, status, cat, msg: self.messages.append((status, msg.decode()))  # noqa: E731
+        if self.INTERFACE == "cs":
+            fmu = FMU3Slave(guid=md.guid, unzipDirectory=extract(str(path)),
+                            modelIdentifier=md.coSimulation.modelIdentifier, instanceName="machine")
+            fmu.instantiate(loggingOn=True, eventModeUsed=self.EVENT_MODE, earlyReturnAllowed=self.EVENT_MODE,
+                            logMessage=log)
+        else:
+            fmu = FMU3Model(guid=md.guid, unzipDirectory=extract(str(path)),
+                            modelIdentifier=md.modelExchange.modelIdentifier, instanceName="machine")
+            fmu.instantiate(loggingOn=True, logMessage=log)
+        return fmu
+
+    @property
+    def cs(self):
+        return self.INTERFACE == "cs"
+
+    @rule()
+    def enter_initialization(self):
+        if self.expect("fmi3EnterInitializationMode", self.mode == I,
+                       self.raw("fmi3EnterInitializationMode", 0, D(0.0), D(0.0), 0, D(0.0))):
+            self.mode = INIT
+
+    @rule()
+    def exit_initialization(self):
+        if self.expect("fmi3ExitInitializationMode", self.mode == INIT, self.raw("fmi3ExitInitializationMode")):
+            self.mode, self.t = (EVENT if (not self.cs or self.EVENT_MODE) else STEP), 0.0
+
+    @rule()
+    def enter_event_mode(self):
+        allowed = (self.mode == STEP and self.EVENT_MODE) if self.cs else self.mode == CONT
+        if self.expect("fmi3EnterEventMode", allowed, self.raw("fmi3EnterEventMode")):
+            self.mode = EVENT
+
+    @rule()
+    def update_discrete_states(self):
+        refs = [ctypes.byref(B()) for _ in range(5)] + [ctypes.byref(D())]
+        self.expect("fmi3UpdateDiscreteStates", self.mode == EVENT, self.raw("fmi3UpdateDiscreteStates", *refs))
+
+    @rule()
+    def enter_step_mode(self):
+        allowed = self.cs and self.mode == EVENT
+        if self.expect("fmi3EnterStepMode", allowed, self.raw("fmi3EnterStepMode")):
+            self.mode = STEP
+
+    @rule()
+    def enter_continuous_time_mode(self):
+        allowed = not self.cs and self.mode == EVENT
+        if self.expect("fmi3EnterContinuousTimeMode", allowed, self.raw("fmi3EnterContinuousTimeMode")):
+            self.mode = CONT
+
+    @rule(h=st.sampled_from([1e-3, 4e-3]))
+    def do_step(self, h):
+        flags = [B(), B(), B(), D()]
+        refs = [ctypes.byref(f) for f in flags]
+        if self.expect("fmi3DoStep", self.cs and self.mode == STEP, self.raw("fmi3DoStep", D(self.t), D(h), True, *refs)):
+            self.t = flags[3].value
+
+    @rule()
+    def terminate(self):
+        allowed = self.mode in ({STEP, EVENT} if self.cs else {CONT, EVENT})
+        if self.expect("fmi3Terminate", allowed, self.raw("fmi3Terminate")):
+            self.mode = TERM
+
+    @rule(dt=st.sampled_from([0.0, 1e-3]))
+    def set_time(self, dt):
+        allowed = not self.cs and self.mode in {EVENT, CONT}
+        if self.expect("fmi3SetTime", allowed, self.raw("fmi3SetTime", D(self.t + dt))):
+            self.t += dt
+
+    @rule()
+    def derivatives(self):
+        buf = (D * max(self.nx, 1))()
+        self.expect("fmi3GetContinuousStateDerivatives", not self.cs and self.mode in {INIT, EVENT, CONT, TERM},
+                    self.raw("fmi3GetContinuousStateDerivatives", buf, self.nx))
+
+    @rule()
+    def states_round_trip(self):
+        buf = (D * max(self.nx, 1))()
+        got = self.raw("fmi3GetContinuousStates", buf, self.nx)
+        self.expect("fmi3GetContinuousStates", not self.cs and self.mode in {INIT, EVENT, CONT, TERM}, got)
+        self.expect("fmi3SetContinuousStates", not self.cs and self.mode == CONT,
+                    self.raw("fmi3SetContinuousStates", buf, self.nx), legal_args=got == OK)
+
+    @rule()
+    def completed_integrator_step(self):
+        refs = [ctypes.byref(B()), ctypes.byref(B())]
+        self.expect("fmi3CompletedIntegratorStep", not self.cs and self.mode == CONT,
+                    self.raw("fmi3CompletedIntegratorStep", True, *refs))
+
+    @rule(value=st.floats(-2.0, 2.0))
+    def set_input(self, value):
+        name = "F_ext" if self.vars.get("F_ext") is not None and self.vars["F_ext"].causality == "input" else "ydot"
+        vr = (ctypes.c_uint32 * 1)(self.vars[name].valueReference)
+        self.expect("fmi3SetFloat64", self.mode in {I, INIT, EVENT, CONT, STEP, TERM},
+                    self.raw("fmi3SetFloat64", vr, 1, (D * 1)(value), 1))
+
+
+class Fmi3EventMode(Fmi3Machine):
+    INTERFACE, EVENT_MODE = "cs", True
+
+
+class Fmi3NoEventMode(Fmi3Machine):
+    INTERFACE, EVENT_MODE = "cs", False
+
+
+class Fmi3ModelExchange(Fmi3Machine):
+    INTERFACE, EVENT_MODE = "me", False
+
+
+class Fmi3ControllerME(Fmi3Machine):
+    NAME, INTERFACE, EVENT_MODE = "HopController", "me", False
+
+
+MACHINES = [Fmi2CoSimulation, Fmi2Controller, Fmi3EventMode, Fmi3NoEventMode, Fmi3ModelExchange, Fmi3ControllerME]
+
+
+@pytest.mark.parametrize("machine", MACHINES, ids=[m.__name__ for m in MACHINES])
+def test_random_call_sequences_follow_the_standard(machine):
+    from hypothesis.stateful import run_state_machine_as_test
+
+    run_state_machine_as_test(machine, settings=SETTINGS)
