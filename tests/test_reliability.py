@@ -382,3 +382,67 @@ def test_model_exchange_counts_are_checked_naming_nx_and_nz():
         assert _raw(fmu, "fmi3GetContinuousStates", buf, 7) == 0
     finally:
         fmu.freeInstance()
+
+
+# ---------------------------------------------------------------------------------------------
+# 5. every message names the real cause first; paths work in any locale
+# ---------------------------------------------------------------------------------------------
+
+def _host():
+    from support import compile_c_host
+
+    return compile_c_host
+
+
+def _c_host_run(tmp_path, unzipdir, env=None):
+    from fmpy import read_model_description
+
+    host = _host()(ROOT / "tests" / "c_host" / "fmi2_host.c", tmp_path / "fmi2_host")
+    md = read_model_description(str(Path(unzipdir) / "modelDescription.xml"))
+    y = next(v.valueReference for v in md.modelVariables if v.name == "y")
+    return subprocess.run([str(host), str(unzipdir), md.coSimulation.modelIdentifier, md.guid, "0.01", "1e-3", str(y), "-"],
+                          capture_output=True, text=True, timeout=120, env=env or {"PATH": "/usr/bin:/bin"})
+
+
+def test_a_non_ascii_folder_works_in_a_c_host_with_the_c_locale(tmp_path):
+    folder = tmp_path / "Flugbahn-Mondlandefähre-ø"
+    with zipfile.ZipFile(DIST / "PogoStick.fmu") as z:
+        z.extractall(folder)
+    proc = _c_host_run(tmp_path, folder, env={"PATH": "/usr/bin:/bin", "LANG": "C", "LC_ALL": "C"})
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "UnicodeEncodeError" not in proc.stderr and len(proc.stdout.splitlines()) == 11
+
+
+@pytest.mark.parametrize("damage,words", [
+    ("boot", "the FMU's bootstrap resources/pogofmu_boot.py cannot be run"),
+    ("package", "the FMU's code is missing"),
+    ("launch", "the FMU's resources folder is incomplete"),
+])
+def test_a_damaged_resources_folder_is_named_as_such(tmp_path, damage, words):
+    import shutil
+
+    folder = tmp_path / "fmu"
+    with zipfile.ZipFile(DIST / "PogoStick.fmu") as z:
+        z.extractall(folder)
+    res = folder / "resources"
+    if damage == "boot":
+        (res / "pogofmu_boot.py").unlink()
+    elif damage == "package":
+        shutil.rmtree(next(p for p in res.iterdir() if p.is_dir() and p.name.startswith("_pogofmu_")))
+    else:
+        (res / "pogofmu_launch.txt").write_text("# empty\n")
+    proc = _c_host_run(tmp_path, folder)
+    assert proc.returncode != 0
+    assert words in proc.stderr, proc.stderr[-2000:]
+    assert "no usable CPython" not in proc.stderr and "internal error" not in proc.stderr, proc.stderr[-2000:]
+
+
+def test_a_connection_without_its_connector_is_named(tmp_path):
+    from pogofmu import ssp
+    from test_ssp import variant
+
+    pkg = variant(tmp_path, edit_ssd=lambda t: t.replace(
+        'startElement="HopController" startConnector="F_ext"', 'startElement="HopController"', 1))
+    with pytest.raises(ssp.SSPError) as exc:
+        ssp.simulate(pkg, stop_time=0.01, step=1e-3)
+    assert "Connection 4: no startConnector attribute" in str(exc.value) and "None" not in str(exc.value)

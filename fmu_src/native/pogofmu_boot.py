@@ -78,16 +78,36 @@ def _process_lock():
     return lock
 
 
+class BootError(Exception):
+    """The FMU's resources cannot give its Python code; the launcher logs the message (Error)."""
+
+    fmi_status = 3
+
+
 def load(resources):
-    """The slave class of the FMU whose resources folder is ``resources``."""
+    """The slave class of the FMU whose resources folder is ``resources`` (a path as str or as the
+    file system's bytes: any locale)."""
+    if isinstance(resources, bytes):
+        resources = os.fsdecode(resources)
     with _process_lock():
         return _load(resources)
 
 
 def _load(resources):
-    conf = read_launch_file(resources)
-    package, module, cls = conf["package"][0], conf["module"][0], conf["class"][0]
+    try:
+        conf = read_launch_file(resources)
+        package, module, cls = conf["package"][0], conf["module"][0], conf["class"][0]
+    except OSError as exc:
+        raise BootError(f"the FMU's resources folder is incomplete: {exc.filename or resources}: "
+                        f"{exc.strerror or exc} (extract the FMU again)") from None
+    except (KeyError, IndexError, ValueError) as exc:
+        raise BootError(f"the FMU's {LAUNCH_FILE} is damaged ({type(exc).__name__}: {exc}): extract the FMU "
+                        f"again") from None
     package_dir = os.path.join(resources, package)
+    for needed in (os.path.join(package_dir, "__init__.py"), os.path.join(resources, module + ".py")):
+        if not os.path.isfile(needed):
+            raise BootError(f"the FMU's code is missing: {needed} does not exist (the FMU's resources folder is "
+                            f"incomplete: extract the FMU again)")
     if package in sys.modules:
         _repoint_package(package, package_dir)
     _import_from_file(package, os.path.join(package_dir, "__init__.py"), package_dir)

@@ -114,7 +114,7 @@ typedef int GIL;
 /* data symbols, needed only to start an interpreter of our own (legacy configuration API,
  * present in 3.10-3.13) */
 #define PY_FLAGS(X) X(Py_IsolatedFlag) X(Py_NoSiteFlag) X(Py_IgnoreEnvironmentFlag) \
-    X(Py_NoUserSiteDirectory) X(Py_DontWriteBytecodeFlag)
+    X(Py_NoUserSiteDirectory) X(Py_DontWriteBytecodeFlag) X(Py_UTF8Mode)
 
 static struct {
 #define DECLARE(ret, name, args) ret(*name) args;
@@ -245,6 +245,7 @@ static int start_interpreter(void *handle)
     *py.Py_IgnoreEnvironmentFlag = 1;
     *py.Py_NoUserSiteDirectory = 1;
     *py.Py_DontWriteBytecodeFlag = 1;
+    *py.Py_UTF8Mode = 1; /* file names in any locale (LANG=C too): UTF-8, undecodable bytes kept as they are */
     whome = py.Py_DecodeLocale(home, NULL);
     wname = py.Py_DecodeLocale("pogofmu", NULL);
     if (!whome || !wname) return 0;
@@ -347,7 +348,7 @@ static int load_boot(const char *resources)
     snprintf(path, sizeof path, "%s/pogofmu_boot.py", resources);
     FILE *f = fopen(path, "rb");
     if (!f) {
-        report("  cannot read %s\n", path);
+        report("  cannot read %s: %s\n", path, strerror(errno));
         return 0;
     }
     fseek(f, 0, SEEK_END);
@@ -395,8 +396,8 @@ static int load_boot(const char *resources)
     return ok;
 }
 
-/* Make sure an interpreter runs and the boot code is loaded; on failure python_report says what
- * was tried. */
+/* Make sure an interpreter runs and the boot code is loaded: 1; 0 no usable interpreter, -1 the
+ * boot code cannot be read or run; python_report says what was tried or what failed. */
 static int ensure_python(const char *resources)
 {
     pthread_mutex_lock(&boot_lock);
@@ -423,7 +424,8 @@ static int ensure_python(const char *resources)
                                          : try_launch_file(resources) || try_path_pythons() || try_usual_places();
         }
     }
-    int ok = python_ready && (boot || load_boot(resources));
+    if (python_ready && !boot) python_report[0] = '\0'; /* (only the boot code's reason from here) */
+    int ok = !python_ready ? 0 : (boot || load_boot(resources)) ? 1 : -1;
     pthread_mutex_unlock(&boot_lock);
     return ok;
 }
@@ -912,6 +914,13 @@ static int token_matches(Inst *in, const char *resources, const char *token)
         }
     }
     fclose(f);
+    if (!found) {
+        char msg[PATH_MAX + 160];
+        snprintf(msg, sizeof msg, "%s records no instantiation token: the FMU's resources folder is incomplete "
+                 "or damaged (extract the FMU again)", path);
+        emit(in, ST_ERROR, "logStatusError", msg);
+        return 0;
+    }
     if (!ok) {
         char msg[1024];
         snprintf(msg, sizeof msg, "instantiation token %s does not match this FMU's (%s): the model "
@@ -1068,13 +1077,20 @@ static Inst *instantiate(Inst *in, const char *location, const char *token, int 
         free_inst(in);
         return NULL;
     }
-    if (!ensure_python(resources)) {
+    int python = ensure_python(resources);
+    if (python <= 0) {
         char *msg = malloc(sizeof python_report + 512);
-        if (msg) {
+        if (msg && python < 0) {
+            snprintf(msg, sizeof python_report + 512,
+                     "the FMU's bootstrap resources/pogofmu_boot.py cannot be run (the FMU's resources folder is "
+                     "incomplete or unreadable: extract the FMU again):\n%s", python_report);
+        } else if (msg) {
             snprintf(msg, sizeof python_report + 512,
                      "no usable CPython (>= 3.10) for this FMU's Python code; set POGOFMU_PYTHON_LIB to "
                      "the path of a libpython3.X.so to choose one. Tried:\n%s",
                      python_report[0] ? python_report : "  (nothing found)\n");
+        }
+        if (msg) {
             emit(in, ST_ERROR, "logStatusError", msg);
             free(msg);
         }
@@ -1085,7 +1101,7 @@ static Inst *instantiate(Inst *in, const char *location, const char *token, int 
     GIL g = py.PyGILState_Ensure();
     char *error = NULL;
     PyObject *load = py.PyDict_GetItemString(boot, "load"); /* borrowed */
-    PyObject *args = build("(s)", resources);
+    PyObject *args = build("(y)", resources); /* bytes: the file system's own, in any locale */
     PyObject *cls = (load && args) ? py.PyObject_CallObject(load, args) : NULL;
     PyObject *kwargs = cls ? build("{s:s,s:s,s:N,s:s}", "instance_name", in->name, "resources", resources,
                                    "visible", py.PyBool_FromLong(visible), "fmi_binary", "pogofmu") : NULL;

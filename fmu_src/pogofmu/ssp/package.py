@@ -183,6 +183,11 @@ def read_ssd(root: Path) -> System:
         components[name] = Component(name, el.get("source"), connectors, bindings)
     connections = []
     for i, cel in enumerate(system_el.findall("ssd:Connections/ssd:Connection", NS), start=1):
+        missing = [a for a in ("startConnector", "endConnector") if not cel.get(a)]
+        if missing:  # (a missing startElement/endElement is a connector of the system: refused later)
+            problems.append(f"Connection {i}: no {' and no '.join(missing)} attribute (every connection joins two "
+                            f"named connectors)")
+            continue
         connections.append(Connection(i, cel.get("startElement"), cel.get("startConnector"),
                                       cel.get("endElement"), cel.get("endConnector")))
     start, stop = 0.0, None
