@@ -475,3 +475,43 @@ def test_the_coupling_study_writes_the_table_the_figure_and_the_slopes(tmp_path,
     # bad input: one line, exit status 2
     assert cli.main(["study", "coupling", "--out", str(out), "--steps", "4e-2", "--bodies", "moon"]) == 2
     assert "does not divide" in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------------------------------------
+# saving only what is needed: FMU states every REPLAY_STEPS steps, the calls in between replayed
+# ---------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("which", ["fmi2", "fmi3"])
+def test_replayed_saves_give_the_run_of_a_save_before_every_step_to_the_bit(which, monkeypatch):
+    """A restore that replays the journaled calls from an older FMU state must land on the very
+    state a save before every step would have kept: the whole 6 s Moon run (events, rollbacks,
+    bisected controller switches) is identical to the bit, with far fewer FMU states saved, and
+    replays did happen."""
+    from pogofmu.ssp import components
+
+    counts = {}
+    real_save, real_restore = components.Component.save, components.Component.restore
+
+    def counting_save(self):
+        n0 = self._journal is None or len(self._journal) >= 2 * components.REPLAY_STEPS
+        counts["saves"] = counts.get("saves", 0) + bool(n0)
+        return real_save(self)
+
+    def counting_restore(self):
+        counts["replays"] = counts.get("replays", 0) + bool(self._mark)
+        return real_restore(self)
+
+    monkeypatch.setattr(components.Component, "save", counting_save)
+    monkeypatch.setattr(components.Component, "restore", counting_restore)
+    runs = {}
+    for k in (1, components.REPLAY_STEPS):
+        monkeypatch.setattr(components, "REPLAY_STEPS", k)
+        counts.clear()
+        res = master.simulate(PACKAGES[which], parameters="moon", stop_time=6.0, step=1e-3, echo_log=False)
+        runs[k] = (res, dict(counts))
+    (eager, c1), (lazy, c16) = runs[1], runs[components.REPLAY_STEPS]
+    assert eager.rows == lazy.rows > 6000
+    for name in eager.names:
+        assert np.array_equal(np.asarray(eager[name]), np.asarray(lazy[name])), name
+    assert c16["saves"] * 4 < c1["saves"], (c1, c16)
+    assert c16.get("replays", 0) > 5 and c1.get("replays", 0) == 0, (c1, c16)

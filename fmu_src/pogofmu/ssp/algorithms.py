@@ -213,6 +213,7 @@ class Synchronizer:
             if inst.rollback and inst.counts_events:
                 ex.also_read(inst, ["n_events", "t_last_event"])
         self.switching = [inst for inst in order if inst.switches]
+        self._switch_keys = [(inst.name, n) for inst in self.switching for n in inst.switches]
         for i, inst in enumerate(order):
             later = any(o.may_stop for o in order[i + 1:]) or any(o.switches for o in order[i:])
             inst.must_save = inst.can_save and (inst.rollback or later)
@@ -291,22 +292,29 @@ class Synchronizer:
         """Bring every component from ``t`` to ``T``, or to the first event before it; returns
         ``(t_reached, step result of the event or None)``."""
         ex, target, event, stepped = self.ex, T, None, []
-        switch0 = {inst.name: self._switch_values(inst) for inst in self.switching}
-        for t_next in self.next_event.values():  # time events asked for by FMI 3.0 components
-            if t < t_next < target:
-                target = t_next
-        if self.jacobi:
+        switch0 = self._switch_values() if self._switch_keys else None
+        next_event = self.next_event
+        if next_event:
+            for t_next in next_event.values():  # time events asked for by FMI 3.0 components
+                if t < t_next < target:
+                    target = t_next
+        jacobi = self.jacobi
+        if jacobi:
             for inst in ex.order:
                 ex.feed(inst)
         for inst in ex.order:
             if inst.t >= target:  # ahead (it cannot roll back): wait for the others
                 stepped.append(inst)
                 continue
-            if not self.jacobi:
+            if not jacobi:
                 ex.feed(inst)
             if inst.must_save:
                 inst.save()
-            r = self._step(inst, t, target)  # (it reads the outputs)
+            if inst.rollback:
+                r = self._step(inst, t, target)  # (it reads the outputs)
+            else:
+                r = inst.do_step(t, target - t)
+                ex.read(inst)
             if r.terminate:
                 raise SSPError(f"Component {inst.name} asked to terminate the simulation at t = {r.t_end!r} s")
             if r.t_end < target:  # it stopped at (or just before) an event: everyone goes no further
@@ -324,17 +332,18 @@ class Synchronizer:
             elif r.event_at is not None and event is None:
                 event = r  # an event exactly at the end of the step
             stepped.append(inst)
-        if event is None and target in self.next_event.values():
+        if event is None and next_event and target in next_event.values():
             event = StepResult(target, event_at=target, event_mode=True)
-        if event is None and any(self._switch_values(inst) != switch0[inst.name] for inst in self.switching):
+        if event is None and switch0 and self._switch_values() != switch0:
             located = self._locate_switch(t, target, switch0)
             if located is not None:
                 target, event = located
         return target, event
 
-    def _switch_values(self, inst):
+    def _switch_values(self):
+        """The latest values of every switching output (feed-through discrete outputs)."""
         v = self.ex.value
-        return [v[(inst.name, n)] for n in inst.switches]
+        return [v[k] for k in self._switch_keys]
 
     def _redo(self, t, tau):
         """Every component restored to ``t`` and stepped to ``tau`` in update order (Gauss–Seidel:
@@ -359,7 +368,7 @@ class Synchronizer:
             return None  # a component cannot go back: the switch is seen at the end of the step
 
         def switched():
-            return any(self._switch_values(inst) != switch0[inst.name] for inst in self.switching)
+            return self._switch_values() != switch0
         lo, hi = t, T
         while hi - lo > self.tol:
             mid = 0.5 * (lo + hi)
