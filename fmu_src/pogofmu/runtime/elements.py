@@ -158,7 +158,7 @@ class MemSpring(Element):
     outputs = (Variable("a", "m.s", "absement of the leg, a' = x (time integral of the deflection)"),)
 
     def initial_states(self, p):
-        return (float(p.a_0),)
+        return (p.a_0,)
 
     def rates(self, x, xdot, xi, q, p):
         return (x,)
@@ -191,7 +191,7 @@ class MemSpring(Element):
 
     def check(self, p):
         require_nonnegative(p, "k", "beta")
-        require(p.spring_law in SPRING_LAWS, "spring_law", p.spring_law,
+        require(p.spring_law in tuple(SPRING_LAWS), "spring_law", p.spring_law,
                 "spring_law is 0 (linear), 1 (softening) or 2 (hardening)")
 
 

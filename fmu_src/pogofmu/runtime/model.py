@@ -17,9 +17,10 @@ Conventions (docs/models.md):
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Callable, Mapping, Optional, Sequence, Tuple
+
+from . import fmath
 
 FALLING = -1
 RISING = 1
@@ -198,7 +199,7 @@ def require(condition: bool, name: str, value, rule: str):
 def require_finite(p: Params, names: Optional[Sequence[str]] = None):
     for name in names if names is not None else p.as_dict():
         v = p[name]
-        if not (isinstance(v, (int, float)) and math.isfinite(v)):
+        if not fmath.isfinite(v):
             raise ParameterError(f"parameter {name} = {v!r} violates the rule: {name} must be a finite number")
 
 

@@ -16,22 +16,33 @@ non-integer power while the integrator probes ``delta`` slightly below 0 around 
 """
 from __future__ import annotations
 
-import math
-from functools import lru_cache
-
+from . import fmath
 from .model import Parameter, Params, require
 
 
-@lru_cache(maxsize=None)
 def _power(n: float):
-    """``d -> max(0, d)^n``, with the common exponents written without ``pow``."""
+    """``d -> max(0, d)^n``, with the common exponents written without ``pow`` (chosen once per
+    contact: :meth:`HuntCrossley.bind` builds the flow's closures with it)."""
     if n == 1.0:
         return lambda d: d if d > 0.0 else 0.0
     if n == 1.5:
-        return lambda d: d * math.sqrt(d) if d > 0.0 else 0.0
+        return lambda d: d * fmath.sqrt(d) if d > 0.0 else 0.0
     if n == 2.0:
         return lambda d: d * d if d > 0.0 else 0.0
     return lambda d: d ** n if d > 0.0 else 0.0
+
+
+def positive_power(d: float, n: float) -> float:
+    """``max(0, d)^n`` with the arithmetic of :func:`_power`'s closures, without building one."""
+    if not d > 0.0:
+        return 0.0
+    if n == 1.0:
+        return d
+    if n == 1.5:
+        return d * fmath.sqrt(d)
+    if n == 2.0:
+        return d * d
+    return d ** n
 
 
 class HuntCrossley:
@@ -68,8 +79,8 @@ class HuntCrossley:
     def reference_velocity(p: Params, impact_speed: float) -> float:
         """The ``d0dot`` of a contact that starts with this impact speed (m/s, >= 0)."""
         if p.d0dot_from_impact and impact_speed > 0.0:
-            return float(impact_speed)
-        return float(p.d0dot)
+            return impact_speed
+        return p.d0dot
 
     @staticmethod
     def damping(p: Params, d0dot: float) -> float:
@@ -79,19 +90,19 @@ class HuntCrossley:
     def force_of(self, p: Params, d0dot: float, delta: float, delta_dot: float) -> float:
         """The soil force (N, positive up) at penetration ``delta`` and rate ``delta_dot`` (the
         arithmetic of ``bind``'s closures, without building them: guards call this every step)."""
-        P = _power(float(p.n))(delta)
-        return (float(p.K) + self.damping(p, d0dot) * delta_dot) * P
+        P = positive_power(delta, p.n)
+        return (p.K + self.damping(p, d0dot) * delta_dot) * P
 
     def rate_of(self, p: Params, d0dot: float, load: float, c_series: float, delta: float) -> float:
         """Penetration rate of a massless foot loaded by ``load - c_series*delta_dot`` (see ``bind``)."""
-        P = _power(float(p.n))(delta)
-        return (load - float(p.K) * P) / (self.damping(p, d0dot) * P + c_series)
+        P = positive_power(delta, p.n)
+        return (load - p.K * P) / (self.damping(p, d0dot) * P + c_series)
 
     def bind(self, p: Params, d0dot: float):
         """``(force, rate)`` closures for a contact with reference velocity ``d0dot``."""
-        K = float(p.K)
+        K = p.K
         lam = self.damping(p, d0dot)
-        power = _power(float(p.n))
+        power = _power(p.n)
 
         def force(delta, delta_dot):
             P = power(delta)

@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 from typing import Mapping, Optional, Tuple
 
+from .. import fmath
 from ..model import HybridModel, Parameter, ParameterError, Params, require
 
 SOLVER_PARAMETERS = (
@@ -62,12 +63,12 @@ def check_solver_parameters(s: Params, has_states: bool = True):
     """Every rule of the settings, each refusal naming the setting, its value and the rule."""
     for name in SOLVER_PARAMETER_NAMES:
         v = s[name]
-        if not isinstance(v, (int, float)) or math.isnan(v):
+        if not fmath.is_number(v):
             raise ParameterError(f"parameter {name} = {v!r} violates the rule: {name} must be a number")
-    require(s.method in METHOD_NAMES, "method", s.method, "method must be 5 (DOPRI5) or 8 (DOP853)")
+    require(s.method in tuple(METHOD_NAMES), "method", s.method, "method must be 5 (DOPRI5) or 8 (DOP853)")
     require(1e-14 <= s.rel_tol <= REL_TOL_MAX, "rel_tol", s.rel_tol,
             f"1e-14 <= rel_tol <= {REL_TOL_MAX:g} (a looser relative tolerance does not control the error)")
-    require(s.abs_tol > 0 and math.isfinite(s.abs_tol), "abs_tol", s.abs_tol, "0 < abs_tol < inf")
+    require(s.abs_tol > 0 and fmath.isfinite(s.abs_tol), "abs_tol", s.abs_tol, "0 < abs_tol < inf")
     require(s.max_step >= 0, "max_step", s.max_step, "max_step >= 0 (0 or inf: unbounded)")
     budget = s.max_steps_per_second
     require(budget >= 10 and budget < math.inf, "max_steps_per_second", budget,
@@ -79,7 +80,7 @@ def check_solver_parameters(s: Params, has_states: bool = True):
             f"alone takes more than half the work budget of {budget:.3g} internal steps per simulated second; "
             f"raise max_steps_per_second to allow it)")
     require(s.log_events in (0, 1), "log_events", s.log_events, "log_events is 0 or 1")
-    require(s.initial_step >= 0 and math.isfinite(s.initial_step), "initial_step", s.initial_step,
+    require(s.initial_step >= 0 and fmath.isfinite(s.initial_step), "initial_step", s.initial_step,
             "0 <= initial_step < inf (0: automatic)")
 
 

@@ -35,6 +35,7 @@ from collections import deque
 from dataclasses import dataclass
 from typing import List, Optional
 
+from .. import fmath
 from ..model import DomainError, HybridModel, ModelError, ParameterError, ZenoError, FALLING
 from .pairs import METHODS
 from .settings import ABS_TOL_MAX_FRACTION, check_solver_parameters, domain_slack, split_parameters
@@ -118,11 +119,16 @@ class Simulator:
                  zeno_max_events: int = 200, zeno_window: float = 1e-6, keep_history: Optional[bool] = None,
                  solver=None):
         p, s = split_parameters(model, {} if p is None else p, solver)
-        check_solver_parameters(s, has_states=bool(model.states))
-        model.check(p)
         self.model = model
         self.p = p
         self.solver = s
+        self.u = tuple(float(v.start) for v in model.inputs) if u is None else tuple(u)
+        try:  # every rule first, in the order of prepare(), before any setting is used
+            x, q = prepare(model, p, s, self.u)
+        except (ArithmeticError, ValueError) as exc:
+            if isinstance(exc, ModelError):
+                raise
+            raise self._arithmetic_error(exc, "initialization") from None
         self.pair = METHODS[int(s.method)]
         self.rtol = float(s.rel_tol)
         self.atol = float(s.abs_tol)
@@ -132,8 +138,6 @@ class Simulator:
         self.t_stop = float(t_stop)
         self.zeno_max_events = zeno_max_events
         self.zeno_window = zeno_window
-        self.u = tuple(float(v.start) for v in model.inputs) if u is None else tuple(u)
-        self._check_input(self.u)
         self.t = float(t0)  # integrator time (may be ahead of the communication time)
         self.t_out = float(t0)  # latest time served to the caller
         self.n_events = 0
@@ -155,14 +159,11 @@ class Simulator:
         self._at_start = True
         self._disarmed = -1  # index of the event whose guard stays disarmed at zero
         try:
-            _check_time_scales(model, p)
-            x, q = model.initial(p)
             self.x = [float(v) for v in x]
             self.pair = self.pair.specialized(len(self.x))  # the step unrolled for this many states
             self.q = dict(q)
             self.x_out, self.q_out = self.x, self.q  # state served at t_out
             self._stateless = not self.x
-            self._check_abs_tol()
             self._check_domain(self.t, self.x)
             self._bind()
             self._check_initial_rates()
@@ -175,34 +176,6 @@ class Simulator:
             raise self._arithmetic_error(exc, "initialization") from None
 
     # ---- setup helpers ----------------------------------------------------------------------
-    def _check_input(self, u):
-        for var, v in zip(self.model.inputs, u):
-            if not math.isfinite(v):
-                raise ParameterError(f"input {var.name} = {v!r} violates the rule: {var.name} must be finite")
-
-    def _check_abs_tol(self):
-        """Issue 9 item 7: an absolute tolerance of the order of the motion itself controls nothing
-        (abs_tol = 1 m on a 1.5 m drop let the energy balance drift by 90 %).  The scale is the
-        smallest of the model's declared magnitudes (``error_scales``: static deflections, the free
-        leg length, ...), else the largest initial state magnitude."""
-        if self.model.error_scales is not None:
-            scales = [s for s in self.model.error_scales(self.p) if s[2] > 0 and math.isfinite(s[2])]
-        else:
-            scales = []
-        if not scales:
-            big = max((abs(v) for v in self.x), default=0.0)
-            scales = [("the largest initial state magnitude", (), big)] if big > 0 else []
-        if not scales:
-            return
-        label, names, scale = min(scales, key=lambda s: s[2])
-        limit = ABS_TOL_MAX_FRACTION * scale
-        if self.atol > limit:
-            of = f" with {', '.join(f'{n} = {self.p[n]!r}' for n in names)}" if names else ""
-            raise ParameterError(
-                f"parameter abs_tol = {self.solver.abs_tol!r} violates the rule: abs_tol <= {ABS_TOL_MAX_FRACTION:g} x "
-                f"{label} ({scale:.6g}{of}) = {limit:.3g}; a larger absolute tolerance lets the local error be "
-                f"as large as the motion itself and controls nothing")
-
     def _check_initial_rates(self):
         bad = [(v.name, d) for v, d in zip(self.model.states, self.f) if not math.isfinite(d)]
         if bad:
@@ -267,7 +240,7 @@ class Simulator:
         u = tuple(float(v) for v in u)
         if u == self.u:
             return
-        self._check_input(u)
+        check_inputs(self.model, u)
         crossed = None
         if self.t > self.t_out:
             # the integrator ran ahead: redo the step exactly up to the communication time
@@ -799,6 +772,55 @@ class Simulator:
 def _domain_error(violation):
     t, condition = violation
     return DomainError(f"the trajectory left the model's domain at t = {t:.10g} s: {condition}")
+
+
+# =============================================================================================
+# the start of a run: every check and the initial state (pure: the native FMUs run it as C)
+# =============================================================================================
+
+def prepare(model: HybridModel, p, s, u):
+    """The rules of a run, checked in this order, and its initial state ``(x0, q0)``: the
+    solver's settings ``s``, the model's parameters ``p``, the inputs ``u``, the model's time
+    scales, its initial state, the absolute tolerance against its scales. Each refusal names the
+    parameter, its value and the rule. A pure function of its arguments: the code generator
+    traces it into the native FMUs' initialization (issue 18)."""
+    check_solver_parameters(s, has_states=bool(model.states))
+    model.check(p)
+    check_inputs(model, u)
+    _check_time_scales(model, p)
+    x, q = model.initial(p)
+    check_abs_tol(model, p, s, x)
+    return x, q
+
+
+def check_inputs(model: HybridModel, u):
+    for var, v in zip(model.inputs, u):
+        if not fmath.isfinite(v):
+            raise ParameterError(f"input {var.name} = {v!r} violates the rule: {var.name} must be finite")
+
+
+def check_abs_tol(model: HybridModel, p, s, x):
+    """Issue 9 item 7: an absolute tolerance of the order of the motion itself controls nothing
+    (abs_tol = 1 m on a 1.5 m drop let the energy balance drift by 90 %).  The scale is the
+    smallest of the model's declared magnitudes (``error_scales``: static deflections, the free
+    leg length, ...), else the largest initial state magnitude."""
+    if model.error_scales is not None:
+        scales = [e for e in model.error_scales(p) if e[2] > 0 and fmath.isfinite(e[2])]
+    else:
+        scales = []
+    if not scales:
+        big = max((abs(v) for v in x), default=0.0)
+        scales = [("the largest initial state magnitude", (), big)] if big > 0 else []
+    if not scales:
+        return
+    label, names, scale = min(scales, key=lambda e: e[2])
+    limit = ABS_TOL_MAX_FRACTION * scale
+    if s.abs_tol > limit:
+        of = f" with {', '.join(f'{n} = {p[n]!r}' for n in names)}" if names else ""
+        raise ParameterError(
+            f"parameter abs_tol = {s.abs_tol!r} violates the rule: abs_tol <= {ABS_TOL_MAX_FRACTION:g} x "
+            f"{label} ({scale:.6g}{of}) = {limit:.3g}; a larger absolute tolerance lets the local error be "
+            f"as large as the motion itself and controls nothing")
 
 
 # =============================================================================================

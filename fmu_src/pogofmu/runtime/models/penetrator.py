@@ -34,8 +34,7 @@ Events, in priority order:
 """
 from __future__ import annotations
 
-import math
-
+from .. import fmath
 from ..model import (FALLING, Event, HybridModel, Parameter, Variable, require,
                      require_finite, require_nonnegative, require_positive)
 from ..plant import DAMPING, F_EXT, FREE_LENGTH, GRAVITY, MASS, STIFFNESS
@@ -121,11 +120,11 @@ def time_scales(p):
     resolution and names the fastest when a run turns out stiff."""
     out = []
     if p.g > 0:
-        out.append(("sqrt(x_i/g) (fall over the leg length)", ("x_i", "g"), math.sqrt(p.x_i / p.g)))
+        out.append(("sqrt(x_i/g) (fall over the leg length)", ("x_i", "g"), fmath.sqrt(p.x_i / p.g)))
     if p.ydot_0 != 0:
         out.append(("x_i/|ydot_0| (leg length at the initial speed)", ("x_i", "ydot_0"), p.x_i / abs(p.ydot_0)))
     if p.k > 0:
-        out.append(("sqrt(m/k) (leg spring)", ("m", "k"), math.sqrt(p.m / p.k)))
+        out.append(("sqrt(m/k) (leg spring)", ("m", "k"), fmath.sqrt(p.m / p.k)))
         out.append(("c/k (relaxation of the leg)", ("c", "k"), p.c / p.k))
     # the soil's stiffness at the resting depth delta_s = (m g/K)^(1/n): K_s = n K delta_s^(n-1)
     # (= K for a linear soil); under the leg dashpot the foot relaxes in c/K_s
@@ -153,14 +152,14 @@ def error_scales(p):
 def initial(p):
     check(p)
     s, x_lift = _initial_mode(p)
-    X = [float(p.y_0), float(p.ydot_0), 0.0, 0.0, 0.0, 0.0, 0.0]
-    q = {"s": s, "d0dot": float(p.d0dot), "delta_max": 0.0, "x_lift": x_lift}
+    X = [p.y_0, p.ydot_0, 0.0, 0.0, 0.0, 0.0, 0.0]
+    q = {"s": s, "d0dot": p.d0dot, "delta_max": 0.0, "x_lift": x_lift}
     return X, q
 
 
 def bind(q, u, p):
     """The flow for fixed (q, u, p), constants hoisted out of the 7-13 calls per step."""
-    F = float(u[0])
+    F = u[0]
     fa = F / p.m - p.g
     if not q["s"]:
         def flight(t, X):
@@ -195,7 +194,7 @@ def _flight_leg(X, q, p):
     """Leg deflection in flight: the massless free-ended leg relaxes, k x + c x' = 0, from its
     deflection at liftoff: x = x_lift exp(-(k/c) tau)."""
     x_lift = q["x_lift"]
-    return x_lift * math.exp(-(p.k / p.c) * X[I_TAU]) if x_lift else 0.0
+    return x_lift * fmath.exp(-(p.k / p.c) * X[I_TAU]) if x_lift else 0.0
 
 
 def _foot_height_flight(X, q, p):

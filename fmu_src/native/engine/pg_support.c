@@ -1,0 +1,259 @@
+/* See pg_support.h. */
+#include "pg_support.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+void pg_msg_clear(PgMsg *m)
+{
+    m->text[0] = '\0';
+    m->len = 0;
+    m->arith = 0;
+}
+
+void pg_msg_str(PgMsg *m, const char *s)
+{
+    size_t n = strlen(s);
+    if (m->len + n >= PG_MSG_MAX) n = PG_MSG_MAX - 1 - m->len;
+    memcpy(m->text + m->len, s, n);
+    m->len += n;
+    m->text[m->len] = '\0';
+}
+
+void pg_msg_printf(PgMsg *m, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    int n = vsnprintf(m->text + m->len, PG_MSG_MAX - m->len, fmt, ap);
+    va_end(ap);
+    if (n > 0) m->len += (size_t)n < PG_MSG_MAX - m->len ? (size_t)n : PG_MSG_MAX - 1 - m->len;
+}
+
+/* The shortest decimal digits that read back as v (Python's repr, dtoa mode 0): the correctly
+ * rounded P-digit form for the least P that round-trips. digits: without the point; returns the
+ * decimal exponent of the first digit (v = 0.d1d2... x 10^(exp + 1)). */
+static int shortest_digits(double v, char *digits, size_t size)
+{
+    char buf[40];
+    for (int prec = 1; prec <= 17; ++prec) {
+        snprintf(buf, sizeof buf, "%.*e", prec - 1, v);
+        if (strtod(buf, NULL) == v || prec == 17) {
+            char *e = strchr(buf, 'e');
+            int exp10 = atoi(e + 1);
+            size_t k = 0;
+            for (char *c = buf; c < e && k + 1 < size; ++c)
+                if (*c >= '0' && *c <= '9') digits[k++] = *c;
+            digits[k] = '\0';
+            while (k > 1 && digits[k - 1] == '0') digits[--k] = '\0'; /* (%.*e pads none, but be safe) */
+            return exp10;
+        }
+    }
+    return 0;
+}
+
+void pg_repr_double(double v, char *buf, size_t size)
+{
+    if (isnan(v)) {
+        snprintf(buf, size, "nan");
+        return;
+    }
+    if (isinf(v)) {
+        snprintf(buf, size, v > 0 ? "inf" : "-inf");
+        return;
+    }
+    if (v == 0.0) {
+        snprintf(buf, size, signbit(v) ? "-0.0" : "0.0");
+        return;
+    }
+    char digits[24];
+    int exp10 = shortest_digits(fabs(v), digits, sizeof digits);
+    int decpt = exp10 + 1; /* digits d1 d2 ... with the point after decpt of them */
+    int n = (int)strlen(digits);
+    char out[64];
+    size_t k = 0;
+    if (v < 0) out[k++] = '-';
+    if (decpt <= -4 || decpt > 16) { /* exponent notation: d.ddde+XX */
+        out[k++] = digits[0];
+        if (n > 1) {
+            out[k++] = '.';
+            for (int i = 1; i < n; ++i) out[k++] = digits[i];
+        }
+        k += (size_t)snprintf(out + k, sizeof out - k, "e%c%02d", exp10 < 0 ? '-' : '+', abs(exp10));
+    } else if (decpt <= 0) { /* 0.000ddd */
+        out[k++] = '0';
+        out[k++] = '.';
+        for (int i = 0; i < -decpt; ++i) out[k++] = '0';
+        for (int i = 0; i < n; ++i) out[k++] = digits[i];
+    } else { /* ddd.ddd, with .0 when there is no fraction */
+        for (int i = 0; i < decpt; ++i) out[k++] = i < n ? digits[i] : '0';
+        out[k++] = '.';
+        if (n > decpt) {
+            for (int i = decpt; i < n; ++i) out[k++] = digits[i];
+        } else {
+            out[k++] = '0';
+        }
+    }
+    out[k] = '\0';
+    snprintf(buf, size, "%s", out);
+}
+
+void pg_format(double v, const char *spec, char *buf, size_t size)
+{
+    if (isnan(v)) {
+        snprintf(buf, size, "nan");
+        return;
+    }
+    if (isinf(v)) {
+        snprintf(buf, size, v > 0 ? "inf" : "-inf");
+        return;
+    }
+    int prec = 6;
+    char type = 'g';
+    const char *c = spec;
+    if (*c == '.') {
+        prec = atoi(c + 1);
+        ++c;
+        while (*c >= '0' && *c <= '9') ++c;
+    }
+    if (*c) type = *c;
+    if (type == 'g' && prec == 0) prec = 1;
+    char fmt[16];
+    snprintf(fmt, sizeof fmt, "%%.%d%c", prec, type);
+    snprintf(buf, size, fmt, v);
+}
+
+void pg_msg_value(PgMsg *m, double v, char kind, const char *spec)
+{
+    char buf[64];
+    if (strcmp(spec, "r") == 0) {
+        if (kind == 'b') {
+            snprintf(buf, sizeof buf, "%s", v != 0.0 ? "True" : "False");
+        } else if (kind == 'i' && isfinite(v)) {
+            snprintf(buf, sizeof buf, "%.0f", v);
+        } else {
+            pg_repr_double(v, buf, sizeof buf);
+        }
+    } else {
+        pg_format(v, spec, buf, sizeof buf);
+    }
+    pg_msg_str(m, buf);
+}
+
+int pg_arith(PgMsg *m, int kind)
+{
+    pg_msg_clear(m);
+    m->arith = kind;
+    pg_msg_str(m, kind == PG_ZERO_DIVISION ? "float division by zero"
+                  : kind == PG_OVERFLOW    ? "Numerical result out of range"
+                                           : "math domain error");
+    return PG_ARITH;
+}
+
+static int arith_text(PgMsg *m, int kind, const char *text)
+{
+    pg_msg_clear(m);
+    m->arith = kind;
+    pg_msg_str(m, text);
+    return PG_ARITH;
+}
+
+/* float ** float as CPython's float_pow computes it, with its errors */
+int pg_pow(double iv, double iw, double *out, PgMsg *m)
+{
+    if (iw == 0.0) { *out = 1.0; return PG_OK; }
+    if (isnan(iv)) { *out = iv == 1.0 ? 1.0 : iv; return PG_OK; }
+    if (isnan(iw)) { *out = iv == 1.0 ? 1.0 : iw; return PG_OK; }
+    if (isinf(iw)) {
+        double a = fabs(iv);
+        *out = a == 1.0 ? 1.0 : ((iw > 0) == (a > 1.0)) ? INFINITY : 0.0;
+        return PG_OK;
+    }
+    if (isinf(iv)) {
+        int odd = fmod(fabs(iw), 2.0) == 1.0;
+        if (iw > 0) *out = odd ? iv : fabs(iv);
+        else *out = odd ? copysign(0.0, iv) : 0.0;
+        return PG_OK;
+    }
+    if (iv == 0.0) {
+        int odd = fmod(fabs(iw), 2.0) == 1.0;
+        if (iw < 0.0) return arith_text(m, PG_ZERO_DIVISION, "0.0 cannot be raised to a negative power");
+        *out = odd ? iv : 0.0;
+        return PG_OK;
+    }
+    int negate = 0;
+    if (iv < 0.0) {
+        if (iw != floor(iw)) /* Python returns a complex number here: no real result */
+            return arith_text(m, PG_DOMAIN, "math domain error");
+        iv = -iv;
+        negate = fmod(fabs(iw), 2.0) == 1.0;
+    }
+    if (iv == 1.0) { *out = negate ? -1.0 : 1.0; return PG_OK; }
+    errno = 0;
+    double ix = pow(iv, iw);
+    if (isinf(ix)) return arith_text(m, PG_OVERFLOW, "Numerical result out of range");
+    *out = negate ? -ix : ix;
+    return PG_OK;
+}
+
+int pg_sqrt(double a, double *out, PgMsg *m)
+{
+    if (a < 0.0 || (isinf(a) && a < 0)) return arith_text(m, PG_DOMAIN, "math domain error");
+    *out = sqrt(a);
+    return PG_OK;
+}
+
+int pg_exp(double a, double *out, PgMsg *m)
+{
+    double r = exp(a);
+    if (isinf(r) && isfinite(a)) return arith_text(m, PG_OVERFLOW, "math range error");
+    *out = r;
+    return PG_OK;
+}
+
+int pg_log(double a, double *out, PgMsg *m)
+{
+    if (!(a > 0.0) && !isnan(a)) return arith_text(m, PG_DOMAIN, "math domain error");
+    *out = log(a);
+    return PG_OK;
+}
+
+int pg_cos(double a, double *out, PgMsg *m)
+{
+    if (isinf(a)) return arith_text(m, PG_DOMAIN, "math domain error");
+    *out = cos(a);
+    return PG_OK;
+}
+
+int pg_sin(double a, double *out, PgMsg *m)
+{
+    if (isinf(a)) return arith_text(m, PG_DOMAIN, "math domain error");
+    *out = sin(a);
+    return PG_OK;
+}
+
+int pg_atan2(double a, double b, double *out, PgMsg *m)
+{
+    (void)m;
+    *out = atan2(a, b);
+    return PG_OK;
+}
+
+int pg_hypot(double a, double b, double *out, PgMsg *m)
+{
+    (void)m;
+    *out = hypot(a, b);
+    return PG_OK;
+}
+
+/* math.trunc of a float: an int in Python; NaN and infinities raise */
+int pg_trunc(double a, double *out, PgMsg *m)
+{
+    if (isnan(a)) return arith_text(m, PG_DOMAIN, "cannot convert float NaN to integer");
+    if (isinf(a)) return arith_text(m, PG_OVERFLOW, "cannot convert float infinity to integer");
+    *out = trunc(a);
+    return PG_OK;
+}

@@ -1,0 +1,66 @@
+"""Compiling the native code: a model's generated C with the engine's C files, by the system C
+compiler (host-side; ``build_fmu.py`` and the tests use it).
+
+Flags: C99, ``-O2`` and ``-ffp-contract=off`` — no fused multiply-add, so that every operation is
+rounded as Python rounds it (the same bits as the Python engine).
+"""
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+from pathlib import Path
+from typing import Iterable, Optional, Sequence
+
+NATIVE = Path(__file__).resolve().parents[2] / "native"
+ENGINE = NATIVE / "engine"
+CFLAGS = ("-std=c99", "-O2", "-ffp-contract=off", "-fno-strict-aliasing", "-Wall", "-Wextra")
+
+
+class CompileError(Exception):
+    """The C compiler is missing or failed (the message holds its first lines of output)."""
+
+
+def c_compiler(cc: Optional[str] = None) -> Optional[str]:
+    for name in ([cc] if cc else [os.environ.get("CC"), "cc", "gcc", "clang"]):
+        if name and shutil.which(name):
+            return shutil.which(name)
+    return None
+
+
+def compile_c(sources: Sequence[Path], out: Path, *, shared: bool = True, include: Iterable[Path] = (),
+              defines: Iterable[str] = (), cc: Optional[str] = None, extra: Sequence[str] = (),
+              libs: Sequence[str] = ("-lm",)) -> Path:
+    compiler = c_compiler(cc)
+    if compiler is None:
+        raise CompileError("no C compiler found (cc, gcc or clang; or set CC)")
+    cmd = [compiler, *CFLAGS, *(["-shared", "-fPIC"] if shared else []), *extra,
+           *(f"-I{p}" for p in include), *(f"-D{d}" for d in defines),
+           *(str(s) for s in sources), "-o", str(out), *libs]
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    if proc.returncode != 0:
+        lines = (proc.stderr or proc.stdout).strip().splitlines()
+        raise CompileError(f"{Path(compiler).name} failed ({proc.returncode}): " + " | ".join(lines[:6]))
+    return out
+
+
+def write_model_source(model_name: str, folder: Path) -> Path:
+    """``<folder>/<Model>_model.c``, generated from the Python model."""
+    from pogofmu.runtime.models import get
+
+    from .cmodel import generate
+
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f"{model_name}_model.c"
+    text = generate(get(model_name))
+    if not path.exists() or path.read_text() != text:
+        path.write_text(text)
+    return path
+
+
+def model_library(model_name: str, folder: Path, cc: Optional[str] = None) -> Path:
+    """A shared library of the model's generated C and the engine's support code (``PG_MODEL``
+    exported), for tests that call the generated functions directly."""
+    src = write_model_source(model_name, folder)
+    out = folder / f"lib{model_name}_model.so"
+    return compile_c([src, ENGINE / "pg_support.c"], out, include=[ENGINE], cc=cc)

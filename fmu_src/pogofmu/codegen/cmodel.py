@@ -1,0 +1,283 @@
+"""The C file of one model, generated from its :class:`~pogofmu.runtime.model.HybridModel`.
+
+Every pure function of the model is traced (:mod:`.trace`) and printed (:mod:`.cprint`) as a C
+function of ``fmu_src/native/engine/pg_model.h``'s interface: the solver settings' rules, the
+parameter rules, the initial state (the pieces of the engine's
+:func:`~pogofmu.runtime.engine.simulator.prepare`), the flow as the engine calls it
+(``bind(q, u, p)(t, x)``), each event's guard, activity and jump, the outputs, the domain
+conditions (with the engine's slack) and the scales. No equation is written a second time: the C
+is what the Python does, operation by operation.
+
+    python -m pogofmu.codegen.cmodel PogoStick > PogoStick_model.c
+"""
+from __future__ import annotations
+
+import sys
+from typing import Dict, List, Tuple
+
+from pogofmu.runtime.engine import SOLVER_PARAMETERS
+from pogofmu.runtime.engine.settings import check_solver_parameters, domain_slack
+from pogofmu.runtime.model import HybridModel, Params
+
+from .cprint import Printer, c_string, literal, message_lines, result_nodes
+from .trace import BOOL, FLOAT, INT, Sym, TraceError, explore, symbol
+
+ARGS = {
+    "check_settings": "const double *s, PgMsg *m",
+    "check": "const double *p, PgMsg *m",
+    "initial": "const double *p, double *x_out, double *q_out, PgMsg *m",
+    "flow": "double t, const double *x, const double *q, const double *u, const double *p, double *dx, PgMsg *m",
+    "guard": "const double *x, const double *q, const double *u, const double *p, double *g, PgMsg *m",
+    "active": "const double *q, int *on, PgMsg *m",
+    "jump": "const double *x, const double *q, const double *u, const double *p, double *x_new, double *q_new, "
+            "PgMsg *m",
+    "outputs": "double t, const double *x, const double *q, const double *u, const double *p, double *y, PgMsg *m",
+    "domain": "double t, const double *x, const double *q, const double *u, const double *p, const double *s, "
+              "PgMsg *m",
+    "scales": "const double *p, PgScale *out, int *n, PgMsg *m",
+}
+INPUTS = {"t": "t", "x": "x[{i}]", "q": "q[{i}]", "u": "u[{i}]", "p": "p[{i}]", "s": "s[{i}]"}
+
+
+def _kind_of(v) -> str:
+    return INT if isinstance(v, int) and not isinstance(v, (bool, float)) else FLOAT
+
+
+def discrete_layout(model: HybridModel) -> List[Tuple[str, str]]:
+    """The slots of the discrete state ``q``: (key, kind) in the order of the model's initial
+    ``q`` for the default parameters (the jumps keep the keys)."""
+    _, q = model.initial(model.params())
+    return [(k, _kind_of(v)) for k, v in q.items()]
+
+
+class Inputs:
+    """The traced inputs of one call (made inside each run of a path)."""
+
+    def __init__(self, model: HybridModel, layout):
+        self.model, self.layout = model, layout
+
+    def t(self):
+        return symbol("t", 0)
+
+    def x(self):
+        return [symbol("x", i) for i in range(len(self.model.states))]
+
+    def q(self):
+        return {k: symbol("q", j, kind) for j, (k, kind) in enumerate(self.layout)}
+
+    def u(self):
+        return tuple(symbol("u", i) for i in range(len(self.model.inputs)))
+
+    def p(self):
+        return Params({par.name: symbol("p", i, INT if par.integer else FLOAT)
+                       for i, par in enumerate(self.model.parameters)})
+
+    def s(self):
+        return Params({par.name: symbol("s", i, INT if par.integer else FLOAT)
+                       for i, par in enumerate(SOLVER_PARAMETERS)})
+
+
+def _raise_lines(path, ref):
+    _, cls, text = path.result
+    return ["pg_msg_clear(m);", *message_lines(text, ref), "return PG_RAISE;"]
+
+
+def _number(v) -> bool:
+    return isinstance(v, (Sym, bool, int, float))
+
+
+class ModelWriter:
+    def __init__(self, model: HybridModel):
+        self.model = model
+        self.layout = discrete_layout(model)
+        self.inp = Inputs(model, self.layout)
+        self.functions: List[str] = []
+
+    # ---- one traced function ----
+    def function(self, name, args, fn, leaf, what):
+        paths = explore(fn, f"{self.model.name}: {what}")
+
+        def roots(path):
+            return result_nodes(path.result[1] if path.result[0] == "return" else path.result[2])
+
+        def any_leaf(path, ref):
+            if path.result[0] == "raise":
+                return _raise_lines(path, ref)
+            return leaf(path.result[1], ref)
+        body = Printer(paths, INPUTS, any_leaf, roots).body()
+        unused = [a.split()[-1].lstrip("*") for a in args.split(", ")]
+        self.functions.append("\n".join(
+            [f"static int {name}({args})", "{", *[f"    (void){u};" for u in unused], *body, "}", ""]))
+        return len(paths)
+
+    # ---- leaves ----
+    def _vector(self, target, n, what):
+        def leaf(value, ref):
+            if not (isinstance(value, (list, tuple)) and len(value) == n and all(map(_number, value))):
+                raise TraceError(f"{self.model.name}: {what} returned {value!r}, not {n} numbers")
+            return [f"{target}[{i}] = {ref(v)};" for i, v in enumerate(value)] + ["return PG_OK;"]
+        return leaf
+
+    def _q_lines(self, q, target, what):
+        keys = [k for k, _ in self.layout]
+        if not isinstance(q, dict) or list(q) != keys and set(q) != set(keys):
+            raise TraceError(f"{self.model.name}: {what} returned a discrete state with keys {list(q)}, not {keys}")
+        return q, keys
+
+    def _state_leaf(self, xname, qname, what):
+        nx = len(self.model.states)
+
+        def leaf(value, ref):
+            x, q = value
+            q, keys = self._q_lines(q, qname, what)
+            if len(x) != nx:
+                raise TraceError(f"{self.model.name}: {what} returned {len(x)} states, not {nx}")
+            return ([f"{xname}[{i}] = {ref(v)};" for i, v in enumerate(x)]
+                    + [f"{qname}[{j}] = {ref(q[k])};" for j, k in enumerate(keys)] + ["return PG_OK;"])
+        return leaf
+
+    def _scales_leaf(self, value, ref):
+        lines = []
+        for k, item in enumerate(value):
+            label, names, v = item
+            if len(names) > 6:
+                raise TraceError(f"{self.model.name}: a scale names more than 6 parameters: {names}")
+            lines.append(f"out[{k}].label = {c_string(label)};")
+            for j, nm in enumerate(names):
+                lines.append(f"out[{k}].names[{j}] = {c_string(nm)};")
+            lines += [f"out[{k}].n_names = {len(names)};", f"out[{k}].value = {ref(v)};"]
+        return lines + [f"*n = {len(value)};", "return PG_OK;"]
+
+    # ---- the whole file ----
+    def write(self) -> str:
+        model, inp = self.model, self.inp
+        nx, nu, ne = len(model.states), len(model.inputs), len(model.events)
+        counts: Dict[str, int] = {}
+        # the start of a run in the pieces of the engine's prepare(), traced one by one (the engine
+        # calls them in its order); traced as one, the branches of each would multiply
+        counts["check_settings"] = self.function(
+            "pg_check_settings", ARGS["check_settings"],
+            lambda: check_solver_parameters(inp.s(), has_states=bool(model.states)),
+            lambda v, ref: ["return PG_OK;"], "the solver's settings")
+        counts["check"] = self.function("pg_check", ARGS["check"], lambda: model.check(inp.p()),
+                                        lambda v, ref: ["return PG_OK;"], "the parameter rules")
+        counts["initial"] = self.function(
+            "pg_initial", ARGS["initial"], lambda: model.initial(inp.p()),
+            self._state_leaf("x_out", "q_out", "initial"), "the initial state")
+
+        def flow():
+            t, x, q, u, p = inp.t(), inp.x(), inp.q(), inp.u(), inp.p()
+            if model.bind is not None:
+                return model.bind(q, u, p)(t, x)
+            return model.flow(t, x, q, u, p)
+        counts["flow"] = self.function("pg_flow", ARGS["flow"], flow, self._vector("dx", nx, "the flow"), "flow")
+        for k, ev in enumerate(model.events):
+            counts[f"guard {ev.name}"] = self.function(
+                f"pg_guard_{k}", ARGS["guard"], lambda ev=ev: ev.guard(inp.x(), inp.q(), inp.u(), inp.p()),
+                lambda v, ref: [f"*g = {ref(v)};", "return PG_OK;"], f"guard of {ev.name}")
+            counts[f"active {ev.name}"] = self.function(
+                f"pg_active_{k}", ARGS["active"], lambda ev=ev: ev.active(inp.q()),
+                lambda v, ref: [f"*on = ({ref(v)}) ? 1 : 0;", "return PG_OK;"], f"activity of {ev.name}")
+            counts[f"jump {ev.name}"] = self.function(
+                f"pg_jump_{k}", ARGS["jump"], lambda ev=ev: ev.jump(inp.x(), inp.q(), inp.u(), inp.p()),
+                self._state_leaf("x_new", "q_new", f"jump of {ev.name}"), f"jump of {ev.name}")
+        names = [v.name for v in model.outputs]
+
+        def outputs_leaf(value, ref):
+            if not isinstance(value, dict) or set(value) != set(names):
+                raise TraceError(f"{model.name}: the outputs returned {sorted(value)}, not {sorted(names)}")
+            return [f"y[{j}] = {ref(value[n])};" for j, n in enumerate(names)] + ["return PG_OK;"]
+        counts["outputs"] = self.function(
+            "pg_outputs", ARGS["outputs"],
+            lambda: model.output_fn(inp.t(), inp.x(), inp.q(), inp.u(), inp.p()), outputs_leaf, "outputs")
+
+        def domain():
+            return model.domain(inp.t(), inp.x(), inp.q(), inp.u(), inp.p(), domain_slack(inp.s()))
+
+        def domain_leaf(value, ref):
+            if value is None:
+                return ["return PG_OK;"]
+            return ["pg_msg_clear(m);", *message_lines(value, ref), "return PG_RAISE;"]
+        counts["domain"] = self.function("pg_domain", ARGS["domain"], domain, domain_leaf, "domain")
+        for kind in ("time_scales", "error_scales"):
+            fn = getattr(model, kind)
+            if fn is None:
+                self.functions.append(f"static int pg_{kind}({ARGS['scales']})\n{{\n    (void)p; (void)out; (void)m;\n"
+                                      f"    *n = 0;\n    return PG_OK;\n}}\n")
+            else:
+                counts[kind] = self.function(f"pg_{kind}", ARGS["scales"], lambda fn=fn: fn(inp.p()),
+                                             self._scales_leaf, kind.replace("_", " "))
+        self.counts = counts
+        return self._file(nx, nu, ne, names)
+
+    def _dispatch(self, name, args, call_args, ne):
+        lines = [f"static int {name}(int k, {args})", "{", "    switch (k) {"]
+        for k in range(ne):
+            lines.append(f"    case {k}: return {name}_{k}({call_args});")
+        lines += ["    default: (void)k;" if ne == 0 else "    default: break;", "    }"]
+        lines += [f"    (void){a};" for a in call_args.split(", ")]
+        lines += ["    pg_msg_clear(m);", '    pg_msg_str(m, "no such event");', "    return PG_RAISE;", "}", ""]
+        return "\n".join(lines)
+
+    def _file(self, nx, nu, ne, out_names):
+        model = self.model
+
+        def strings(name, items):
+            if not items:
+                return f"static const char *const {name}[1] = {{0}};"
+            return f"static const char *const {name}[] = {{{', '.join(c_string(s) for s in items)}}};"
+        head = [
+            f"/* {model.name}: generated by pogofmu.codegen.cmodel from the Python model (do not edit;",
+            "   rebuilt by build_fmu.py). Every function does the Python code's operations in its order. */",
+            '#include <math.h>', '#include "pg_model.h"', '#include "pg_support.h"', "",
+        ]
+        tail = [
+            self._dispatch("pg_guard", ARGS["guard"], "x, q, u, p, g, m", ne),
+            self._dispatch("pg_active", ARGS["active"], "q, on, m", ne),
+            self._dispatch("pg_jump", ARGS["jump"], "x, q, u, p, x_new, q_new, m", ne),
+            strings("STATE_NAMES", [v.name for v in model.states]),
+            strings("Q_NAMES", [k for k, _ in self.layout]),
+            strings("INPUT_NAMES", [v.name for v in model.inputs]),
+            strings("PARAMETER_NAMES", [par.name for par in model.parameters]),
+            strings("OUTPUT_NAMES", out_names),
+            strings("EVENT_NAMES", [ev.name for ev in model.events]),
+            f"static const signed char EVENT_DIRECTION[] = {{{', '.join(str(ev.direction) for ev in model.events) or '0'}}};",
+            "",
+            "const PgModel PG_MODEL = {",
+            f"    {c_string(model.name)}, {nx}, {len(self.layout)}, {nu}, {len(model.parameters)}, "
+            f"{len(SOLVER_PARAMETERS)}, {len(out_names)}, {ne},",
+            "    STATE_NAMES, Q_NAMES, " + c_string("".join(k for _, k in self.layout)) + ", INPUT_NAMES, PARAMETER_NAMES,",
+            "    " + c_string("".join("i" if par.integer else "f" for par in model.parameters)) + ",",
+            "    OUTPUT_NAMES, EVENT_NAMES, EVENT_DIRECTION,",
+            f"    {int(model.time_scales is not None)}, {int(model.error_scales is not None)},",
+            "    pg_check_settings, pg_check, pg_initial, pg_flow, pg_guard, pg_active, pg_jump, pg_outputs, "
+            "pg_domain, pg_time_scales, pg_error_scales,",
+            "};", "",
+        ]
+        return "\n".join(head + self.functions + tail)
+
+
+def generate(model: HybridModel) -> str:
+    """The C source of ``model`` (``PG_MODEL``)."""
+    return ModelWriter(model).write()
+
+
+def main(argv=None):
+    from pogofmu.runtime.models import get
+
+    argv = sys.argv[1:] if argv is None else argv
+    if len(argv) != 1:
+        print("usage: python -m pogofmu.codegen.cmodel <Model>", file=sys.stderr)
+        return 2
+    try:
+        sys.stdout.write(generate(get(argv[0])))
+    except (KeyError, TraceError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
+
+__all__ = ["generate", "discrete_layout", "literal", "BOOL"]

@@ -1,0 +1,192 @@
+"""Printing traced paths (:mod:`.trace`) as the body of one C function.
+
+The paths of a function share their first decisions; the body is their decision tree: the
+operations every path below a decision needs are printed once before its ``if``, in the order
+Python made them, each as ``const double v<k> = ...;`` (C evaluates them in that order with the
+same IEEE operations: the same bits). An operation that raises in Python (a division by zero,
+``sqrt`` of a negative number, an overflow in ``**`` or ``exp``) is checked where it happens and
+ends the function with the error Python would raise (``pg_*`` helpers of ``pg_support.h``),
+even when its value is not used afterwards — as in Python. Leaves (what a path returns or
+raises) are printed by a callback of the caller, which knows what the function returns.
+"""
+from __future__ import annotations
+
+import math
+from typing import Callable, Dict, List, Sequence, Set
+
+from .trace import BOOL, INT, Node, Path, Sym, split_message  # noqa: F401
+
+FALLIBLE = {"truediv", "pow", "sqrt", "exp", "log", "cos", "sin", "trunc"}
+INFIX = {"add": "+", "sub": "-", "mul": "*", "lt": "<", "le": "<=", "gt": ">", "ge": ">=", "eq": "==", "ne": "!="}
+
+
+def literal(v) -> str:
+    """A Python number as a C double literal that parses to the same double."""
+    if isinstance(v, bool):
+        return "1.0" if v else "0.0"
+    if isinstance(v, int):
+        return f"{v}.0"
+    if math.isnan(v):
+        return "NAN"
+    if math.isinf(v):
+        return "INFINITY" if v > 0 else "(-INFINITY)"
+    text = repr(float(v))
+    if "." not in text and "e" not in text:
+        text += ".0"
+    return f"({text})" if text.startswith("-") else text
+
+
+def c_string(text: str) -> str:
+    out = []
+    for ch in text:
+        if ch in '"\\':
+            out.append("\\" + ch)
+        elif ch == "\n":
+            out.append("\\n")
+        elif ord(ch) < 32 or ord(ch) == 127:
+            out.append(f"\\{ord(ch):03o}")
+        elif ord(ch) > 127:
+            out.extend(f"\\{b:03o}" for b in ch.encode("utf-8"))
+        else:
+            out.append(ch)
+    return '"' + "".join(out) + '"'
+
+
+class Printer:
+    """Prints one traced function. ``inputs`` maps an input group (``t``, ``x``, ``q`` ...) to the
+    C expression of its element ``{i}``; ``leaf(path, ref) -> lines`` prints what a path does at
+    its end, ``ref(value)`` giving the C expression of a traced value or a number."""
+
+    def __init__(self, paths: Sequence[Path], inputs: Dict[str, str], leaf: Callable, roots: Callable):
+        self.paths = list(paths)
+        self.inputs = inputs
+        self.leaf = leaf
+        self.roots = roots  # (path) -> the node indices its result uses
+        self._live = [self._live_set(p) for p in self.paths]
+
+    # ---- liveness: what a path needs (its result, its decisions, every operation that may raise)
+    def _live_set(self, path: Path) -> Set[int]:
+        nodes = path.nodes
+        todo = [c for c, _, _ in path.decisions] + list(self.roots(path))
+        todo += [n.index for n in nodes if n.op in FALLIBLE]
+        live: Set[int] = set()
+        while todo:
+            i = todo.pop()
+            if i in live:
+                continue
+            live.add(i)
+            if nodes[i].op == "in":
+                continue
+            for a in nodes[i].args:
+                if isinstance(a, int):
+                    todo.append(a)
+        return live
+
+    def ref_of(self, path: Path):
+        def ref(v):
+            if isinstance(v, Sym):
+                return f"v{v.i}"
+            if isinstance(v, (bool, int, float)):
+                return literal(v)
+            raise TypeError(f"not a number: {v!r}")
+        return ref
+
+    def body(self) -> List[str]:
+        return self._tree(list(range(len(self.paths))), 0, 0, "    ")
+
+    def _tree(self, group: List[int], depth: int, start: int, ind: str) -> List[str]:
+        first = self.paths[group[0]]
+        live = set().union(*(self._live[k] for k in group))
+        if depth < len(first.decisions):
+            cond, _, n_before = first.decisions[depth]
+            lines = self._nodes(first.nodes, start, n_before, live, ind)
+            yes = [k for k in group if self.paths[k].decisions[depth][1]]
+            no = [k for k in group if not self.paths[k].decisions[depth][1]]
+            assert yes and no, "a decision explored one way only"
+            lines.append(f"{ind}if (v{cond}) {{")
+            lines += self._tree(yes, depth + 1, n_before, ind + "    ")
+            lines.append(f"{ind}}} else {{")
+            lines += self._tree(no, depth + 1, n_before, ind + "    ")
+            lines.append(f"{ind}}}")
+            return lines
+        assert len(group) == 1, "paths that agree on every decision"
+        lines = self._nodes(first.nodes, start, len(first.nodes), live, ind)
+        return lines + [ind + line for line in self.leaf(first, self.ref_of(first))]
+
+    def _nodes(self, nodes: List[Node], start: int, stop: int, live: Set[int], ind: str) -> List[str]:
+        out = []
+        for n in nodes[start:stop]:
+            if n.index in live:
+                out += [ind + line for line in self._node(n, nodes)]
+                if n.op in FALLIBLE:  # kept for its error even where its value is not used
+                    out.append(f"{ind}(void)v{n.index};")
+        return out
+
+    def _node(self, n: Node, nodes: List[Node]) -> List[str]:
+        def a(k):
+            v = n.args[k]
+            return f"v{v}" if isinstance(v, int) else literal(v[1])
+
+        def num(k):  # an operand as a number (a truth value is 0 or 1 in arithmetic)
+            return a(k)
+        name = f"v{n.index}"
+        ctype = "int" if n.kind == BOOL else "double"
+        op = n.op
+        if op == "in":
+            group, i = n.args
+            return [f"const {ctype} {name} = {self.inputs[group].format(i=i)};"]
+        if op in INFIX:
+            return [f"const {ctype} {name} = {num(0)} {INFIX[op]} {num(1)};"]
+        if op == "truediv":
+            return [f"if ({num(1)} == 0.0) return pg_arith(m, PG_ZERO_DIVISION);",
+                    f"const double {name} = {num(0)} / {num(1)};"]
+        if op in ("pow", "atan2", "hypot"):
+            fn = {"pow": "pg_pow", "atan2": "pg_atan2", "hypot": "pg_hypot"}[op]
+            return [f"double {name};", f"if ({fn}({num(0)}, {num(1)}, &{name}, m)) return PG_ARITH;"]
+        if op in ("sqrt", "exp", "log", "cos", "sin", "trunc"):
+            return [f"double {name};", f"if (pg_{op}({num(0)}, &{name}, m)) return PG_ARITH;"]
+        if op == "neg":
+            return [f"const double {name} = -{num(0)};"]
+        if op == "abs":
+            return [f"const double {name} = fabs({num(0)});"]
+        if op == "not":
+            return [f"const int {name} = !{a(0)};"]
+        if op == "isfinite":
+            return [f"const int {name} = isfinite({num(0)}) ? 1 : 0;"]
+        if op == "isnumber":
+            return [f"const int {name} = isnan({num(0)}) ? 0 : 1;"]
+        raise ValueError(f"no C for the operation {op}")
+
+
+def message_lines(text: str, ref, kind_of=None) -> List[str]:
+    """C statements appending ``text`` (with its placeholders) to the message ``m``."""
+    out = []
+    for part in split_message(text):
+        if isinstance(part, str):
+            out.append(f"pg_msg_str(m, {c_string(part)});")
+        else:
+            i, kind, spec = part
+            out.append(f"pg_msg_value(m, v{i}, '{kind}', {c_string(spec)});")
+    return out
+
+
+def result_nodes(value) -> List[int]:
+    """Every traced node a returned structure refers to (and the placeholders in its strings)."""
+    out: List[int] = []
+
+    def walk(v):
+        if isinstance(v, Sym):
+            out.append(v.i)
+        elif isinstance(v, str):
+            out.extend(p[0] for p in split_message(v) if not isinstance(p, str))
+        elif isinstance(v, dict):
+            for w in v.values():
+                walk(w)
+        elif isinstance(v, (list, tuple)):
+            for w in v:
+                walk(w)
+    walk(value)
+    return out
+
+
+__all__ = ["Printer", "literal", "c_string", "message_lines", "result_nodes", "INT", "BOOL"]
