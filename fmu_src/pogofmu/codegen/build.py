@@ -64,3 +64,26 @@ def model_library(model_name: str, folder: Path, cc: Optional[str] = None) -> Pa
     src = write_model_source(model_name, folder)
     out = folder / f"lib{model_name}_model.so"
     return compile_c([src, ENGINE / "pg_support.c"], out, include=[ENGINE], cc=cc)
+
+
+def write_pairs_source(folder: Path) -> Path:
+    """``<folder>/pg_pairs.c``, generated from the Python engine's tableaux."""
+    from .cpairs import generate
+
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / "pg_pairs.c"
+    text = generate()
+    if not path.exists() or path.read_text() != text:
+        path.write_text(text)
+    return path
+
+
+ENGINE_SOURCES = ("pg_engine.c", "pg_support.c")
+
+
+def engine_library(model_name: str, folder: Path, cc: Optional[str] = None) -> Path:
+    """A shared library of the native engine with the model's generated C (``PG_MODEL`` and the
+    ``pg_engine_*`` functions exported), for tests that drive the engine directly."""
+    srcs = [write_model_source(model_name, folder), write_pairs_source(folder), *(ENGINE / s for s in ENGINE_SOURCES)]
+    out = folder / f"lib{model_name}_engine.so"
+    return compile_c(srcs, out, include=[ENGINE], cc=cc)

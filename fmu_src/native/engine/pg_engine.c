@@ -1,0 +1,1199 @@
+/* See pg_engine.h. Each function names the Python method it follows (simulator.py); the order of
+ * the floating-point operations is that of the Python code, so both give the same bits. */
+#include "pg_engine.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "pg_support.h"
+
+#define EPS 2.220446049250313e-16
+#define SAFETY 0.9
+#define MIN_FACTOR 0.2
+#define MAX_FACTOR 10.0
+#define MIN_STEP_ULPS 10
+#define START_STEP_ULPS 100
+#define BUDGET_WINDOW 1.0
+#define BUDGET_WARN_FRACTION 0.2
+#define MIN_TIME_SCALE 1e-9
+#define UNBOUNDED_STEP_FACTOR 10.0
+#define STORM_EVENTS 5
+#define ABS_TOL_MAX_FRACTION 1e-3
+#define DOMAIN_SLACK 10.0
+
+/* an error of the model's own (PG_RAISE) or of its arithmetic (PG_ARITH), as raised in Python */
+#define TRY(call) do { int rc_ = (call); if (rc_) return rc_; } while (0)
+
+static double pmax(double a, double b) { return b > a ? b : a; } /* Python's max(a, b) */
+static double pmin(double a, double b) { return b < a ? b : a; } /* Python's min(a, b) */
+
+static const char *event_name(const PgEngine *e, int i) { return e->model->event_names[i]; }
+
+/* ---- messages ------------------------------------------------------------------------------ */
+static int raise_text(PgEngine *e, const char *text)
+{
+    pg_msg_clear(&e->msg);
+    pg_msg_str(&e->msg, text);
+    return PG_RAISE;
+}
+
+static void param_repr(const PgEngine *e, int i, PgMsg *m)
+{
+    pg_msg_value(m, e->p[i], e->model->parameter_kinds[i], "r");
+}
+
+static int param_index(const PgEngine *e, const char *name)
+{
+    for (int i = 0; i < e->np; ++i)
+        if (strcmp(e->model->parameter_names[i], name) == 0) return i;
+    return -1;
+}
+
+/* "m = 1.0, g = 9.81" for the names of a scale */
+static void named_values(const PgEngine *e, const PgScale *sc, PgMsg *m)
+{
+    for (int j = 0; j < sc->n_names; ++j) {
+        if (j) pg_msg_str(m, ", ");
+        pg_msg_str(m, sc->names[j]);
+        pg_msg_str(m, " = ");
+        int i = param_index(e, sc->names[j]);
+        if (i >= 0) param_repr(e, i, m);
+    }
+}
+
+/* _extreme_parameters: the parameters of the most extreme magnitude */
+static void extreme_parameters(const PgEngine *e, PgMsg *m)
+{
+    int idx[PG_MAX_P], n = 0;
+    double mag[PG_MAX_P];
+    for (int i = 0; i < e->np; ++i) {
+        double v = e->p[i];
+        if (v == 0.0 || !isfinite(v)) continue;
+        mag[n] = fabs(log10(fabs(v)));
+        idx[n++] = i;
+    }
+    /* sorted by (magnitude, name, value), largest first, as Python sorts the tuples */
+    for (int a = 1; a < n; ++a) {
+        for (int b = a; b > 0; --b) {
+            int i = idx[b - 1], j = idx[b];
+            double mi = mag[b - 1], mj = mag[b];
+            int c = strcmp(e->model->parameter_names[i], e->model->parameter_names[j]);
+            int less = mi < mj || (mi == mj && (c < 0 || (c == 0 && e->p[i] < e->p[j])));
+            if (!less) break;
+            idx[b - 1] = j, idx[b] = i, mag[b - 1] = mj, mag[b] = mi;
+        }
+    }
+    pg_msg_str(m, "the values exceed floating-point range");
+    if (n) pg_msg_str(m, "; parameters of the most extreme magnitude: ");
+    for (int k = 0; k < n && k < 3; ++k) {
+        if (k) pg_msg_str(m, ", ");
+        pg_msg_str(m, e->model->parameter_names[idx[k]]);
+        pg_msg_str(m, " = ");
+        param_repr(e, idx[k], m);
+    }
+}
+
+/* _arithmetic_error: a floating-point failure in the model, with where it happened */
+static int arithmetic_error(PgEngine *e, const PgMsg *detail, const char *where_prefix, double where_t,
+                            const char *where_suffix)
+{
+    const char *kind = detail->arith == PG_ZERO_DIVISION ? "division by zero"
+                       : detail->arith == PG_OVERFLOW    ? "overflow"
+                                                         : "domain error";
+    char text[PG_MSG_MAX];
+    snprintf(text, sizeof text, "%s", detail->text);
+    PgMsg *m = &e->msg;
+    pg_msg_clear(m);
+    pg_msg_printf(m, "floating-point %s in the model at %s", kind, where_prefix);
+    if (where_suffix) {
+        pg_msg_value(m, where_t, 'f', "r");
+        pg_msg_str(m, where_suffix);
+    }
+    pg_msg_printf(m, " (%s): ", text);
+    extreme_parameters(e, m);
+    return PG_RAISE;
+}
+
+/* a PG_ARITH of a model call becomes the Python engine's DomainError text; PG_RAISE stays */
+static int at_time(PgEngine *e, int rc, const char *prefix, double t, const char *suffix)
+{
+    if (rc == PG_ARITH) return arithmetic_error(e, &e->msg, prefix, t, suffix);
+    return rc;
+}
+
+/* ---- the model, in the current (q, u) ----------------------------------------------------- */
+static int model_fun(void *ctx, double t, const double *y, double *dy, PgMsg *m)
+{
+    PgEngine *e = ctx;
+    return e->model->flow(t, y, e->q, e->u, e->p, dy, m);
+}
+
+static int guard_at(PgEngine *e, int i, const double *x, double *g)
+{
+    return e->model->guard(i, x, e->q, e->u, e->p, g, &e->msg);
+}
+
+static int pair_step(PgEngine *e, double t, const double *y, const double *f, double h, double *y_new,
+                     double *f_new, double *K)
+{
+    if (e->method == 8) return pg_dop853_step(model_fun, e, t, y, f, h, e->nx, y_new, f_new, K, &e->msg);
+    return pg_dopri5_step(model_fun, e, t, y, f, h, e->nx, y_new, f_new, K, &e->msg);
+}
+
+static double error_norm(const PgEngine *e, const double *K, double h, const double *y, const double *y_new)
+{
+    if (e->method == 8) return pg_dop853_error_norm(K, h, y, y_new, e->atol, e->rtol, e->nx);
+    return pg_dopri5_error_norm(K, h, y, y_new, e->atol, e->rtol, e->nx);
+}
+
+static double error_exponent(const PgEngine *e) { return e->method == 8 ? -1.0 / 8.0 : -1.0 / 5.0; }
+static int pair_order(const PgEngine *e) { return e->method == 8 ? 8 : 5; }
+
+/* _Segment.__call__: the step's end points exactly, the dense output in between */
+static int seg_at(PgEngine *e, PgSeg *seg, double t, double *out)
+{
+    if (t == seg->t1) {
+        memcpy(out, seg->y1, sizeof(double) * (size_t)e->nx);
+        return PG_OK;
+    }
+    if (t == seg->t0) {
+        memcpy(out, seg->y0, sizeof(double) * (size_t)e->nx);
+        return PG_OK;
+    }
+    double h = seg->t1 - seg->t0;
+    if (!seg->dense_built) {
+        if (e->method == 8) {
+            TRY(pg_dop853_dense(model_fun, e, seg->t0, seg->y0, seg->y1, h, seg->K, e->nx, seg->Q, &e->msg));
+        } else {
+            pg_dopri5_dense(seg->K, e->nx, seg->Q);
+        }
+        seg->dense_built = 1;
+    }
+    if (e->method == 8) pg_dop853_eval(seg->Q, seg->t0, h, seg->y0, t, e->nx, out);
+    else pg_dopri5_eval(seg->Q, seg->t0, h, seg->y0, t, e->nx, out);
+    return PG_OK;
+}
+
+static void make_seg(PgEngine *e, PgSeg *seg, double t0, double t1, const double *y0, const double *y1,
+                     const double *f0, const double *K)
+{
+    size_t n = sizeof(double) * (size_t)e->nx;
+    seg->t0 = t0, seg->t1 = t1;
+    memmove(seg->y0, y0, n);
+    memmove(seg->y1, y1, n);
+    memmove(seg->f0, f0, n);
+    for (int j = 0; j < PG_MAX_STAGES; ++j) memmove(seg->K + j * PG_MAX_X, K + j * PG_MAX_X, n);
+    seg->dense_built = 0;
+}
+
+static double sgn_of(const PgEngine *e, int i) { return e->model->event_direction[i] == PG_FALLING ? -1.0 : 1.0; }
+
+/* ---- time scales and tolerances (prepare, _stiffness_text) -------------------------------- */
+static int time_scales(PgEngine *e, PgScale *out, int *n, int filtered)
+{
+    *n = 0;
+    if (!e->model->has_time_scales) return PG_OK;
+    TRY(e->model->time_scales(e->p, out, n, &e->msg));
+    if (filtered) {
+        int k = 0;
+        for (int i = 0; i < *n; ++i)
+            if (out[i].value > 0 && isfinite(out[i].value)) out[k++] = out[i];
+        *n = k;
+    }
+    return PG_OK;
+}
+
+static void stiffness_text(PgEngine *e, PgMsg *m)
+{
+    PgScale sc[PG_MAX_SCALES];
+    int n = 0;
+    PgMsg keep = e->msg;
+    if (time_scales(e, sc, &n, 1) != PG_OK) n = 0;
+    e->msg = keep;
+    if (!n) {
+        pg_msg_str(m, "the error control forces steps this small");
+        return;
+    }
+    /* sorted(scales, key=value)[:2]: a stable sort */
+    for (int a = 1; a < n; ++a)
+        for (int b = a; b > 0 && sc[b].value < sc[b - 1].value; --b) {
+            PgScale tmp = sc[b];
+            sc[b] = sc[b - 1], sc[b - 1] = tmp;
+        }
+    pg_msg_str(m, "fastest time scales of the model: ");
+    for (int k = 0; k < n && k < 2; ++k) {
+        if (k) pg_msg_str(m, "; ");
+        pg_msg_str(m, sc[k].label);
+        pg_msg_str(m, " = ");
+        pg_msg_value(m, sc[k].value, 'f', ".3g");
+        pg_msg_str(m, " s (");
+        named_values(e, &sc[k], m);
+        pg_msg_str(m, ")");
+    }
+}
+
+/* _check_time_scales */
+static int check_time_scales(PgEngine *e)
+{
+    PgScale sc[PG_MAX_SCALES];
+    int n = 0;
+    TRY(time_scales(e, sc, &n, 0));
+    for (int k = 0; k < n; ++k) {
+        if (!(sc[k].value >= MIN_TIME_SCALE)) {
+            PgMsg *m = &e->msg;
+            pg_msg_clear(m);
+            pg_msg_str(m, sc[k].n_names > 1 ? "parameters " : "parameter ");
+            named_values(e, &sc[k], m);
+            pg_msg_str(m, sc[k].n_names > 1 ? " violate the rule: the time scale " : " violates the rule: the time scale ");
+            pg_msg_str(m, sc[k].label);
+            pg_msg_str(m, " = ");
+            pg_msg_value(m, sc[k].value, 'f', ".3g");
+            pg_msg_str(m, " s must be >= 1e-09 s (faster dynamics are beyond the solver's resolution)");
+            return PG_RAISE;
+        }
+    }
+    return PG_OK;
+}
+
+/* check_inputs */
+static int check_inputs(PgEngine *e, const double *u)
+{
+    for (int i = 0; i < e->nu; ++i) {
+        if (!isfinite(u[i])) {
+            PgMsg *m = &e->msg;
+            const char *name = e->model->input_names[i];
+            pg_msg_clear(m);
+            pg_msg_printf(m, "input %s = ", name);
+            pg_msg_value(m, u[i], 'f', "r");
+            pg_msg_printf(m, " violates the rule: %s must be finite", name);
+            return PG_RAISE;
+        }
+    }
+    return PG_OK;
+}
+
+/* check_abs_tol */
+static int check_abs_tol(PgEngine *e)
+{
+    PgScale sc[PG_MAX_SCALES];
+    int n = 0;
+    if (e->model->has_error_scales) {
+        TRY(e->model->error_scales(e->p, sc, &n, &e->msg));
+        int k = 0;
+        for (int i = 0; i < n; ++i)
+            if (sc[i].value > 0 && isfinite(sc[i].value)) sc[k++] = sc[i];
+        n = k;
+    }
+    if (!n) {
+        double big = 0.0;
+        for (int i = 0; i < e->nx; ++i) {
+            double a = fabs(e->x[i]);
+            if (i == 0 || a > big) big = a;
+        }
+        if (!(big > 0)) return PG_OK;
+        sc[0].label = "the largest initial state magnitude";
+        sc[0].n_names = 0;
+        sc[0].value = big;
+        n = 1;
+    }
+    int best = 0;
+    for (int i = 1; i < n; ++i)
+        if (sc[i].value < sc[best].value) best = i;
+    double limit = ABS_TOL_MAX_FRACTION * sc[best].value;
+    if (e->s[PG_S_ABS_TOL] > limit) {
+        PgMsg *m = &e->msg;
+        pg_msg_clear(m);
+        pg_msg_str(m, "parameter abs_tol = ");
+        pg_msg_value(m, e->s[PG_S_ABS_TOL], 'f', "r");
+        pg_msg_str(m, " violates the rule: abs_tol <= 0.001 x ");
+        pg_msg_str(m, sc[best].label);
+        pg_msg_str(m, " (");
+        pg_msg_value(m, sc[best].value, 'f', ".6g");
+        if (sc[best].n_names) {
+            pg_msg_str(m, " with ");
+            named_values(e, &sc[best], m);
+        }
+        pg_msg_str(m, ") = ");
+        pg_msg_value(m, limit, 'f', ".3g");
+        pg_msg_str(m, "; a larger absolute tolerance lets the local error be as large as the motion itself and "
+                      "controls nothing");
+        return PG_RAISE;
+    }
+    return PG_OK;
+}
+
+/* ---- domain ------------------------------------------------------------------------------- */
+/* _domain_violation: 0 inside, 1 outside (the condition's text in e->msg, its first time in *t_v) */
+static int domain_violation(PgEngine *e, double t, const double *x, PgSeg *seg, double *t_v, int *rc)
+{
+    *rc = PG_OK;
+    int r = e->model->domain(t, x, e->q, e->u, e->p, e->s, &e->msg);
+    if (r == PG_ARITH) {
+        *rc = r;
+        return 0;
+    }
+    if (r == PG_OK) {
+        int bad = 0;
+        for (int i = 0; i < e->nx; ++i) bad |= !isfinite(x[i]);
+        if (bad) {
+            PgMsg *m = &e->msg;
+            pg_msg_clear(m);
+            pg_msg_str(m, "the state became non-finite at t = ");
+            pg_msg_value(m, t, 'f', ".15g");
+            pg_msg_str(m, " s (");
+            int first = 1;
+            for (int i = 0; i < e->nx; ++i) {
+                if (isfinite(x[i])) continue;
+                if (!first) pg_msg_str(m, ", ");
+                first = 0;
+                pg_msg_str(m, e->model->state_names[i]);
+                pg_msg_str(m, " = ");
+                pg_msg_value(m, x[i], 'f', "r");
+            }
+            pg_msg_str(m, "): ");
+            extreme_parameters(e, m);
+            *rc = PG_RAISE;
+        }
+        return 0;
+    }
+    PgMsg condition = e->msg;
+    if (seg) {
+        double a = seg->t0, b = t, y[PG_MAX_X];
+        for (int k = 0; k < 60; ++k) {
+            double c = 0.5 * (a + b);
+            int s1 = seg_at(e, seg, c, y);
+            if (s1) {
+                *rc = s1;
+                return 0;
+            }
+            int d = e->model->domain(c, y, e->q, e->u, e->p, e->s, &e->scratch);
+            if (d == PG_ARITH) {
+                e->msg = e->scratch;
+                *rc = d;
+                return 0;
+            }
+            if (d == PG_OK) a = c;
+            else b = c;
+        }
+        t = b;
+    }
+    e->msg = condition;
+    *t_v = t;
+    return 1;
+}
+
+static int domain_error(PgEngine *e, double t_v)
+{
+    char condition[PG_MSG_MAX];
+    snprintf(condition, sizeof condition, "%s", e->msg.text);
+    pg_msg_clear(&e->msg);
+    pg_msg_str(&e->msg, "the trajectory left the model's domain at t = ");
+    pg_msg_value(&e->msg, t_v, 'f', ".10g");
+    pg_msg_str(&e->msg, " s: ");
+    pg_msg_str(&e->msg, condition);
+    return PG_RAISE;
+}
+
+static int check_domain(PgEngine *e, double t, const double *x)
+{
+    double t_v;
+    int rc;
+    if (domain_violation(e, t, x, NULL, &t_v, &rc)) return domain_error(e, t_v);
+    return rc;
+}
+
+/* ---- binding, the first step -------------------------------------------------------------- */
+static int rebind(PgEngine *e)
+{
+    e->n_active = 0;
+    for (int i = 0; i < e->model->ne; ++i) {
+        int on = 0;
+        TRY(e->model->active(i, e->q, &on, &e->msg));
+        if (on) e->active[e->n_active++] = i;
+    }
+    return PG_OK;
+}
+
+static int bind(PgEngine *e)
+{
+    TRY(rebind(e));
+    TRY(e->model->flow(e->t, e->x, e->q, e->u, e->p, e->f, &e->msg));
+    for (int k = 0; k < e->n_active; ++k) TRY(guard_at(e, e->active[k], e->x, &e->g[k]));
+    e->has_g_prev = 0;
+    return PG_OK;
+}
+
+static double rms(const double *v, int n)
+{
+    if (!n) return 0.0;
+    double acc = 0.0;
+    for (int i = 0; i < n; ++i) acc += v[i] * v[i];
+    return sqrt(acc / n);
+}
+
+/* _initial_step: Hairer's starting step, never below START_STEP_ULPS ulps */
+static int initial_step(PgEngine *e, double *out)
+{
+    double t = e->t;
+    const double *y = e->x, *f = e->f;
+    int n = e->nx;
+    double floor_ = pmin(START_STEP_ULPS * EPS * pmax(fabs(t), 1.0), e->max_step);
+    if (!n) {
+        *out = isfinite(e->max_step) ? e->max_step : 1.0;
+        return PG_OK;
+    }
+    double scale[PG_MAX_X], v[PG_MAX_X], y1[PG_MAX_X] = {0}, f1[PG_MAX_X] = {0};
+    for (int i = 0; i < n; ++i) scale[i] = e->atol + fabs(y[i]) * e->rtol;
+    for (int i = 0; i < n; ++i) v[i] = y[i] / scale[i];
+    double d0 = rms(v, n);
+    for (int i = 0; i < n; ++i) v[i] = f[i] / scale[i];
+    double d1 = rms(v, n);
+    double h0 = !(d0 >= 1e-5 && d1 >= 1e-5) ? 1e-6 : 0.01 * d0 / d1;
+    if (!(h0 >= floor_)) h0 = floor_;
+    h0 = pmin(h0, e->max_step);
+    for (int i = 0; i < n; ++i) y1[i] = y[i] + h0 * f[i];
+    TRY(model_fun(e, t + h0, y1, f1, &e->msg));
+    for (int i = 0; i < n; ++i) v[i] = (f1[i] - f[i]) / scale[i];
+    double d2 = rms(v, n) / h0;
+    double h1;
+    if (d1 <= 1e-15 && d2 <= 1e-15) {
+        h1 = pmax(1e-6, h0 * 1e-3);
+    } else {
+        double d = pmax(d1, d2);
+        if (isfinite(d)) {
+            if (pg_pow(0.01 / d, 1.0 / pair_order(e), &h1, &e->msg)) return PG_ARITH;
+        } else {
+            h1 = 0.0;
+        }
+    }
+    double h = pmin(pmin(100 * h0, h1), e->max_step);
+    *out = h >= floor_ ? h : floor_;
+    return PG_OK;
+}
+
+static int check_initial_rates(PgEngine *e)
+{
+    for (int i = 0; i < e->nx; ++i) {
+        if (!isfinite(e->f[i])) {
+            PgMsg *m = &e->msg;
+            pg_msg_clear(m);
+            pg_msg_printf(m, "the rate d%s/dt = ", e->model->state_names[i]);
+            pg_msg_value(m, e->f[i], 'f', "r");
+            pg_msg_str(m, " at the start (t = ");
+            pg_msg_value(m, e->t, 'f', "r");
+            pg_msg_str(m, " s) is not finite: ");
+            extreme_parameters(e, m);
+            return PG_RAISE;
+        }
+    }
+    return PG_OK;
+}
+
+/* ---- Simulator.__init__ -------------------------------------------------------------------- */
+static int prepare(PgEngine *e)
+{
+    const PgModel *md = e->model;
+    TRY(md->check_settings(e->s, &e->msg));
+    TRY(md->check(e->p, &e->msg));
+    TRY(check_inputs(e, e->u));
+    TRY(check_time_scales(e));
+    TRY(md->initial(e->p, e->x, e->q, &e->msg));
+    TRY(check_abs_tol(e));
+    return PG_OK;
+}
+
+int pg_engine_init(PgEngine *e, const PgModel *model, const double *p, const double *s, const double *u,
+                   double t0, double t_stop)
+{
+    PgEventHook on_event = e->on_event;
+    PgWarnHook on_warning = e->on_warning;
+    void *ctx = e->hook_ctx;
+    memset(e, 0, sizeof *e);
+    e->on_event = on_event, e->on_warning = on_warning, e->hook_ctx = ctx;
+    e->model = model;
+    e->nx = model->nx, e->nq = model->nq, e->nu = model->nu, e->np = model->np;
+    if (e->nx > PG_MAX_X || e->nq > PG_MAX_Q || e->nu > PG_MAX_U || e->np > PG_MAX_P || model->ne > PG_MAX_EVENTS ||
+        model->ns != PG_NS)
+        return raise_text(e, "the model is larger than the native engine's limits");
+    memcpy(e->p, p, sizeof(double) * (size_t)e->np);
+    memcpy(e->s, s, sizeof(double) * PG_NS);
+    memcpy(e->u, u, sizeof(double) * (size_t)e->nu);
+    int rc = prepare(e);
+    if (rc) return at_time(e, rc, "initialization", 0, NULL);
+    e->method = (int)s[PG_S_METHOD];
+    e->rtol = s[PG_S_REL_TOL];
+    e->atol = s[PG_S_ABS_TOL];
+    e->max_step = s[PG_S_MAX_STEP] == 0.0 ? INFINITY : s[PG_S_MAX_STEP];
+    e->t_stop = t_stop;
+    e->zeno_max_events = 200;
+    e->zeno_window = 1e-6;
+    e->t = e->t_out = t0;
+    e->keep_history = s[PG_S_LOG_EVENTS] != 0.0;
+    e->budget = s[PG_S_MAX_STEPS_PER_SECOND] * BUDGET_WINDOW;
+    e->win_t0 = e->t, e->win_n = 0, e->warned = 0;
+    e->warn_n = BUDGET_WARN_FRACTION * e->budget;
+    e->at_start = 1;
+    e->disarmed = -1;
+    memcpy(e->x_out, e->x, sizeof e->x);
+    memcpy(e->q_out, e->q, sizeof e->q);
+    e->stateless = e->nx == 0;
+    rc = check_domain(e, e->t, e->x);
+    if (!rc) rc = bind(e);
+    if (!rc) rc = check_initial_rates(e);
+    if (!rc) {
+        double is = s[PG_S_INITIAL_STEP];
+        if (is > 0) e->h = pmax(is, START_STEP_ULPS * EPS * pmax(fabs(e->t), 1.0));
+        else rc = initial_step(e, &e->h);
+    }
+    if (rc) return at_time(e, rc, "initialization", 0, NULL);
+    return PG_OK;
+}
+
+/* ---- the work budget (_spend) -------------------------------------------------------------- */
+static int spend(PgEngine *e, double t, double h)
+{
+    if (t - e->win_t0 >= BUDGET_WINDOW) e->win_t0 = t, e->win_n = 1;
+    long n = e->win_n;
+    if (n < e->warn_n) return PG_OK;
+    double elapsed = pmax(t + h - e->win_t0, 0.0);
+    PgMsg *m = &e->msg;
+    if (n >= e->budget) {
+        pg_msg_clear(m);
+        pg_msg_printf(m, "work budget exhausted: %ld internal steps within ", n);
+        pg_msg_value(m, elapsed, 'f', ".3g");
+        pg_msg_str(m, " s of simulated time up to t = ");
+        pg_msg_value(m, t, 'f', ".10g");
+        pg_msg_str(m, " s (max_steps_per_second = ");
+        pg_msg_value(m, e->s[PG_S_MAX_STEPS_PER_SECOND], 'f', "g");
+        pg_msg_str(m, "; mean step ");
+        pg_msg_value(m, elapsed / n, 'f', ".3g");
+        pg_msg_str(m, " s, latest ");
+        pg_msg_value(m, h, 'f', ".3g");
+        pg_msg_str(m, " s). The model is stiff here: ");
+        stiffness_text(e, m);
+        pg_msg_str(m, ". To change: make the fastest time scale slower (the parameters named above), or raise "
+                      "max_steps_per_second to let the run go on slowly");
+        return PG_RAISE;
+    }
+    if (!e->warned) {
+        e->warned = 1;
+        PgMsg w;
+        pg_msg_clear(&w);
+        pg_msg_printf(&w, "stiff: %ld internal steps within ", n);
+        pg_msg_value(&w, elapsed, 'f', ".3g");
+        pg_msg_str(&w, " s of simulated time up to t = ");
+        pg_msg_value(&w, t, 'f', ".10g");
+        pg_msg_str(&w, " s (mean step ");
+        pg_msg_value(&w, elapsed / n, 'f', ".3g");
+        pg_msg_str(&w, " s); the run stops at max_steps_per_second = ");
+        pg_msg_value(&w, e->s[PG_S_MAX_STEPS_PER_SECOND], 'f', "g");
+        pg_msg_str(&w, " steps per simulated second. ");
+        stiffness_text(e, &w);
+        if (e->on_warning) e->on_warning(e->hook_ctx, w.text);
+    }
+    return PG_OK;
+}
+
+static int recent_count(const PgEngine *e) { return e->recent_n; }
+
+/* the k-th latest recorded event (0: the latest) */
+static double recent_time(const PgEngine *e, int k)
+{
+    int i = (e->recent_head - 1 - k + PG_RECENT) % PG_RECENT;
+    return e->recent_t[i];
+}
+
+static int recent_index(const PgEngine *e, int k)
+{
+    int i = (e->recent_head - 1 - k + PG_RECENT) % PG_RECENT;
+    return e->recent_i[i];
+}
+
+/* _collapse_error */
+static int collapse_error(PgEngine *e, double t, double h)
+{
+    PgMsg *m = &e->msg;
+    pg_msg_clear(m);
+    if (e->has_last && e->last.time == t) {
+        int count = 0;
+        double oldest = t;
+        for (int k = 0; k < recent_count(e); ++k) count += t - recent_time(e, k) <= e->zeno_window;
+        /* in the deque's order (oldest first), the first of the events in the window */
+        for (int k = recent_count(e) - 1; k >= 0; --k) {
+            double tk = recent_time(e, k);
+            if (t - tk <= e->zeno_window) {
+                oldest = tk;
+                break;
+            }
+        }
+        if (count >= STORM_EVENTS) {
+            pg_msg_str(m, "event storm: the step size collapsed to ");
+            pg_msg_value(m, h, 'f', ".3g");
+            pg_msg_printf(m, " s right after event %ld (%s) at t = ", e->n_events, event_name(e, e->last.index));
+            pg_msg_value(m, t, 'f', ".15g");
+            pg_msg_printf(m, " s, the latest %d events within ", count);
+            pg_msg_value(m, t - oldest, 'f', ".3g");
+            pg_msg_str(m, " s: the events accumulate (Zeno behaviour)");
+            return PG_RAISE;
+        }
+        pg_msg_str(m, "step size collapsed to ");
+        pg_msg_value(m, h, 'f', ".3g");
+        pg_msg_printf(m, " s right after event %ld (%s) at t = ", e->n_events, event_name(e, e->last.index));
+        pg_msg_value(m, t, 'f', ".15g");
+        pg_msg_str(m, " s: the dynamics after the event are too fast to resolve or singular (");
+        stiffness_text(e, m);
+        pg_msg_str(m, ")");
+        return PG_RAISE;
+    }
+    pg_msg_str(m, "step size collapsed to ");
+    pg_msg_value(m, h, 'f', ".3g");
+    pg_msg_str(m, " s at t = ");
+    pg_msg_value(m, t, 'f', ".15g");
+    pg_msg_str(m, " s: the error estimate cannot be met with rel_tol = ");
+    pg_msg_value(m, e->s[PG_S_REL_TOL], 'f', "r");
+    pg_msg_str(m, ", abs_tol = ");
+    pg_msg_value(m, e->s[PG_S_ABS_TOL], 'f', "r");
+    pg_msg_str(m, " (the model is stiff or singular here, or the tolerances lie below the rounding error of the "
+                  "states)");
+    return PG_RAISE;
+}
+
+/* ---- locating events ------------------------------------------------------------------------ */
+/* _locate: earliest time in [a, b] where guard i crosses zero in its direction */
+static int locate(PgEngine *e, PgSeg *seg, int i, double a, double ga, double gb, const double *b_in, double *out)
+{
+    double sgn = sgn_of(e, i);
+    double b = b_in ? *b_in : seg->t1;
+    double fa = sgn * ga, fb = sgn * gb;
+    int side = 0;
+    double tol = 4 * EPS * pmax(pmax(fabs(a), fabs(b)), 1e-300);
+    double y[PG_MAX_X];
+    for (int k = 0; k < 200; ++k) {
+        if (b - a <= tol) break;
+        if (fb - fa == 0.0) return pg_arith(&e->msg, PG_ZERO_DIVISION);
+        double c = b - fb * (b - a) / (fb - fa);
+        if (!(a < c && c < b)) c = 0.5 * (a + b);
+        double gc;
+        TRY(seg_at(e, seg, c, y));
+        TRY(guard_at(e, i, y, &gc));
+        double fc = sgn * gc;
+        if (fc >= 0.0) {
+            b = c, fb = fc;
+            if (side == 1) fa *= 0.5;
+            side = 1;
+        } else {
+            a = c, fa = fc;
+            if (side == -1) fb *= 0.5;
+            side = -1;
+        }
+        if (fc == 0.0) break;
+    }
+    *out = b;
+    return PG_OK;
+}
+
+/* _locate_from_zero: *found = 0 for "None" */
+static int locate_from_zero(PgEngine *e, PgSeg *seg, int i, double g1, int at_start, double *out, int *found)
+{
+    static const double fracs[5] = {1e-7, 1e-4, 1e-2, 0.1, 0.5};
+    double sgn = sgn_of(e, i), h = seg->t1 - seg->t0, y[PG_MAX_X];
+    *found = 0;
+    for (int k = 0; k < 5; ++k) {
+        double tp = seg->t0 + fracs[k] * h, gp;
+        TRY(seg_at(e, seg, tp, y));
+        TRY(guard_at(e, i, y, &gp));
+        if (sgn * gp < 0.0) {
+            *found = 1;
+            return locate(e, seg, i, tp, gp, g1, NULL, out);
+        }
+        if (gp != 0.0) {
+            if (at_start) *found = 1, *out = seg->t0;
+            return PG_OK;
+        }
+    }
+    if (at_start && g1 != 0.0) *found = 1, *out = seg->t0;
+    return PG_OK;
+}
+
+/* _hidden_crossing */
+static int hidden_crossing(PgEngine *e, PgSeg *seg, int i, double sgn, double g0, double g1, const double *f1,
+                           double *out, int *found)
+{
+    double t0 = seg->t0, h = seg->t1 - seg->t0;
+    double eps = 1e-6 * h, y[PG_MAX_X], ga, gb;
+    *found = 0;
+    if (eps == 0.0) return pg_arith(&e->msg, PG_ZERO_DIVISION);
+    for (int k = 0; k < e->nx; ++k) y[k] = seg->y0[k] + eps * seg->f0[k];
+    TRY(guard_at(e, i, y, &ga));
+    double d0 = sgn * (ga - g0) / eps * h;
+    if (!(d0 > 0.0)) return PG_OK;
+    for (int k = 0; k < e->nx; ++k) y[k] = seg->y1[k] + eps * f1[k];
+    TRY(guard_at(e, i, y, &gb));
+    double d1 = sgn * (gb - g1) / eps * h;
+    if (!(d1 < 0.0)) return PG_OK;
+    double G0 = sgn * g0, G1 = sgn * g1;
+    double A = 6 * G0 + 3 * d0 - 6 * G1 + 3 * d1;
+    double B = -6 * G0 - 4 * d0 + 6 * G1 - 2 * d1;
+    double lo = 0.0, hi = 1.0;
+    for (int k = 0; k < 40; ++k) {
+        double mid = 0.5 * (lo + hi);
+        if ((A * mid + B) * mid + d0 > 0.0) lo = mid;
+        else hi = mid;
+    }
+    (void)hi;
+    double tp = t0 + lo * h;
+    if (!(t0 < tp && tp < seg->t1)) return PG_OK;
+    double gp;
+    TRY(seg_at(e, seg, tp, y));
+    TRY(guard_at(e, i, y, &gp));
+    if (sgn * gp < 0.0) return PG_OK;
+    *found = 1;
+    return locate(e, seg, i, t0, g0, gp, &tp, out);
+}
+
+/* _land_on_event: redo the step exactly up to the event, secant on exact steps */
+static int land_on_event(PgEngine *e, PgSeg *seg, int i, double te, double *te_out, double *y_out, double *f_out,
+                         double *K_out)
+{
+    double t0 = seg->t0, t1 = seg->t1;
+    double y_a[PG_MAX_X], f_a[PG_MAX_X], y_b[PG_MAX_X], f_b[PG_MAX_X], yd[PG_MAX_X];
+    double K_a_local[PG_MAX_STAGES * PG_MAX_X], K_b_local[PG_MAX_STAGES * PG_MAX_X];
+    size_t n = sizeof(double) * (size_t)e->nx;
+    double g_a, g_b, g_te, g_d;
+    TRY(pair_step(e, t0, seg->y0, seg->f0, te - t0, y_a, f_a, K_a_local));
+    TRY(guard_at(e, i, y_a, &g_a));
+    double best = fabs(g_a), best_t = te;
+    memcpy(y_out, y_a, n), memcpy(f_out, f_a, n), memcpy(K_out, K_a_local, sizeof K_a_local);
+    double d = 1e-3 * (te - t0);
+    TRY(seg_at(e, seg, te, yd));
+    TRY(guard_at(e, i, yd, &g_te));
+    TRY(seg_at(e, seg, te - d, yd));
+    TRY(guard_at(e, i, yd, &g_d));
+    if (d == 0.0) return pg_arith(&e->msg, PG_ZERO_DIVISION);
+    double slope = (g_te - g_d) / d;
+    double ta = te, tb = slope != 0.0 ? te - g_a / slope : te;
+    double tol = 4 * EPS * pmax(fabs(te), 1.0);
+    for (int k = 0; k < 8; ++k) {
+        if (g_a == 0.0 || !(t0 < tb && tb < t1) || fabs(tb - ta) <= tol) break;
+        TRY(pair_step(e, t0, seg->y0, seg->f0, tb - t0, y_b, f_b, K_b_local));
+        TRY(guard_at(e, i, y_b, &g_b));
+        if (fabs(g_b) < best) {
+            best = fabs(g_b), best_t = tb;
+            memcpy(y_out, y_b, n), memcpy(f_out, f_b, n), memcpy(K_out, K_b_local, sizeof K_b_local);
+        }
+        if (g_b == g_a) break;
+        double tb_new = tb - g_b * (tb - ta) / (g_b - g_a);
+        ta = tb, g_a = g_b, tb = tb_new;
+    }
+    *te_out = best_t;
+    return PG_OK;
+}
+
+/* ---- committing a step ---------------------------------------------------------------------- */
+/* _end_step: *cut = 1 if the step was cut at t_target; PG_RAISE for a domain error */
+static int end_step(PgEngine *e, PgSeg *seg, double t_target, int *cut)
+{
+    double t_v;
+    int rc;
+    *cut = 0;
+    if (!domain_violation(e, seg->t1, seg->y1, seg, &t_v, &rc)) return rc;
+    if (t_v > t_target && t_target > seg->t0) {
+        double y_c[PG_MAX_X], f_c[PG_MAX_X];
+        double K_c[PG_MAX_STAGES * PG_MAX_X];
+        double t = seg->t0, y0[PG_MAX_X], f0[PG_MAX_X];
+        memcpy(y0, seg->y0, sizeof y0), memcpy(f0, seg->f0, sizeof f0);
+        TRY(pair_step(e, t, y0, f0, t_target - t, y_c, f_c, K_c));
+        make_seg(e, &e->seg, t, t_target, y0, y_c, f0, K_c);
+        e->has_seg = 1;
+        e->t = t_target;
+        memcpy(e->x, y_c, sizeof y_c), memcpy(e->f, f_c, sizeof f_c);
+        for (int k = 0; k < e->n_active; ++k) TRY(guard_at(e, e->active[k], y_c, &e->g[k]));
+        e->has_g_prev = 0;
+        *cut = 1;
+        return PG_OK;
+    }
+    return domain_error(e, t_v);
+}
+
+/* _step */
+static int step(PgEngine *e, double t_target)
+{
+    double t = e->t, y[PG_MAX_X], f[PG_MAX_X];
+    memcpy(y, e->x, sizeof y), memcpy(f, e->f, sizeof f);
+    double h = pmin(pmin(e->h, e->max_step), UNBOUNDED_STEP_FACTOR * pmax(fabs(t), 1.0));
+    int rejected = 0;
+    double t_new, y_new[PG_MAX_X], f_new[PG_MAX_X];
+    double K[PG_MAX_STAGES * PG_MAX_X];
+    for (;;) {
+        t_new = t + h;
+        if (t_new >= e->t_stop && e->t_stop > t + 10 * EPS * pmax(fabs(t), 1.0)) t_new = e->t_stop;
+        h = t_new - t;
+        if (h <= MIN_STEP_ULPS * EPS * pmax(fabs(t), 1.0)) return collapse_error(e, t, h);
+        TRY(pair_step(e, t, y, f, h, y_new, f_new, K));
+        long n = e->win_n = e->win_n + 1;
+        if (n >= e->warn_n || t - e->win_t0 >= BUDGET_WINDOW) TRY(spend(e, t, h));
+        double err = error_norm(e, K, h, y, y_new);
+        if (err < 1.0) {
+            double factor;
+            if (err == 0.0) {
+                factor = MAX_FACTOR;
+            } else {
+                double pw;
+                TRY(pg_pow(err, error_exponent(e), &pw, &e->msg));
+                factor = pmin(MAX_FACTOR, SAFETY * pw);
+            }
+            if (rejected) factor = pmin(1.0, factor);
+            e->h = pmin(h * factor, e->max_step);
+            break;
+        }
+        e->n_rejected += 1;
+        rejected = 1;
+        if (!isfinite(err)) {
+            h *= MIN_FACTOR;
+        } else {
+            double pw;
+            TRY(pg_pow(err, error_exponent(e), &pw, &e->msg));
+            h *= pmax(MIN_FACTOR, SAFETY * pw);
+        }
+    }
+    e->n_steps += 1;
+    int at_start = e->at_start;
+    e->at_start = 0;
+    int disarmed = e->disarmed;
+    PgSeg seg;
+    make_seg(e, &seg, t, t_new, y, y_new, f, K);
+    double g_new[PG_MAX_EVENTS];
+    for (int k = 0; k < e->n_active; ++k) TRY(guard_at(e, e->active[k], y_new, &g_new[k]));
+    if (at_start)
+        for (int k = 0; k < e->n_active; ++k)
+            if (e->g[k] == 0.0 && g_new[k] == 0.0) e->at_start = 1;
+    int hit = -1;
+    double hit_t = 0;
+    for (int k = 0; k < e->n_active; ++k) {
+        int i = e->active[k];
+        double g0 = e->g[k], g1 = g_new[k], te = 0;
+        double sgn = sgn_of(e, i);
+        int found = 1;
+        if (sgn * g1 < 0.0) {
+            if (sgn * g0 >= 0.0 || (e->has_g_prev && sgn * (g0 - e->g_prev[k]) < 0.0)) continue;
+            TRY(hidden_crossing(e, &seg, i, sgn, g0, g1, f_new, &te, &found));
+            if (!found) continue;
+        } else if (sgn * g0 < 0.0) {
+            TRY(locate(e, &seg, i, t, g0, g1, NULL, &te));
+        } else if (g0 == 0.0) {
+            TRY(locate_from_zero(e, &seg, i, g1, at_start && i != disarmed, &te, &found));
+            if (!found) continue;
+        } else {
+            continue;
+        }
+        if (hit < 0 || te < hit_t) hit = k, hit_t = te;
+    }
+    if (hit < 0) {
+        int rc = e->model->domain(t_new, y_new, e->q, e->u, e->p, e->s, &e->msg);
+        if (rc == PG_ARITH) return rc;
+        int finite = 1;
+        for (int i = 0; i < e->nx; ++i) finite &= isfinite(y_new[i]) != 0;
+        int cut = 0;
+        if (!(rc == PG_OK && finite)) TRY(end_step(e, &seg, t_target, &cut));
+        if (!cut) {
+            e->seg = seg, e->has_seg = 1;
+            e->t = t_new;
+            memcpy(e->x, y_new, sizeof y_new), memcpy(e->f, f_new, sizeof f_new);
+            memcpy(e->g_prev, e->g, sizeof e->g), e->has_g_prev = 1;
+            memcpy(e->g, g_new, sizeof g_new);
+        }
+        return PG_OK;
+    }
+    int i = e->active[hit];
+    double te = hit_t;
+    if (te == t) {
+        e->has_seg = 0;
+        memcpy(e->x, y, sizeof y), memcpy(e->f, f, sizeof f);
+        e->has_pending = 1, e->pending_index = i;
+        memcpy(e->pending_x, y, sizeof y);
+        return PG_OK;
+    }
+    double y_e[PG_MAX_X], f_e[PG_MAX_X];
+    if (te < t_new) {
+        double K_e[PG_MAX_STAGES * PG_MAX_X];
+        TRY(land_on_event(e, &seg, i, te, &te, y_e, f_e, K_e));
+        make_seg(e, &seg, t, te, y, y_e, f, K_e);
+    } else {
+        memcpy(y_e, y_new, sizeof y_e), memcpy(f_e, f_new, sizeof f_e);
+    }
+    int cut = 0;
+    TRY(end_step(e, &seg, t_target, &cut));
+    if (!cut) {
+        e->seg = seg, e->has_seg = 1;
+        e->t = te;
+        memcpy(e->x, y_e, sizeof y_e), memcpy(e->f, f_e, sizeof f_e);
+        e->has_pending = 1, e->pending_index = i;
+        memcpy(e->pending_x, y_e, sizeof y_e);
+    }
+    return PG_OK;
+}
+
+/* ---- events --------------------------------------------------------------------------------- */
+static int check_zeno(PgEngine *e)
+{
+    int n = e->zeno_max_events;
+    if (e->n_events >= n) {
+        double first = recent_time(e, n - 1);
+        if (e->t - first <= e->zeno_window) {
+            /* the names of the latest n events, sorted, each once */
+            const char *names[PG_MAX_EVENTS];
+            int k = 0;
+            for (int j = 0; j < n; ++j) {
+                const char *nm = event_name(e, recent_index(e, j));
+                int seen = 0;
+                for (int a = 0; a < k; ++a) seen |= strcmp(names[a], nm) == 0;
+                if (!seen && k < PG_MAX_EVENTS) names[k++] = nm;
+            }
+            for (int a = 1; a < k; ++a)
+                for (int b = a; b > 0 && strcmp(names[b], names[b - 1]) < 0; --b) {
+                    const char *tmp = names[b];
+                    names[b] = names[b - 1], names[b - 1] = tmp;
+                }
+            PgMsg *m = &e->msg;
+            pg_msg_clear(m);
+            pg_msg_printf(m, "event storm: %d events (", n);
+            for (int a = 0; a < k; ++a) {
+                if (a) pg_msg_str(m, ", ");
+                pg_msg_str(m, names[a]);
+            }
+            pg_msg_str(m, ") within ");
+            pg_msg_value(m, e->t - first, 'f', ".3g");
+            pg_msg_str(m, " s up to t = ");
+            pg_msg_value(m, e->t, 'f', ".15g");
+            pg_msg_printf(m, " s (Zeno behaviour; limit %d events per ", n);
+            pg_msg_value(m, e->zeno_window, 'f', "g");
+            pg_msg_str(m, " s)");
+            return PG_RAISE;
+        }
+    }
+    return PG_OK;
+}
+
+/* apply_pending_event */
+static int apply_pending_event(PgEngine *e)
+{
+    int i = e->pending_index;
+    double x_new[PG_MAX_X], q_new[PG_MAX_Q];
+    TRY(e->model->jump(i, e->x, e->q, e->u, e->p, x_new, q_new, &e->msg));
+    size_t nx = sizeof(double) * (size_t)e->nx;
+    e->last.time = e->t, e->last.index = i;
+    memcpy(e->last.x_before, e->pending_x, nx);
+    memcpy(e->last.x_after, x_new, nx);
+    e->has_last = 1;
+    e->n_events += 1;
+    e->recent_t[e->recent_head] = e->t, e->recent_i[e->recent_head] = i;
+    e->recent_head = (e->recent_head + 1) % PG_RECENT;
+    if (e->recent_n < PG_RECENT) e->recent_n += 1;
+    if (e->keep_history && e->on_event) e->on_event(e->hook_ctx, e, &e->last, e->n_events);
+    e->has_pending = 0;
+    e->at_start = 1, e->disarmed = i;
+    memcpy(e->x, x_new, nx);
+    memcpy(e->q, q_new, sizeof(double) * (size_t)e->nq);
+    TRY(check_zeno(e));
+    TRY(check_domain(e, e->t, e->x));
+    TRY(bind(e));
+    double h0;
+    TRY(initial_step(e, &h0));
+    e->h = pmin(e->h, h0);
+    return PG_OK;
+}
+
+/* _run */
+static int run(PgEngine *e, double t_target, int apply_events)
+{
+    for (;;) {
+        if (e->has_pending) {
+            if (!apply_events) return PG_OK;
+            if (t_target >= e->t) {
+                int rc = apply_pending_event(e);
+                if (rc) return at_time(e, rc, "t = ", e->t, " s");
+                continue;
+            }
+        }
+        if (t_target <= e->t) return PG_OK;
+        int rc = step(e, t_target);
+        if (rc) return at_time(e, rc, "t = ", e->t, " s");
+    }
+}
+
+/* ---- public ---------------------------------------------------------------------------------- */
+int pg_engine_advance(PgEngine *e, double t_target)
+{
+    size_t nx = sizeof(double) * (size_t)e->nx, nq = sizeof(double) * (size_t)e->nq;
+    if (e->t_out <= t_target && t_target < e->t) {
+        if (t_target == e->seg.t0) {
+            memcpy(e->x_out, e->seg.y0, nx);
+        } else {
+            int rc = seg_at(e, &e->seg, t_target, e->x_out);
+            if (rc) return at_time(e, rc, "t = ", e->t, " s");
+        }
+        e->t_out = t_target;
+        memcpy(e->q_out, e->q, nq);
+        return PG_OK;
+    }
+    if (t_target < e->t_out) {
+        pg_msg_clear(&e->msg);
+        pg_msg_str(&e->msg, "cannot go back in time: t = ");
+        pg_msg_value(&e->msg, t_target, 'f', "r");
+        pg_msg_str(&e->msg, " < ");
+        pg_msg_value(&e->msg, e->t_out, 'f', "r");
+        return PG_RAISE;
+    }
+    if (e->stateless) {
+        e->t = e->t_out = pmax(e->t, t_target);
+        memcpy(e->q_out, e->q, nq);
+        return PG_OK;
+    }
+    TRY(run(e, t_target, 1));
+    e->t_out = t_target;
+    if (t_target == e->t) {
+        memcpy(e->x_out, e->x, nx);
+    } else {
+        int rc = seg_at(e, &e->seg, t_target, e->x_out);
+        if (rc) return at_time(e, rc, "t = ", e->t, " s");
+    }
+    memcpy(e->q_out, e->q, nq);
+    return PG_OK;
+}
+
+int pg_engine_advance_to_event(PgEngine *e, double t_target, int *stopped)
+{
+    *stopped = 0;
+    if (t_target < e->t_out) return pg_engine_advance(e, t_target); /* (the same refusal) */
+    if (e->model->ne == 0 || e->stateless) return pg_engine_advance(e, t_target);
+    TRY(run(e, t_target, 0));
+    if (e->has_pending && e->t <= t_target) {
+        e->t_out = e->t;
+        memcpy(e->x_out, e->x, sizeof e->x);
+        memcpy(e->q_out, e->q, sizeof e->q);
+        *stopped = 1;
+        return PG_OK;
+    }
+    return pg_engine_advance(e, t_target);
+}
+
+int pg_engine_event_due(const PgEngine *e) { return e->has_pending && e->t == e->t_out; }
+
+/* _crossed_in: the first active event whose guard went from its before side to its after side */
+static int crossed_in(PgEngine *e, const double *y0, const double *y1, int *index)
+{
+    int disarmed = e->has_last && e->last.time == e->seg.t0 ? e->last.index : -1;
+    *index = -1;
+    for (int k = 0; k < e->n_active; ++k) {
+        int i = e->active[k];
+        double sgn = sgn_of(e, i), a, b;
+        TRY(guard_at(e, i, y0, &a));
+        TRY(guard_at(e, i, y1, &b));
+        double g0 = sgn * a, g1 = sgn * b;
+        if (g1 >= 0.0 && (g0 < 0.0 || (g0 == 0.0 && 0.0 < g1 && i != disarmed))) {
+            *index = i;
+            return PG_OK;
+        }
+    }
+    return PG_OK;
+}
+
+int pg_engine_set_input(PgEngine *e, const double *u)
+{
+    int same = 1;
+    for (int i = 0; i < e->nu; ++i) same &= u[i] == e->u[i];
+    if (same) return PG_OK;
+    TRY(check_inputs(e, u));
+    int crossed = -1;
+    if (e->t > e->t_out) {
+        double x[PG_MAX_X];
+        if (e->t_out == e->seg.t0) {
+            memcpy(x, e->seg.y0, sizeof x);
+        } else {
+            double f_c[PG_MAX_X];
+            double K_c[PG_MAX_STAGES * PG_MAX_X];
+            int rc = pair_step(e, e->seg.t0, e->seg.y0, e->seg.f0, e->t_out - e->seg.t0, x, f_c, K_c);
+            if (!rc) rc = crossed_in(e, e->seg.y0, x, &crossed);
+            if (rc) return at_time(e, rc, "the input change at t = ", e->t_out, " s");
+        }
+        e->t = e->t_out;
+        memcpy(e->x, x, sizeof x);
+        e->has_pending = 0;
+        e->has_seg = 0;
+    }
+    memcpy(e->u, u, sizeof(double) * (size_t)e->nu);
+    int rc = bind(e);
+    double h0 = 0;
+    if (!rc) rc = initial_step(e, &h0);
+    if (rc) return at_time(e, rc, "the input change at t = ", e->t, " s");
+    e->h = pmin(e->h, h0);
+    if (crossed >= 0) {
+        e->has_pending = 1, e->pending_index = crossed;
+        memcpy(e->pending_x, e->x, sizeof e->x);
+    }
+    e->at_start = 1;
+    e->disarmed = e->has_last && e->last.time == e->t ? e->last.index : -1;
+    return PG_OK;
+}
+
+int pg_engine_apply_event(PgEngine *e, int index, double t, const double *x)
+{
+    e->t = e->t_out = t;
+    memcpy(e->x, x, sizeof(double) * (size_t)e->nx);
+    e->has_seg = 0;
+    e->has_pending = 1, e->pending_index = index;
+    memcpy(e->pending_x, e->x, sizeof e->x);
+    int rc = apply_pending_event(e);
+    if (rc) return at_time(e, rc, "t = ", e->t, " s");
+    memcpy(e->x_out, e->x, sizeof e->x);
+    memcpy(e->q_out, e->q, sizeof e->q);
+    return PG_OK;
+}
+
+int pg_engine_restart_at(PgEngine *e, double t, const double *x, const double *u)
+{
+    e->t = e->t_out = t;
+    memcpy(e->x, x, sizeof(double) * (size_t)e->nx);
+    memcpy(e->x_out, x, sizeof(double) * (size_t)e->nx);
+    e->has_seg = 0, e->has_pending = 0;
+    /* set_input with the same inputs returns at once in Python: the rebinding happens only for a change */
+    return pg_engine_set_input(e, u);
+}
+
+int pg_engine_domain_problem(PgEngine *e, double t, const double *x)
+{
+    int rc = e->model->domain(t, x, e->q, e->u, e->p, e->s, &e->msg);
+    return rc == PG_RAISE;
+}
+
+int pg_engine_flow(PgEngine *e, double t, const double *x, double *dx)
+{
+    return e->model->flow(t, x, e->q, e->u, e->p, dx, &e->msg);
+}
+
+int pg_engine_guard(PgEngine *e, int k, const double *x, double *g) { return guard_at(e, k, x, g); }
+
+int pg_engine_outputs(PgEngine *e, double t, const double *x, const double *q, double *y)
+{
+    return e->model->outputs(t, x, q, e->u, e->p, y, &e->msg);
+}
+
+size_t pg_engine_sizeof(void) { return sizeof(PgEngine); }
+const char *pg_engine_message(const PgEngine *e) { return e->msg.text; }
+
+void pg_engine_served(const PgEngine *e, double *t_out, double *x_out, double *q_out, long *n_events)
+{
+    *t_out = e->t_out;
+    memcpy(x_out, e->x_out, sizeof(double) * (size_t)e->nx);
+    memcpy(q_out, e->q_out, sizeof(double) * (size_t)e->nq);
+    *n_events = e->n_events;
+}
+
+int pg_engine_last_event(const PgEngine *e, double *time, int *index)
+{
+    if (!e->has_last) return 0;
+    *time = e->last.time, *index = e->last.index;
+    return 1;
+}

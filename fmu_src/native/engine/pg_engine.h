@@ -1,0 +1,113 @@
+/* pogofmu native engine: the hybrid integrator of the Python engine
+ * (fmu_src/pogofmu/runtime/engine/simulator.py), written once in C for any generated model.
+ *
+ * The same rules, in the same order, with the same floating-point operations: DOPRI5 / DOP853 with
+ * error control, the step running ahead of the communication points and serving them from the
+ * dense output, event location on the continuous extension (Illinois) then on exact steps
+ * (secant), hidden crossings, guards at zero after a jump or at the start, the restart caps, the
+ * work budget, the event storm bound, the domain conditions — and the same messages.
+ *
+ * A PgEngine holds no pointer to memory of its own: copying the struct copies the whole state
+ * (fmi2GetFMUstate is a memcpy). Functions return PG_OK, or PG_RAISE with the message in e->msg
+ * (the text the Python engine's exception carries). */
+#ifndef PG_ENGINE_H
+#define PG_ENGINE_H
+
+#include "pg_model.h"
+#include "pg_pairs.h"
+
+#define PG_MAX_Q 16
+#define PG_MAX_U 16
+#define PG_MAX_P 64
+#define PG_NS 7 /* solver settings: method rel_tol abs_tol max_step initial_step log_events max_steps_per_second */
+#define PG_MAX_EVENTS 16
+#define PG_RECENT 200 /* max(zeno_max_events, STORM_EVENTS) */
+
+enum { PG_S_METHOD, PG_S_REL_TOL, PG_S_ABS_TOL, PG_S_MAX_STEP, PG_S_INITIAL_STEP, PG_S_LOG_EVENTS,
+       PG_S_MAX_STEPS_PER_SECOND };
+
+typedef struct PgSeg {
+    double t0, t1;
+    double y0[PG_MAX_X], y1[PG_MAX_X], f0[PG_MAX_X];
+    double K[PG_MAX_STAGES * PG_MAX_X];
+    int dense_built;
+    double Q[PG_MAX_DENSE * PG_MAX_X];
+} PgSeg;
+
+typedef struct PgEvent {
+    double time;
+    int index;
+    double x_before[PG_MAX_X], x_after[PG_MAX_X];
+} PgEvent;
+
+typedef struct PgEngine PgEngine;
+/* called at each event when the parameter log_events is 1 (number: 1 for the first event) */
+typedef void (*PgEventHook)(void *ctx, const PgEngine *e, const PgEvent *ev, long number);
+/* called with a warning text (the work budget) */
+typedef void (*PgWarnHook)(void *ctx, const char *text);
+
+struct PgEngine {
+    const PgModel *model;
+    int nx, nq, nu, np;
+    double p[PG_MAX_P], s[PG_NS];
+    int method;
+    double rtol, atol, max_step, t_stop, zeno_window;
+    int zeno_max_events;
+    double u[PG_MAX_U];
+    double t, t_out;
+    double x[PG_MAX_X], q[PG_MAX_Q];
+    double x_out[PG_MAX_X], q_out[PG_MAX_Q];
+    long n_events;
+    int has_last;
+    PgEvent last;
+    int keep_history;
+    double recent_t[PG_RECENT];
+    int recent_i[PG_RECENT];
+    int recent_n, recent_head; /* ring buffer of the latest events' (time, index) */
+    int has_seg;
+    PgSeg seg;
+    int has_pending, pending_index;
+    double pending_x[PG_MAX_X];
+    long n_steps, n_rejected;
+    double budget, win_t0, warn_n;
+    long win_n;
+    int warned;
+    int at_start, disarmed, stateless;
+    int n_active, active[PG_MAX_EVENTS];
+    double f[PG_MAX_X], g[PG_MAX_EVENTS], g_prev[PG_MAX_EVENTS];
+    int has_g_prev;
+    double h;
+    /* not state: the hooks of the adapter, and scratch */
+    PgEventHook on_event;
+    PgWarnHook on_warning;
+    void *hook_ctx;
+    PgMsg msg; /* the message of the latest PG_RAISE */
+    PgMsg scratch;
+};
+
+/* the Python Simulator(model, p, u, t0, t_stop) with the settings s: every rule checked in the
+ * order of the Python engine's prepare(); PG_RAISE names the rule broken */
+int pg_engine_init(PgEngine *e, const PgModel *model, const double *p, const double *s, const double *u,
+                   double t0, double t_stop);
+int pg_engine_set_input(PgEngine *e, const double *u);
+int pg_engine_advance(PgEngine *e, double t_target);
+/* stops before the jump of the first event in (t_out, t_target]: *stopped = 1 and t_out is its time */
+int pg_engine_advance_to_event(PgEngine *e, double t_target, int *stopped);
+int pg_engine_event_due(const PgEngine *e);
+/* FMI 3.0 model exchange: the importer's solver located the event / moved the states */
+int pg_engine_apply_event(PgEngine *e, int index, double t, const double *x);
+int pg_engine_restart_at(PgEngine *e, double t, const double *x, const double *u);
+/* the domain condition at (t, x) in the current mode: 1 with its text in e->msg, 0 inside */
+int pg_engine_domain_problem(PgEngine *e, double t, const double *x);
+/* the flow and the active guards at (t, x) in the current mode (for model exchange) */
+int pg_engine_flow(PgEngine *e, double t, const double *x, double *dx);
+int pg_engine_guard(PgEngine *e, int k, const double *x, double *g);
+int pg_engine_outputs(PgEngine *e, double t, const double *x, const double *q, double *y);
+
+size_t pg_engine_sizeof(void);
+const char *pg_engine_message(const PgEngine *e);
+/* the time, state and discrete state served last, and the event count */
+void pg_engine_served(const PgEngine *e, double *t_out, double *x_out, double *q_out, long *n_events);
+int pg_engine_last_event(const PgEngine *e, double *time, int *index);
+
+#endif
