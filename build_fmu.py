@@ -466,6 +466,35 @@ def build_one(name: str, dest: Path, token_seed: str = "", fmi_version: int = 2)
     return fmu
 
 
+def build_native(name: str, dest: Path, fmi_version: int = 2) -> Path:
+    """Build and validate the native FMU of the model ``name`` (issue 18): the same modelDescription
+    as the Python-hosted FMU of that FMI version, and a binary of C generated from the Python model
+    (pogofmu.codegen) with the native engine and adapter — no Python at run time. FMI 2.0 into
+    ``dest/native/<Model>.fmu``."""
+    from fmpy.validation import validate_fmu
+
+    from pogofmu.codegen.build import CompileError, native_fmu_library
+
+    cls = slave_class(name)
+    out_dir = dest / "native"
+    out_dir.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(prefix="pogofmu_native_") as tmp:
+        try:
+            lib, token, build, _ = native_fmu_library(name, fmi_version, Path(tmp), fmi_headers())
+        except CompileError as exc:
+            raise BuildError(f"{name}: the native FMU does not compile: {exc}") from None
+        binary = lib.read_bytes()
+    members = [("modelDescription.xml", model_description_fmi2(cls, token), False),
+               (f"binaries/linux64/{name}.so", binary, True)]
+    fmu = out_dir / f"{name}.fmu"
+    write_zip(fmu, members)
+    problems = validate_fmu(str(fmu))
+    if problems:
+        raise BuildError(f"{fmu.name} (native FMI {fmi_version}): fmpy validation failed:\n  " + "\n  ".join(problems))
+    print(f"built and validated {fmu.relative_to(ROOT) if fmu.is_relative_to(ROOT) else fmu}")
+    return fmu
+
+
 def ssp2_text(text: str, what: str) -> str:
     """An SSP 1.0 .ssd or .ssv as SSP 2.0, for FMI 3.0 components: version 2.0 and the FMI 3.0 type
     names (``Real`` -> ``Float64``, ``Integer`` -> ``Int32``); everything else as written."""
@@ -520,6 +549,8 @@ def main(argv=None):
             continue
         built.append(build_one(name, dest))
         built.append(build_one(name, dest, fmi_version=3))
+        if compile_launcher(2) is not None:  # (a C compiler: the native FMUs too)
+            built.append(build_native(name, dest))
     if not args.names:
         for ssd in sorted(SSP_DIR.glob("*/SystemStructure.ssd")):
             pack_ssp(ssd.parent, dest)

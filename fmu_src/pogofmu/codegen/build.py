@@ -87,3 +87,48 @@ def engine_library(model_name: str, folder: Path, cc: Optional[str] = None) -> P
     srcs = [write_model_source(model_name, folder), write_pairs_source(folder), *(ENGINE / s for s in ENGINE_SOURCES)]
     out = folder / f"lib{model_name}_engine.so"
     return compile_c(srcs, out, include=[ENGINE], cc=cc)
+
+
+ADAPTER = NATIVE / "adapter"
+ADAPTER_SOURCES = ("pg_instance.c", "pg_sha256.c")
+FMI_ENTRY = {2: NATIVE / "fmi2" / "pg_fmi2.c"}
+
+
+def native_sources(model_name: str, fmi: int, folder: Path):
+    """Every C file of the native FMU of ``model_name`` (the generated ones written into
+    ``folder``), without the description file, which needs the token: ``(sources, digest)``, the
+    digest covering their bytes (the FMU's build name and token derive from it)."""
+    import hashlib
+
+    srcs = [write_model_source(model_name, folder), write_pairs_source(folder),
+            *(ENGINE / s for s in ENGINE_SOURCES), *(ADAPTER / s for s in ADAPTER_SOURCES), FMI_ENTRY[fmi]]
+    digest = hashlib.sha256(f"fmi{fmi}".encode())
+    headers = sorted([*ENGINE.glob("*.h"), *ADAPTER.glob("*.h"), NATIVE / "call_states.h"])
+    for path in [*srcs, *headers]:
+        digest.update(path.name.encode() + b"\0" + path.read_bytes())
+    return srcs, digest.hexdigest()
+
+
+def write_fmu_source(model_name: str, fmi: int, folder: Path, token: str, build: str) -> Path:
+    from pogofmu.runtime.models import get
+
+    from .cfmu import generate
+
+    path = folder / f"{model_name}_fmi{fmi}.c"
+    path.write_text(generate(get(model_name), fmi, token, build))
+    return path
+
+
+def native_fmu_library(model_name: str, fmi: int, folder: Path, fmi_headers: Path, cc: Optional[str] = None,
+                       token: Optional[str] = None):
+    """Compile the native FMU's binary: ``(library, token, build name, sources)``."""
+    import uuid
+
+    srcs, digest = native_sources(model_name, fmi, folder)
+    build = f"native_{model_name}_{digest[:12]}"
+    token = token or "{" + str(uuid.uuid5(uuid.NAMESPACE_URL, f"pogofmu/{build}/fmi{fmi}")) + "}"
+    desc = write_fmu_source(model_name, fmi, folder, token, build)
+    out = folder / f"{model_name}.so"
+    compile_c([*srcs, desc], out, include=[ENGINE, ADAPTER, fmi_headers], cc=cc,
+              extra=("-fvisibility=hidden",), libs=("-lm",))
+    return out, token, build, [*srcs, desc]

@@ -1,0 +1,499 @@
+/* FMI 2.0 co-simulation entry points of the native FMUs: every function of the standard exists
+ * once here, checks the instance's call state against the one table of call_states.h, and hands
+ * the work to the adapter (fmu_src/native/adapter/pg_instance.c). No Python: the FMU needs only
+ * the C library and libm. Built with the generated files of one model (its PgFmu `PG_FMU`). */
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "fmi2Functions.h"
+#include "pg_instance.h"
+
+#include "../call_states.h"
+
+extern const PgFmu PG_FMU;
+
+#define STATE_MAGIC 0x706f6e61u /* 'pona': a state handle of a native pogofmu FMU */
+#define ST_OK fmi2OK
+#define ST_WARNING fmi2Warning
+#define ST_ERROR fmi2Error
+
+typedef struct {
+    unsigned magic;
+    const PgFmu *owner; /* the FMU (this copy of this build) whose state it is */
+    unsigned mode;      /* the instance's call state when the state was taken */
+    PgState state;
+} StateHandle;
+
+typedef struct {
+    char *name;
+    fmi2CallbackFunctions cb;
+    int logging_on;
+    char **categories; /* enabled categories (NULL: all) */
+    size_t n_categories;
+    unsigned mode;
+    PgInstance inst;
+} Inst;
+
+static void emit(Inst *in, int status, const char *category, const char *message)
+{
+    if (!in->cb.logger) return;
+    /* the FMI 2 logger takes a printf format: double every '%' */
+    size_t n = strlen(message), extra = 0;
+    for (size_t i = 0; i < n; ++i) extra += message[i] == '%';
+    char *text = malloc(n + extra + 1);
+    if (!text) return;
+    for (size_t i = 0, j = 0; i <= n; ++i) {
+        text[j++] = message[i];
+        if (message[i] == '%') text[j++] = '%';
+    }
+    in->cb.logger(in->cb.componentEnvironment, in->name, (fmi2Status)status, category, text);
+    free(text);
+}
+
+/* OK messages go out only with logging on and their category enabled; warnings and errors always */
+static int wanted(Inst *in, int status, const char *category)
+{
+    if (status >= ST_WARNING) return 1;
+    if (!in->logging_on) return 0;
+    if (!in->categories) return 1;
+    for (size_t i = 0; i < in->n_categories; ++i)
+        if (strcmp(in->categories[i], category) == 0) return 1;
+    return 0;
+}
+
+static void log_from_adapter(void *env, int status, const char *category, const char *message)
+{
+    Inst *in = env;
+    if (wanted(in, status, category)) emit(in, status, category, message);
+}
+
+static int allowed(Inst *in, int rule, const char *function)
+{
+    const CallRule *r = &CALL_RULES[rule];
+    unsigned mask = r->cs;
+    char text[700], where[400];
+    if (!mask) {
+        snprintf(text, sizeof text, "%s refused: it is not a co-simulation function", function);
+    } else if (!(in->mode & mask)) {
+        mode_list(mask, 0, where, sizeof where);
+        snprintf(text, sizeof text, "%s refused: not allowed in %s (the standard allows it in %s)", function,
+                 mode_name(in->mode, 0), where);
+    } else {
+        return 1;
+    }
+    emit(in, ST_ERROR, "logStatusError", text);
+    return 0;
+}
+
+static fmi2Status unsupported(Inst *in, const char *what)
+{
+    char msg[300];
+    snprintf(msg, sizeof msg, "%s is not supported by this FMU", what);
+    emit(in, ST_ERROR, "logStatusError", msg);
+    return fmi2Error;
+}
+
+static void free_categories(Inst *in)
+{
+    for (size_t i = 0; i < in->n_categories; ++i) free(in->categories[i]);
+    free(in->categories);
+    in->categories = NULL;
+    in->n_categories = 0;
+}
+
+#define INST ((Inst *)c)
+#define CHECK(c) do { if (!(c)) return fmi2Error; } while (0)
+#define REQUIRE(rule, function) do { if (!allowed(INST, RULE_##rule, function)) return fmi2Error; } while (0)
+#define LEADS_TO(st, m) do { if ((st) <= ST_WARNING) INST->mode = (m); } while (0)
+
+const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
+const char *fmi2GetVersion(void) { return fmi2Version; }
+
+fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
+                              fmi2String fmuResourceLocation, const fmi2CallbackFunctions *functions,
+                              fmi2Boolean visible, fmi2Boolean loggingOn)
+{
+    (void)fmuResourceLocation, (void)visible; /* a native FMU needs no resources */
+    Inst *in = calloc(1, sizeof *in);
+    if (!in) return NULL;
+    const char *name = instanceName ? instanceName : "";
+    in->name = malloc(strlen(name) + 1);
+    if (!in->name) {
+        free(in);
+        return NULL;
+    }
+    strcpy(in->name, name);
+    if (functions) in->cb = *functions;
+    in->logging_on = loggingOn;
+    char text[600];
+    if (fmuType != fmi2CoSimulation) {
+        emit(in, fmi2Error, "logStatusError",
+             "this FMU implements FMI 2.0 co-simulation only (fmuType must be fmi2CoSimulation)");
+    } else if (!fmuGUID || strcmp(fmuGUID, PG_FMU.token) != 0) {
+        snprintf(text, sizeof text, "instantiation token %s does not match this FMU's (%s): the model description "
+                 "read by the importer belongs to another FMU or build", fmuGUID ? fmuGUID : "(null)", PG_FMU.token);
+        emit(in, fmi2Error, "logStatusError", text);
+    } else {
+        pg_inst_init(&in->inst, &PG_FMU, log_from_adapter, in);
+        in->mode = MODE_INSTANTIATED;
+        return in;
+    }
+    free(in->name);
+    free(in);
+    return NULL;
+}
+
+void fmi2FreeInstance(fmi2Component c)
+{
+    if (!c) return;
+    free_categories(INST);
+    free(INST->name);
+    free(INST);
+}
+
+fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nCategories, const fmi2String categories[])
+{
+    CHECK(c);
+    REQUIRE(fmi2SetDebugLogging, "fmi2SetDebugLogging");
+    const PgFmu *f = &PG_FMU;
+    for (size_t i = 0; i < nCategories; ++i) {
+        int known = 0;
+        for (int k = 0; k < f->n_log_categories && !known; ++k)
+            known = categories[i] && strcmp(categories[i], f->log_categories[k]) == 0;
+        if (!known) {
+            char text[1200];
+            size_t used = (size_t)snprintf(text, sizeof text, "fmi2SetDebugLogging refused: %s%s%s is not a log category "
+                                           "of this FMU (the categories are", categories[i] ? "'" : "",
+                                           categories[i] ? categories[i] : "NULL", categories[i] ? "'" : "");
+            for (int k = 0; k < f->n_log_categories && used < sizeof text; ++k)
+                used += (size_t)snprintf(text + used, sizeof text - used, "%s%s", k ? ", " : " ", f->log_categories[k]);
+            if (used < sizeof text) snprintf(text + used, sizeof text - used, ")");
+            emit(INST, ST_ERROR, "logStatusError", text);
+            return fmi2Error;
+        }
+    }
+    free_categories(INST);
+    INST->logging_on = loggingOn;
+    if (nCategories > 0) {
+        INST->categories = calloc(nCategories, sizeof(char *));
+        if (!INST->categories) return fmi2Error;
+        for (size_t i = 0; i < nCategories; ++i) {
+            INST->categories[i] = malloc(strlen(categories[i]) + 1);
+            if (INST->categories[i]) strcpy(INST->categories[i], categories[i]);
+            INST->n_categories = i + 1;
+        }
+    }
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fmi2Real tolerance,
+                               fmi2Real startTime, fmi2Boolean stopTimeDefined, fmi2Real stopTime)
+{
+    CHECK(c);
+    REQUIRE(fmi2SetupExperiment, "fmi2SetupExperiment");
+    if (toleranceDefined && !(tolerance > 0 && tolerance < HUGE_VAL)) {
+        char text[300];
+        snprintf(text, sizeof text, "fmi2SetupExperiment refused: tolerance = %g violates the rule: with "
+                 "toleranceDefined the tolerance is a number > 0 and finite", tolerance);
+        emit(INST, ST_ERROR, "logStatusError", text);
+        return fmi2Error;
+    }
+    return (fmi2Status)pg_inst_setup_experiment(&INST->inst, startTime, stopTimeDefined, stopTime);
+}
+
+fmi2Status fmi2EnterInitializationMode(fmi2Component c)
+{
+    CHECK(c);
+    REQUIRE(fmi2EnterInitializationMode, "fmi2EnterInitializationMode");
+    LEADS_TO(fmi2OK, MODE_INITIALIZATION);
+    return fmi2OK;
+}
+
+fmi2Status fmi2ExitInitializationMode(fmi2Component c)
+{
+    CHECK(c);
+    REQUIRE(fmi2ExitInitializationMode, "fmi2ExitInitializationMode");
+    fmi2Status st = (fmi2Status)pg_inst_exit_initialization(&INST->inst);
+    LEADS_TO(st, MODE_STEP);
+    return st;
+}
+
+fmi2Status fmi2Terminate(fmi2Component c)
+{
+    CHECK(c);
+    REQUIRE(fmi2Terminate, "fmi2Terminate");
+    LEADS_TO(fmi2OK, MODE_TERMINATED);
+    return fmi2OK;
+}
+
+fmi2Status fmi2Reset(fmi2Component c)
+{
+    CHECK(c);
+    REQUIRE(fmi2Reset, "fmi2Reset");
+    pg_inst_reset(&INST->inst);
+    LEADS_TO(fmi2OK, MODE_INSTANTIATED);
+    return fmi2OK;
+}
+
+/* ---- variables ------------------------------------------------------------------------------ */
+fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[])
+{
+    CHECK(c);
+    REQUIRE(fmi2GetValues, "fmi2GetReal");
+    if (nvr && (!vr || !value)) return fmi2Error;
+    return (fmi2Status)pg_inst_get_real(&INST->inst, vr, nvr, value);
+}
+
+fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Integer value[])
+{
+    CHECK(c);
+    REQUIRE(fmi2GetValues, "fmi2GetInteger");
+    if (nvr && (!vr || !value)) return fmi2Error;
+    return (fmi2Status)pg_inst_get_integer(&INST->inst, vr, nvr, value);
+}
+
+fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Boolean value[])
+{
+    CHECK(c);
+    REQUIRE(fmi2GetValues, "fmi2GetBoolean");
+    (void)value;
+    if (nvr && !vr) return fmi2Error;
+    return (fmi2Status)pg_inst_no_such_type(&INST->inst, vr, nvr, "Boolean");
+}
+
+fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2String value[])
+{
+    CHECK(c);
+    REQUIRE(fmi2GetValues, "fmi2GetString");
+    (void)value;
+    if (nvr && !vr) return fmi2Error;
+    return (fmi2Status)pg_inst_no_such_type(&INST->inst, vr, nvr, "String");
+}
+
+fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[])
+{
+    CHECK(c);
+    REQUIRE(fmi2SetValues, "fmi2SetReal");
+    if (nvr && (!vr || !value)) return fmi2Error;
+    return (fmi2Status)pg_inst_set_real(&INST->inst, vr, nvr, value);
+}
+
+fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Integer value[])
+{
+    CHECK(c);
+    REQUIRE(fmi2SetValues, "fmi2SetInteger");
+    if (nvr && (!vr || !value)) return fmi2Error;
+    return (fmi2Status)pg_inst_set_integer(&INST->inst, vr, nvr, value);
+}
+
+fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Boolean value[])
+{
+    CHECK(c);
+    REQUIRE(fmi2SetValues, "fmi2SetBoolean");
+    (void)value;
+    if (nvr && !vr) return fmi2Error;
+    return (fmi2Status)pg_inst_no_such_type(&INST->inst, vr, nvr, "Boolean");
+}
+
+fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2String value[])
+{
+    CHECK(c);
+    REQUIRE(fmi2SetValues, "fmi2SetString");
+    (void)value;
+    if (nvr && !vr) return fmi2Error;
+    return (fmi2Status)pg_inst_no_such_type(&INST->inst, vr, nvr, "String");
+}
+
+/* ---- FMU states ----------------------------------------------------------------------------- */
+static StateHandle *state_handle(Inst *in, void *state, const char *what)
+{
+    StateHandle *h = state;
+    if (!h || h->magic != STATE_MAGIC || h->owner != &PG_FMU) {
+        char text[300];
+        snprintf(text, sizeof text, "%s refused: %s", what,
+                 !h ? "no FMU state given (NULL)"
+                 : h->magic != STATE_MAGIC ? "not an FMU state of a native pogofmu FMU (or one already freed)"
+                 : "the state belongs to another FMU (another model or build): restore it into an instance of the "
+                   "FMU that saved it");
+        emit(in, ST_ERROR, "logStatusError", text);
+        return NULL;
+    }
+    return h;
+}
+
+fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
+{
+    CHECK(c && FMUstate);
+    REQUIRE(fmi2FMUstate, "fmi2GetFMUstate");
+    StateHandle *h = *FMUstate;
+    if (h && h->magic != STATE_MAGIC) {
+        emit(INST, ST_ERROR, "logStatusError", "get FMU state refused: the state to overwrite is not one of this FMU");
+        return fmi2Error;
+    }
+    if (!h) h = malloc(sizeof *h);
+    if (!h) return fmi2Error;
+    h->magic = STATE_MAGIC;
+    h->owner = &PG_FMU;
+    h->mode = INST->mode;
+    h->state = INST->inst.st;
+    *FMUstate = h;
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate)
+{
+    CHECK(c);
+    REQUIRE(fmi2FMUstate, "fmi2SetFMUstate");
+    StateHandle *h = state_handle(INST, FMUstate, "set FMU state");
+    if (!h) return fmi2Error;
+    pg_inst_restore(&INST->inst, &h->state);
+    if (h->mode) INST->mode = h->mode;
+    return fmi2OK;
+}
+
+fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
+{
+    CHECK(c);
+    REQUIRE(fmi2FMUstate, "fmi2FreeFMUstate");
+    StateHandle *h = FMUstate ? *FMUstate : NULL;
+    if (!h) return fmi2OK;
+    if (h->magic != STATE_MAGIC) {
+        emit(INST, ST_ERROR, "logStatusError", "free FMU state refused: not an FMU state of a native pogofmu FMU");
+        return fmi2Error;
+    }
+    h->magic = 0;
+    free(h);
+    *FMUstate = NULL;
+    return fmi2OK;
+}
+
+fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate, size_t *size)
+{
+    CHECK(c && size);
+    REQUIRE(fmi2FMUstate, "fmi2SerializedFMUstateSize");
+    if (!state_handle(INST, FMUstate, "serialized FMU state size")) return fmi2Error;
+    *size = pg_inst_serialized_size(&INST->inst);
+    return fmi2OK;
+}
+
+fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate, fmi2Byte serializedState[], size_t size)
+{
+    CHECK(c && serializedState);
+    REQUIRE(fmi2FMUstate, "fmi2SerializeFMUstate");
+    StateHandle *h = state_handle(INST, FMUstate, "serialize FMU state");
+    if (!h) return fmi2Error;
+    return (fmi2Status)pg_inst_serialize(&INST->inst, &h->state, (unsigned char *)serializedState, size);
+}
+
+fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedState[], size_t size, fmi2FMUstate *FMUstate)
+{
+    CHECK(c && serializedState && FMUstate);
+    REQUIRE(fmi2FMUstate, "fmi2DeSerializeFMUstate");
+    StateHandle *h = malloc(sizeof *h);
+    if (!h) return fmi2Error;
+    int st = pg_inst_deserialize(&INST->inst, (const unsigned char *)serializedState, size, &h->state);
+    if (st) {
+        free(h);
+        return (fmi2Status)st;
+    }
+    h->magic = STATE_MAGIC;
+    h->owner = &PG_FMU;
+    h->mode = h->state.has_sim ? MODE_STEP : MODE_INSTANTIATED;
+    if (*FMUstate && ((StateHandle *)*FMUstate)->magic == STATE_MAGIC) {
+        *(StateHandle *)*FMUstate = *h;
+        free(h);
+    } else {
+        *FMUstate = h;
+    }
+    return fmi2OK;
+}
+
+/* ---- the rest of co-simulation --------------------------------------------------------------- */
+fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vUnknown_ref[], size_t nUnknown,
+                                        const fmi2ValueReference vKnown_ref[], size_t nKnown,
+                                        const fmi2Real dvKnown[], fmi2Real dvUnknown[])
+{
+    (void)vUnknown_ref, (void)nUnknown, (void)vKnown_ref, (void)nKnown, (void)dvKnown, (void)dvUnknown;
+    CHECK(c);
+    REQUIRE(fmi2GetDirectionalDerivative, "fmi2GetDirectionalDerivative");
+    return unsupported(INST, "fmi2GetDirectionalDerivative (providesDirectionalDerivative = false)");
+}
+
+fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                       const fmi2Integer order[], const fmi2Real value[])
+{
+    (void)vr, (void)nvr, (void)order, (void)value;
+    CHECK(c);
+    REQUIRE(fmi2SetRealInputDerivatives, "fmi2SetRealInputDerivatives");
+    return unsupported(INST, "fmi2SetRealInputDerivatives (canInterpolateInputs = false)");
+}
+
+fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                        const fmi2Integer order[], fmi2Real value[])
+{
+    (void)vr, (void)nvr, (void)order, (void)value;
+    CHECK(c);
+    REQUIRE(fmi2GetRealOutputDerivatives, "fmi2GetRealOutputDerivatives");
+    return unsupported(INST, "fmi2GetRealOutputDerivatives (maxOutputDerivativeOrder = 0)");
+}
+
+fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2Real communicationStepSize,
+                      fmi2Boolean noSetFMUStatePriorToCurrentPoint)
+{
+    (void)noSetFMUStatePriorToCurrentPoint;
+    CHECK(c);
+    REQUIRE(fmi2DoStep, "fmi2DoStep");
+    return (fmi2Status)pg_inst_do_step(&INST->inst, currentCommunicationPoint, communicationStepSize);
+}
+
+fmi2Status fmi2CancelStep(fmi2Component c)
+{
+    CHECK(c);
+    REQUIRE(fmi2CancelStep, "fmi2CancelStep");
+    return unsupported(INST, "fmi2CancelStep (fmi2DoStep never returns fmi2Pending)");
+}
+
+fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status *value)
+{
+    (void)s, (void)value;
+    CHECK(c);
+    REQUIRE(fmi2GetStatus, "fmi2GetStatus");
+    return unsupported(INST, "fmi2GetStatus (fmi2DoStep never returns fmi2Pending)");
+}
+
+fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real *value)
+{
+    CHECK(c && value);
+    REQUIRE(fmi2GetStatus, "fmi2GetRealStatus");
+    if (s != fmi2LastSuccessfulTime) return unsupported(INST, "fmi2GetRealStatus for this status kind");
+    *value = pg_inst_last_successful_time(&INST->inst);
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Integer *value)
+{
+    (void)s, (void)value;
+    CHECK(c);
+    REQUIRE(fmi2GetStatus, "fmi2GetIntegerStatus");
+    return unsupported(INST, "fmi2GetIntegerStatus");
+}
+
+fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean *value)
+{
+    CHECK(c && value);
+    REQUIRE(fmi2GetStatus, "fmi2GetBooleanStatus");
+    if (s != fmi2Terminated) return unsupported(INST, "fmi2GetBooleanStatus for this status kind");
+    *value = fmi2False;
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2String *value)
+{
+    (void)s, (void)value;
+    CHECK(c);
+    REQUIRE(fmi2GetStatus, "fmi2GetStringStatus");
+    return unsupported(INST, "fmi2GetStringStatus");
+}
