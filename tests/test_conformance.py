@@ -3,6 +3,9 @@
 Validation, units and descriptions, the default experiment reaching its stop time, bad input
 ending in an error status with a clear message while the host survives, FMU state round trips,
 and agreement with an independent importer (libcosimpy).
+
+The suite runs on both backends of the FMI 2.0 FMUs: the Python-hosted ones (``dist/<Model>.fmu``)
+and the native ones (``dist/native/<Model>.fmu``, issue 18), with the same expectations.
 """
 import json
 import math
@@ -16,6 +19,7 @@ from pogofmu.runtime.engine import SOLVER_PARAMETERS
 from support import DIST, Instance, fmu_path, init_failure_text, run_libcosim, simulate
 
 FMUS = build_fmu.model_names()
+BOTH = FMUS + [f"native/{n}" for n in FMUS]  # the Python-hosted and the native FMU of every model
 
 
 def model_description(name):
@@ -24,7 +28,11 @@ def model_description(name):
 
 
 def slave_model(name):
-    return build_fmu.slave_class(name).model
+    return build_fmu.slave_class(name.rpartition("/")[2]).model
+
+
+def native(name):
+    return name.startswith("native/")
 
 
 def test_every_slave_was_built():
@@ -32,14 +40,14 @@ def test_every_slave_was_built():
     assert sorted(p.stem for p in DIST.glob("*.fmu")) == FMUS
 
 
-@pytest.mark.parametrize("name", FMUS)
+@pytest.mark.parametrize("name", BOTH)
 def test_fmpy_validation_reports_no_problem(name):
     from fmpy.validation import validate_fmu
 
     assert validate_fmu(str(fmu_path(name))) == []
 
 
-@pytest.mark.parametrize("name", FMUS)
+@pytest.mark.parametrize("name", BOTH)
 def test_units_and_descriptions(name):
     root = model_description(name)
     defined = {u.get("name") for u in root.iter("Unit")}
@@ -64,7 +72,7 @@ def test_units_and_descriptions(name):
     assert root.find("CoSimulation").get("canGetAndSetFMUstate") == "true"
 
 
-@pytest.mark.parametrize("name", FMUS)
+@pytest.mark.parametrize("name", BOTH)
 def test_default_experiment_reaches_stop_time(name):
     run = simulate(name)  # asserts the final time
     assert not run.errors
@@ -72,7 +80,7 @@ def test_default_experiment_reaches_stop_time(name):
         assert all(math.isfinite(v) for v in run.res[col]), f"{col} not finite"
 
 
-@pytest.mark.parametrize("name", FMUS)
+@pytest.mark.parametrize("name", BOTH)
 def test_nan_parameter_is_rejected_and_host_survives(name):
     model = slave_model(name)
     par = next(p for p in model.parameters if not p.integer)
@@ -82,7 +90,7 @@ def test_nan_parameter_is_rejected_and_host_survives(name):
     assert run.res["time"][-1] == pytest.approx(0.1)
 
 
-@pytest.mark.parametrize("name", FMUS)
+@pytest.mark.parametrize("name", BOTH)
 def test_bad_step_and_nan_input_are_refused_instance_survives(name):
     from fmpy.fmi1 import FMICallException
 
@@ -134,7 +142,7 @@ def test_bad_step_and_nan_input_are_refused_instance_survives(name):
         inst.close()
 
 
-@pytest.mark.parametrize("name", FMUS)
+@pytest.mark.parametrize("name", BOTH)
 def test_fmu_state_round_trip(name):
     """Save the state at several times, run on, restore, run again: identical outputs."""
     stop = 2.0
@@ -159,7 +167,7 @@ def test_fmu_state_round_trip(name):
         inst.close()
 
 
-@pytest.mark.parametrize("name", FMUS)
+@pytest.mark.parametrize("name", BOTH)
 def test_serialized_state_restores_bit_identically_in_a_fresh_instance(name):
     """fmi2SerializeFMUstate / fmi2DeSerializeFMUstate (canSerializeFMUstate = true): a state taken
     mid-run (integrator ahead of the communication point, events behind) and restored in another
@@ -171,7 +179,8 @@ def test_serialized_state_restores_bit_identically_in_a_fresh_instance(name):
         a.run_to(0.73, 1e-3)
         blob = a.fmu.serializeFMUstate(a.fmu.getFMUstate())
         body, _, seal = bytes(blob).rpartition(b"\n")
-        assert json.loads(body)["owner"][0] == name and len(seal) == 64  # the model, and a SHA-256 seal
+        head = body.split(b"\n", 1)[0] if native(name) else body  # (native: a header line, then the bytes)
+        assert json.loads(head)["owner"][0] == slave_model(name).name and len(seal) == 64  # the model, a seal
         b.fmu.setFMUstate(b.fmu.deSerializeFMUstate(blob))
         b.t = a.t
         assert b.outputs() == a.outputs()
@@ -181,11 +190,11 @@ def test_serialized_state_restores_bit_identically_in_a_fresh_instance(name):
         assert a.outputs() == b.outputs(), f"{name}: the deserialized state runs differently"
         assert a.get("n_events") > 0 or not slave_model(name).states
         # a state of another model, and damaged bytes, are refused with fmi2Error and a reason
-        other = next(n for n in FMUS if n != name)
+        other = next(n for n in (BOTH if native(name) else FMUS) if n != name and native(n) == native(name))
         c = Instance(other).init()
         foreign = c.fmu.serializeFMUstate(c.fmu.getFMUstate())
         c.close()
-        for data, text in ((foreign, f"belongs to model '{other}'"), (bytes(blob)[:-7], "damaged"),
+        for data, text in ((foreign, f"belongs to model '{slave_model(other).name}'"), (bytes(blob)[:-7], "damaged"),
                            (b"garbage", "not a serialized pogofmu FMU state")):
             with pytest.raises(FMICallException):
                 b.fmu.deSerializeFMUstate(data)

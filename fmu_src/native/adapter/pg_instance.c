@@ -546,15 +546,15 @@ int pg_inst_deserialize(PgInstance *in, const unsigned char *bytes, size_t size,
     PgMsg m;
     pg_msg_clear(&m);
     const char *prefix = "{\"format\":\"pogofmu-";
-    if (size < 66 || size < strlen(prefix) || memcmp(bytes, prefix, strlen(prefix)) != 0 || bytes[size - 65] != '\n') {
+    if (!bytes || size < strlen(prefix) || memcmp(bytes, prefix, strlen(prefix)) != 0) {
         pg_msg_printf(&m, "%s refused: the %zu bytes are not a serialized pogofmu FMU state", fn, size);
         return refuse(in, &m);
     }
     char hex[65];
-    pg_sha256_hex(bytes, size - 65, hex);
-    if (memcmp(hex, bytes + size - 64, 64) != 0) {
+    if (size >= 66) pg_sha256_hex(bytes, size - 65, hex);
+    if (size < 66 || bytes[size - 65] != '\n' || memcmp(hex, bytes + size - 64, 64) != 0) {
         pg_msg_printf(&m, "%s refused: the serialized state is damaged (its SHA-256 seal does not match its %zu bytes)",
-                      fn, size - 65);
+                      fn, size >= 65 ? size - 65 : size);
         return refuse(in, &m);
     }
     const unsigned char *nl = memchr(bytes, '\n', size - 65);
