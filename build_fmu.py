@@ -291,7 +291,9 @@ def _variable_attributes(model, v):
     return attrs
 
 
-def model_description_fmi2(cls, token: str) -> bytes:
+def model_description_fmi2(cls, token: str, source_files=()) -> bytes:
+    """The FMI 2.0 modelDescription.xml; ``source_files`` (a source FMU's compilation units, in
+    ``sources/``) are listed in ``<CoSimulation><SourceFiles>``."""
     model = cls.model
     variables = cls.variables()
     root = ET.Element("fmiModelDescription", {
@@ -307,6 +309,10 @@ def model_description_fmi2(cls, token: str) -> bytes:
         "canBeInstantiatedOnlyOncePerProcess": "false", "canNotUseMemoryManagementFunctions": "true",
         "canGetAndSetFMUstate": "true", "canSerializeFMUstate": "true",
         "providesDirectionalDerivative": "false"})
+    if source_files:
+        files = ET.SubElement(root.find("CoSimulation"), "SourceFiles")
+        for name in source_files:
+            ET.SubElement(files, "File", {"name": name})
     mv = _description_body(root, cls, variables)
     for v in variables:
         attrs = _variable_attributes(model, v)
@@ -468,24 +474,31 @@ def build_one(name: str, dest: Path, token_seed: str = "", fmi_version: int = 2)
 
 def build_native(name: str, dest: Path, fmi_version: int = 2) -> Path:
     """Build and validate the native FMU of the model ``name`` (issue 18): the same modelDescription
-    as the Python-hosted FMU of that FMI version, and a binary of C generated from the Python model
-    (pogofmu.codegen) with the native engine and adapter — no Python at run time. FMI 2.0 into
-    ``dest/native/<Model>.fmu``."""
+    as the Python-hosted FMU of that FMI version (but for its token and ``<SourceFiles>``), a binary
+    of C generated from the Python model (pogofmu.codegen) with the native engine and adapter — no
+    Python at run time — for Linux, for Windows where the mingw-w64 cross compiler is installed,
+    and the C sources themselves (``sources/``), from which both binaries are compiled and an
+    importer compiles its own.  FMI 2.0 into ``dest/native/<Model>.fmu``."""
     from fmpy.validation import validate_fmu
 
-    from pogofmu.codegen.build import CompileError, native_fmu_library
+    from pogofmu.codegen.build import CompileError, mingw_compiler, native_fmu
 
     cls = slave_class(name)
     out_dir = dest / "native"
     out_dir.mkdir(parents=True, exist_ok=True)
+    windows = mingw_compiler() is not None
+    if not windows:
+        _warn_once("no mingw-w64 cross compiler (Debian: gcc-mingw-w64-x86-64): the native FMUs get no "
+                   "Windows binary (their sources/ still build on any platform)")
     with tempfile.TemporaryDirectory(prefix="pogofmu_native_") as tmp:
         try:
-            lib, token, build, _ = native_fmu_library(name, fmi_version, Path(tmp), fmi_headers())
+            nb = native_fmu(name, fmi_version, Path(tmp), fmi_headers(), windows=windows)
         except CompileError as exc:
             raise BuildError(f"{name}: the native FMU does not compile: {exc}") from None
-        binary = lib.read_bytes()
-    members = [("modelDescription.xml", model_description_fmi2(cls, token), False),
-               (f"binaries/linux64/{name}.so", binary, True)]
+        members = [("modelDescription.xml", model_description_fmi2(cls, nb.token, nb.units), False)]
+        members += [(f"binaries/{platform}/{name}{lib.suffix}", lib.read_bytes(), True)
+                    for platform, lib in sorted(nb.binaries.items())]
+        members += [(f"sources/{p.name}", p.read_bytes(), False) for p in sorted(nb.sources.iterdir())]
     fmu = out_dir / f"{name}.fmu"
     write_zip(fmu, members)
     problems = validate_fmu(str(fmu))
@@ -493,6 +506,15 @@ def build_native(name: str, dest: Path, fmi_version: int = 2) -> Path:
         raise BuildError(f"{fmu.name} (native FMI {fmi_version}): fmpy validation failed:\n  " + "\n  ".join(problems))
     print(f"built and validated {fmu.relative_to(ROOT) if fmu.is_relative_to(ROOT) else fmu}")
     return fmu
+
+
+_WARNED = set()
+
+
+def _warn_once(text: str) -> None:
+    if text not in _WARNED:
+        _WARNED.add(text)
+        print(f"WARNING: {text}", file=sys.stderr)
 
 
 def ssp2_text(text: str, what: str) -> str:

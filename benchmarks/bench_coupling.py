@@ -18,11 +18,12 @@ most 1.5x; exit status 1 if a median misses its target.
 On a shared machine CPU times of identical runs spread by 2x; ``--instructions`` counts instead
 the instructions each variant executes per communication step (valgrind's callgrind, a fresh
 process per run, the count of a run to ``--short`` seconds subtracted from one to
-``--short + 1`` seconds, so that start-up and loading cancel): repeatable to the instruction,
+``--short + --window`` seconds, so that start-up and loading cancel; the window's events per
+second are printed beside the 30 s run's, for a window to be representative): repeatable to the instruction,
 whatever else the machine does, and slow (a few minutes).
 
     python benchmarks/bench_coupling.py [--rounds 5] [--stop-time 30] [--step 1e-3]
-    python benchmarks/bench_coupling.py --instructions [--short 0.5]
+    python benchmarks/bench_coupling.py --instructions [--short 0.5] [--window 1]
 """
 from __future__ import annotations
 
@@ -47,9 +48,10 @@ def main(argv=None):
     ap.add_argument("--dist", default=str(ROOT / "dist"))
     ap.add_argument("--instructions", action="store_true", help="count instructions per step (callgrind)")
     ap.add_argument("--short", type=float, default=0.5, help="[s] the shorter run of --instructions")
+    ap.add_argument("--window", type=float, default=1.0, help="[s] how much longer the longer run of --instructions is")
     args = ap.parse_args(argv)
     if args.instructions:
-        return count_instructions(Path(args.dist), args.short, args.step)
+        return count_instructions(Path(args.dist), args.short, args.step, args.window, args.stop_time)
     from pogofmu.ssp import simulate
 
     dist = Path(args.dist)
@@ -121,21 +123,33 @@ def _callgrind(dist, package, keywords, stop, step):
     return int(found.group(1))
 
 
-def count_instructions(dist, short, step):
+def _event_instants(dist, stop, step):
+    import numpy as np
+
+    from pogofmu.ssp import simulate
+
+    res = simulate(dist / "SpaceHopper-fmi3.ssp", parameters="moon", stop_time=stop, step=step, echo_log=False)
+    return len(set(np.asarray(res["time"])[np.asarray(res["event"]) != 0]))
+
+
+def count_instructions(dist, short, step, window=1.0, stop_time=30.0):
     import shutil
 
     if shutil.which("valgrind") is None:
         print("--instructions needs valgrind (Debian package valgrind)", file=sys.stderr)
         return 2
-    n = int(round(1.0 / step))  # the second run is one simulated second longer
+    n = int(round(window / step))  # the second run is `window` simulated seconds longer
+    in_window = _event_instants(dist, short + window, step) - _event_instants(dist, short, step)
+    in_run = _event_instants(dist, stop_time, step)
     per_step = {}
     for name, (package, keywords, _) in VARIANTS.items():
         a = _callgrind(dist, package, keywords, short, step)
-        b = _callgrind(dist, package, keywords, short + 1.0, step)
+        b = _callgrind(dist, package, keywords, short + window, step)
         per_step[name] = (b - a) / n
         print(f"{name}: {per_step[name]:,.0f} instructions per step", flush=True)
     print(f"\nSpaceHopper, Moon, instructions per communication step of {step:g} s from t = {short:g} s to "
-          f"{short + 1:g} s (3 events in it), callgrind")
+          f"{short + window:g} s, callgrind; event instants per second: {in_window / window:.2f} in the window, "
+          f"{in_run / stop_time:.2f} in the {stop_time:g} s run")
     failed = False
     for name, (_, _, peer) in VARIANTS.items():
         text = f"{name:26s} {per_step[name]:12,.0f}"

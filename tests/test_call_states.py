@@ -289,7 +289,16 @@ class Fmi3ControllerME(Fmi3Machine):
     NAME, INTERFACE, EVENT_MODE = "HopController", "me", False
 
 
-MACHINES = [Fmi2CoSimulation, Fmi2Controller, Fmi3EventMode, Fmi3NoEventMode, Fmi3ModelExchange, Fmi3ControllerME]
+class NativeFmi2CoSimulation(Fmi2CoSimulation):
+    """The native FMU (dist/native/, issue 18): the same state machine, the same table."""
+    NAME = "native/PogoStick"
+
+
+class NativeFmi2Controller(Fmi2CoSimulation):
+    NAME = "native/HopController"
+
+
+MACHINES = [Fmi2CoSimulation, Fmi2Controller, NativeFmi2CoSimulation, NativeFmi2Controller, Fmi3EventMode, Fmi3NoEventMode, Fmi3ModelExchange, Fmi3ControllerME]
 
 
 @pytest.mark.parametrize("machine", MACHINES, ids=[m.__name__ for m in MACHINES])

@@ -52,9 +52,11 @@ def unzipped(tmp_path_factory):
     return get
 
 
-def run_c_host(c_host, unzipdir, name, stop, step, outputs, params=None, env=None, timeout=300):
-    """Run the C host; return (returncode, rows as dicts name -> value, stderr)."""
-    md = model_description(name)
+def run_c_host(c_host, unzipdir, name, stop, step, outputs, params=None, env=None, timeout=300, md=None,
+               prefix=()):
+    """Run the C host (under ``prefix``, e.g. wine); return (returncode, rows as dicts name -> value,
+    stderr).  ``md``: the FMU's description (default: that of dist/<name>.fmu)."""
+    md = md or model_description(name)
     by_name = {v.name: v for v in md.modelVariables}
     reals = [n for n in outputs if by_name[n].type == "Real"]
     ints = [n for n in outputs if by_name[n].type == "Integer"]
@@ -62,7 +64,7 @@ def run_c_host(c_host, unzipdir, name, stop, step, outputs, params=None, env=Non
             ",".join(str(by_name[n].valueReference) for n in reals) or "-",
             ",".join(str(by_name[n].valueReference) for n in ints) or "-"]
     args += [f"{by_name[k].valueReference}={v!r}" for k, v in (params or {}).items()]
-    proc = subprocess.run(args, capture_output=True, text=True, env=env or BARE_ENV, timeout=timeout)
+    proc = subprocess.run([*prefix, *args], capture_output=True, text=True, env=env or BARE_ENV, timeout=timeout)
     rows = []
     for line in proc.stdout.splitlines():
         values = line.split(",")

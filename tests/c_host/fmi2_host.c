@@ -7,9 +7,28 @@
  * point: time, the reals (%.17g), the integers.  The FMU's log goes to stderr.  Exit status 0 if
  * the run reached STOP, 1 otherwise.
  *
+ * The same source builds for Windows with mingw-w64 (LoadLibrary, binaries/win64/<id>.dll; the
+ * tests run it under wine against the native FMUs' Windows binaries).
+ *
  * Built with -DRECORD_IN_MEMORY (benchmark (b), benchmarks/bench_fmu.py) it keeps every value in
  * memory instead, as fmpy's simulate_fmu does, and prints one summary line at the end. */
+#ifdef _WIN32
+#include <windows.h>
+#define PLATFORM "win64"
+#define SUFFIX ".dll"
+#define OPEN(path) ((void *)LoadLibraryA(path))
+#define SYMBOL(lib, name) ((void *)GetProcAddress((HMODULE)(lib), name))
+#define CLOSE(lib) FreeLibrary((HMODULE)(lib))
+#define OPEN_ERROR() "LoadLibrary failed"
+#else
 #include <dlfcn.h>
+#define PLATFORM "linux64"
+#define SUFFIX ".so"
+#define OPEN(path) dlopen(path, RTLD_NOW | RTLD_LOCAL)
+#define SYMBOL(lib, name) dlsym(lib, name)
+#define CLOSE(lib) dlclose(lib)
+#define OPEN_ERROR() dlerror()
+#endif
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -38,15 +57,15 @@ static size_t parse_vrs(const char *text, fmi2ValueReference *out)
     return n;
 }
 
-#define LOAD(name) name##TYPE *name = (name##TYPE *)dlsym(lib, #name); if (!name) { fprintf(stderr, "missing %s\n", #name); return 2; }
+#define LOAD(name) name##TYPE *name = (name##TYPE *)SYMBOL(lib, #name); if (!name) { fprintf(stderr, "missing %s\n", #name); return 2; }
 
 int main(int argc, char **argv)
 {
     if (argc < 8) { fprintf(stderr, "usage: see the source\n"); return 2; }
     char path[4096], uri[4200];
-    snprintf(path, sizeof path, "%s/binaries/linux64/%s.so", argv[1], argv[2]);
-    void *lib = dlopen(path, RTLD_NOW | RTLD_LOCAL);
-    if (!lib) { fprintf(stderr, "dlopen: %s\n", dlerror()); return 2; }
+    snprintf(path, sizeof path, "%s/binaries/" PLATFORM "/%s" SUFFIX, argv[1], argv[2]);
+    void *lib = OPEN(path);
+    if (!lib) { fprintf(stderr, "loading %s: %s\n", path, OPEN_ERROR()); return 2; }
     LOAD(fmi2Instantiate) LOAD(fmi2SetupExperiment) LOAD(fmi2EnterInitializationMode)
     LOAD(fmi2ExitInitializationMode) LOAD(fmi2DoStep) LOAD(fmi2GetReal) LOAD(fmi2GetInteger)
     LOAD(fmi2SetReal) LOAD(fmi2Terminate) LOAD(fmi2FreeInstance)
@@ -101,6 +120,6 @@ done:
     free(n_all);
 #endif
     fmi2FreeInstance(c);
-    dlclose(lib);
+    CLOSE(lib);
     return rc;
 }

@@ -11,7 +11,7 @@
 #include "fmi2Functions.h"
 #include "pg_instance.h"
 
-#include "../call_states.h"
+#include "call_states.h"
 
 extern const PgFmu PG_FMU;
 

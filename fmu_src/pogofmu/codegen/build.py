@@ -30,11 +30,11 @@ def c_compiler(cc: Optional[str] = None) -> Optional[str]:
 
 def compile_c(sources: Sequence[Path], out: Path, *, shared: bool = True, include: Iterable[Path] = (),
               defines: Iterable[str] = (), cc: Optional[str] = None, extra: Sequence[str] = (),
-              libs: Sequence[str] = ("-lm",)) -> Path:
+              libs: Sequence[str] = ("-lm",), pic: bool = True) -> Path:
     compiler = c_compiler(cc)
     if compiler is None:
         raise CompileError("no C compiler found (cc, gcc or clang; or set CC)")
-    cmd = [compiler, *CFLAGS, *(["-shared", "-fPIC"] if shared else []), *extra,
+    cmd = [compiler, *CFLAGS, *(["-shared"] if shared else []), *(["-fPIC"] if shared and pic else []), *extra,
            *(f"-I{p}" for p in include), *(f"-D{d}" for d in defines),
            *(str(s) for s in sources), "-o", str(out), *libs]
     proc = subprocess.run(cmd, capture_output=True, text=True)
@@ -92,21 +92,34 @@ def engine_library(model_name: str, folder: Path, cc: Optional[str] = None) -> P
 ADAPTER = NATIVE / "adapter"
 ADAPTER_SOURCES = ("pg_instance.c", "pg_sha256.c")
 FMI_ENTRY = {2: NATIVE / "fmi2" / "pg_fmi2.c"}
+FMI_HEADERS = {2: ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")}
+MINGW = "x86_64-w64-mingw32-gcc"
+# Windows: mingw-w64's own C99 printf/strtod (not msvcrt's: "1e-005", inexact parsing), so that
+# the messages read as on Linux; libgcc linked in, symbols stripped, no build time stamp in the DLL
+WINDOWS_FLAGS = ("-D__USE_MINGW_ANSI_STDIO=1", "-static-libgcc", "-s", "-Wl,--no-insert-timestamp")
 
 
-def native_sources(model_name: str, fmi: int, folder: Path):
-    """Every C file of the native FMU of ``model_name`` (the generated ones written into
-    ``folder``), without the description file, which needs the token: ``(sources, digest)``, the
-    digest covering their bytes (the FMU's build name and token derive from it)."""
+def stage_sources(model_name: str, fmi: int, folder: Path, fmi_headers: Path):
+    """Write every file of the native FMU's ``sources/`` into ``folder`` (flat: the generated model
+    and tableaux, the engine, the adapter, the FMI entry file, the call-state table and the FMI
+    headers), without the description file, which needs the token: ``(files, digest)``, the digest
+    covering their names and bytes (the FMU's build name and token derive from it).  The binaries
+    are compiled from this folder alone, as an importer compiles a source FMU."""
     import hashlib
 
-    srcs = [write_model_source(model_name, folder), write_pairs_source(folder),
-            *(ENGINE / s for s in ENGINE_SOURCES), *(ADAPTER / s for s in ADAPTER_SOURCES), FMI_ENTRY[fmi]]
+    folder.mkdir(parents=True, exist_ok=True)
+    write_model_source(model_name, folder)
+    write_pairs_source(folder)
+    copied = [*(ENGINE / s for s in ENGINE_SOURCES), *ENGINE.glob("*.h"), *(ADAPTER / s for s in ADAPTER_SOURCES),
+              *ADAPTER.glob("*.h"), FMI_ENTRY[fmi], NATIVE / "call_states.h",
+              *(fmi_headers / h for h in FMI_HEADERS[fmi])]
+    for path in copied:
+        shutil.copyfile(path, folder / path.name)
+    files = sorted(p.name for p in folder.iterdir() if p.suffix in (".c", ".h"))
     digest = hashlib.sha256(f"fmi{fmi}".encode())
-    headers = sorted([*ENGINE.glob("*.h"), *ADAPTER.glob("*.h"), NATIVE / "call_states.h"])
-    for path in [*srcs, *headers]:
-        digest.update(path.name.encode() + b"\0" + path.read_bytes())
-    return srcs, digest.hexdigest()
+    for name in files:
+        digest.update(name.encode() + b"\0" + (folder / name).read_bytes())
+    return files, digest.hexdigest()
 
 
 def write_fmu_source(model_name: str, fmi: int, folder: Path, token: str, build: str) -> Path:
@@ -119,16 +132,42 @@ def write_fmu_source(model_name: str, fmi: int, folder: Path, token: str, build:
     return path
 
 
-def native_fmu_library(model_name: str, fmi: int, folder: Path, fmi_headers: Path, cc: Optional[str] = None,
-                       token: Optional[str] = None):
-    """Compile the native FMU's binary: ``(library, token, build name, sources)``."""
+def mingw_compiler() -> Optional[str]:
+    """The mingw-w64 cross compiler for 64-bit Windows (``POGOFMU_MINGW`` or Debian's
+    ``gcc-mingw-w64-x86-64``), or None."""
+    return shutil.which(os.environ.get("POGOFMU_MINGW") or MINGW)
+
+
+class NativeBuild:
+    """A native FMU's compiled parts: ``sources`` (the folder), ``units`` (its compilation units, in
+    the order of ``<SourceFiles>``), ``token``, ``build`` (the build name) and ``binaries``
+    (FMI platform folder -> library)."""
+
+    def __init__(self, sources: Path, units, token: str, build: str, binaries: dict):
+        self.sources, self.units, self.token, self.build, self.binaries = sources, units, token, build, binaries
+
+
+def native_fmu(model_name: str, fmi: int, folder: Path, fmi_headers: Path, cc: Optional[str] = None,
+               token: Optional[str] = None, windows: bool = False) -> NativeBuild:
+    """Stage the native FMU's sources in ``folder/sources`` and compile them: the Linux library with
+    the system compiler and, with ``windows``, the Windows DLL with mingw-w64."""
     import uuid
 
-    srcs, digest = native_sources(model_name, fmi, folder)
+    src = folder / "sources"
+    files, digest = stage_sources(model_name, fmi, src, fmi_headers)
     build = f"native_{model_name}_{digest[:12]}"
     token = token or "{" + str(uuid.uuid5(uuid.NAMESPACE_URL, f"pogofmu/{build}/fmi{fmi}")) + "}"
-    desc = write_fmu_source(model_name, fmi, folder, token, build)
+    desc = write_fmu_source(model_name, fmi, src, token, build)
+    units = sorted({*(f for f in files if f.endswith(".c")), desc.name})
+    binaries = {}
     out = folder / f"{model_name}.so"
-    compile_c([*srcs, desc], out, include=[ENGINE, ADAPTER, fmi_headers], cc=cc,
-              extra=("-fvisibility=hidden",), libs=("-lm",))
-    return out, token, build, [*srcs, desc]
+    compile_c([src / u for u in units], out, include=[src], cc=cc, extra=("-fvisibility=hidden",))
+    binaries["linux64" if fmi == 2 else "x86_64-linux"] = out
+    if windows:
+        compiler = mingw_compiler()
+        if compiler is None:
+            raise CompileError(f"no {MINGW} (Debian: gcc-mingw-w64-x86-64; or set POGOFMU_MINGW)")
+        dll = folder / f"{model_name}.dll"
+        compile_c([src / u for u in units], dll, include=[src], cc=compiler, pic=False, extra=WINDOWS_FLAGS)
+        binaries["win64" if fmi == 2 else "x86_64-windows"] = dll
+    return NativeBuild(src, units, token, build, binaries)
