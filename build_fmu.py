@@ -472,19 +472,31 @@ def build_one(name: str, dest: Path, token_seed: str = "", fmi_version: int = 2)
     return fmu
 
 
+def build_description_fmi3(model_name: str, units) -> bytes:
+    """FMI 3.0 ``sources/buildDescription.xml``: one build configuration, the compilation units."""
+    root = ET.Element("fmiBuildDescription", {"fmiVersion": "3.0"})
+    config = ET.SubElement(root, "BuildConfiguration", {"modelIdentifier": model_name})
+    files = ET.SubElement(config, "SourceFileSet", {"language": "C99"})
+    for name in units:
+        ET.SubElement(files, "SourceFile", {"name": name})
+    ET.indent(root)
+    return b'<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="utf-8") + b"\n"
+
+
 def build_native(name: str, dest: Path, fmi_version: int = 2) -> Path:
     """Build and validate the native FMU of the model ``name`` (issue 18): the same modelDescription
-    as the Python-hosted FMU of that FMI version (but for its token and ``<SourceFiles>``), a binary
-    of C generated from the Python model (pogofmu.codegen) with the native engine and adapter — no
-    Python at run time — for Linux, for Windows where the mingw-w64 cross compiler is installed,
-    and the C sources themselves (``sources/``), from which both binaries are compiled and an
-    importer compiles its own.  FMI 2.0 into ``dest/native/<Model>.fmu``."""
+    as the Python-hosted FMU of that FMI version (but for its token and, FMI 2.0, ``<SourceFiles>``),
+    a binary of C generated from the Python model (pogofmu.codegen) with the native engine and
+    adapter — no Python at run time — for Linux, for Windows where the mingw-w64 cross compiler is
+    installed, and the C sources themselves (``sources/``; FMI 3.0: with buildDescription.xml), from
+    which both binaries are compiled and an importer compiles its own.  FMI 2.0 into
+    ``dest/native/<Model>.fmu``, FMI 3.0 into ``dest/native/fmi3/<Model>.fmu``."""
     from fmpy.validation import validate_fmu
 
     from pogofmu.codegen.build import CompileError, mingw_compiler, native_fmu
 
     cls = slave_class(name)
-    out_dir = dest / "native"
+    out_dir = dest / "native" / ("fmi3" if fmi_version == 3 else "")
     out_dir.mkdir(parents=True, exist_ok=True)
     windows = mingw_compiler() is not None
     if not windows:
@@ -495,7 +507,12 @@ def build_native(name: str, dest: Path, fmi_version: int = 2) -> Path:
             nb = native_fmu(name, fmi_version, Path(tmp), fmi_headers(), windows=windows)
         except CompileError as exc:
             raise BuildError(f"{name}: the native FMU does not compile: {exc}") from None
-        members = [("modelDescription.xml", model_description_fmi2(cls, nb.token, nb.units), False)]
+        if fmi_version == 2:
+            description = model_description_fmi2(cls, nb.token, nb.units)
+        else:
+            description = model_description_fmi3(cls, nb.token)
+            (nb.sources / "buildDescription.xml").write_bytes(build_description_fmi3(name, nb.units))
+        members = [("modelDescription.xml", description, False)]
         members += [(f"binaries/{platform}/{name}{lib.suffix}", lib.read_bytes(), True)
                     for platform, lib in sorted(nb.binaries.items())]
         members += [(f"sources/{p.name}", p.read_bytes(), False) for p in sorted(nb.sources.iterdir())]
@@ -506,6 +523,12 @@ def build_native(name: str, dest: Path, fmi_version: int = 2) -> Path:
         raise BuildError(f"{fmu.name} (native FMI {fmi_version}): fmpy validation failed:\n  " + "\n  ".join(problems))
     print(f"built and validated {fmu.relative_to(ROOT) if fmu.is_relative_to(ROOT) else fmu}")
     return fmu
+
+
+def mingw_available() -> bool:
+    from pogofmu.codegen.build import mingw_compiler
+
+    return mingw_compiler() is not None
 
 
 _WARNED = set()
@@ -573,6 +596,7 @@ def main(argv=None):
         built.append(build_one(name, dest, fmi_version=3))
         if compile_launcher(2) is not None:  # (a C compiler: the native FMUs too)
             built.append(build_native(name, dest))
+            built.append(build_native(name, dest, fmi_version=3))
     if not args.names:
         for ssd in sorted(SSP_DIR.glob("*/SystemStructure.ssd")):
             pack_ssp(ssd.parent, dest)

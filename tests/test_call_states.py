@@ -167,12 +167,13 @@ class Fmi2Controller(Fmi2CoSimulation):
 class Fmi3Machine(Machine):
     GET_STATE, SET_STATE, FREE_STATE, RESET = "fmi3GetFMUState", "fmi3SetFMUState", "fmi3FreeFMUState", "fmi3Reset"
     INTERFACE, EVENT_MODE = "cs", True
+    FOLDER = "fmi3"
 
     def make(self):
         from fmpy import extract, read_model_description
         from fmpy.fmi3 import FMU3Model, FMU3Slave
 
-        path = DIST / "fmi3" / f"{self.NAME}.fmu"
+        path = DIST / self.FOLDER / f"{self.NAME}.fmu"
         md = read_model_description(str(path))
         self.vars = {v.name: v for v in md.modelVariables}
         self.nx, self.nz = len(md.derivatives), len(md.eventIndicators)
@@ -298,7 +299,24 @@ class NativeFmi2Controller(Fmi2CoSimulation):
     NAME = "native/HopController"
 
 
-MACHINES = [Fmi2CoSimulation, Fmi2Controller, NativeFmi2CoSimulation, NativeFmi2Controller, Fmi3EventMode, Fmi3NoEventMode, Fmi3ModelExchange, Fmi3ControllerME]
+class NativeFmi3EventMode(Fmi3EventMode):
+    FOLDER = "native/fmi3"
+
+
+class NativeFmi3NoEventMode(Fmi3NoEventMode):
+    FOLDER = "native/fmi3"
+
+
+class NativeFmi3ModelExchange(Fmi3ModelExchange):
+    FOLDER = "native/fmi3"
+
+
+class NativeFmi3ControllerME(Fmi3ControllerME):
+    FOLDER = "native/fmi3"
+
+
+NATIVE_FMI3 = [NativeFmi3EventMode, NativeFmi3NoEventMode, NativeFmi3ModelExchange, NativeFmi3ControllerME]
+MACHINES = [Fmi2CoSimulation, Fmi2Controller, NativeFmi2CoSimulation, NativeFmi2Controller, *NATIVE_FMI3, Fmi3EventMode, Fmi3NoEventMode, Fmi3ModelExchange, Fmi3ControllerME]
 
 
 @pytest.mark.parametrize("machine", MACHINES, ids=[m.__name__ for m in MACHINES])

@@ -7,6 +7,9 @@
 * the event-indicator logic of model exchange driven by hand (direction, restart rule, flags);
 * conformance: validation, the FMI 2.0 variables unchanged, bad parameters, FMU state round trips,
   several FMI 2.0 and 3.0 FMUs in one fresh process.
+
+Every test runs on both backends: the Python-hosted FMUs (dist/fmi3/) and the native ones
+(dist/native/fmi3/, issue 18), which tests/test_native_fmu.py also compares with each other.
 """
 import ctypes
 import math
@@ -28,17 +31,33 @@ C_HOST_SOURCE = ROOT / "tests" / "c_host" / "fmi3_host.c"
 BARE_ENV = {"PATH": "/usr/bin:/bin", "LANG": "C.UTF-8"}
 
 
+BACKENDS = {"python": "fmi3", "native": "native/fmi3"}
+_FOLDER = {"now": "fmi3"}
+
+
+@pytest.fixture(autouse=True, scope="module", params=list(BACKENDS))
+def backend(request):
+    """The FMI 3.0 FMUs under test: the Python-hosted ones, then the native ones."""
+    _FOLDER["now"] = BACKENDS[request.param]
+    yield request.param
+    _FOLDER["now"] = "fmi3"
+
+
 def fmu3_path(name):
-    path = DIST / "fmi3" / f"{name}.fmu"
+    path = DIST / _FOLDER["now"] / f"{name}.fmu"
     assert path.exists(), f"{path} missing: the session fixture builds every FMU first"
     return path
 
 
-@lru_cache(maxsize=None)
 def md3(name):
+    return _md3(name, _FOLDER["now"])
+
+
+@lru_cache(maxsize=None)
+def _md3(name, folder):
     from fmpy import read_model_description
 
-    return read_model_description(str(fmu3_path(name)))
+    return read_model_description(str(DIST / folder / f"{name}.fmu"))
 
 
 @lru_cache(maxsize=None)
@@ -78,11 +97,11 @@ def fmi2_events(name):
 # ---------------------------------------------------------------------------------------------
 
 def test_every_slave_has_an_fmi3_fmu():
-    assert sorted(p.stem for p in (DIST / "fmi3").glob("*.fmu")) == FMUS
+    assert sorted(p.stem for p in (DIST / _FOLDER["now"]).glob("*.fmu")) == FMUS
 
 
 @pytest.mark.parametrize("name", FMUS)
-def test_fmi3_validates_and_offers_both_interfaces(name):
+def test_fmi3_validates_and_offers_both_interfaces(name, backend):
     from fmpy.validation import validate_fmu
 
     assert validate_fmu(str(fmu3_path(name))) == []
@@ -92,7 +111,10 @@ def test_fmi3_validates_and_offers_both_interfaces(name):
     assert md.coSimulation.hasEventMode
     with zipfile.ZipFile(fmu3_path(name)) as z:
         binaries = [n for n in z.namelist() if n.startswith("binaries/")]
-    assert binaries == [f"binaries/x86_64-linux/{name}.so"]
+    expected = [f"binaries/x86_64-linux/{name}.so"]
+    if backend == "native" and build_fmu.mingw_available():  # (and no Windows binary of the Python FMU)
+        expected.append(f"binaries/x86_64-windows/{name}.dll")
+    assert binaries == expected
 
 
 @pytest.mark.parametrize("name", FMUS)

@@ -1,14 +1,17 @@
 """The native FMUs beyond the Linux binary (issue 18): Windows under wine, and the source FMU.
 
-* Windows: ``binaries/win64/<Model>.dll``, cross-compiled by build_fmu.py with mingw-w64, needs
-  nothing but Windows' own KERNEL32 and msvcrt and exports the FMI 2.0 functions only; the tests'
-  C host (tests/c_host/fmi2_host.c), cross-compiled as well, runs every default experiment under
-  wine: the same events as the Linux binary, their times within 1e-12 s, the outputs within
-  1e-12 relative at every communication point.
+* Windows: ``binaries/win64/<Model>.dll`` (FMI 2.0) and ``binaries/x86_64-windows/<Model>.dll``
+  (FMI 3.0), cross-compiled by build_fmu.py with mingw-w64, need nothing but Windows' own
+  KERNEL32 and msvcrt and export the FMI functions only; the tests' C hosts
+  (tests/c_host/fmi2_host.c, fmi3_host.c), cross-compiled as well, run every default experiment
+  under wine — FMI 2.0 co-simulation, FMI 3.0 co-simulation with event mode and early return, and
+  FMI 3.0 model exchange — with the Linux binary's events, their times within 1e-12 s, the outputs
+  within 1e-12 relative at every communication point.
 * Source FMU: ``sources/`` and ``modelDescription.xml`` alone — the binaries deleted — build with
   the system compiler and nothing else (no include path outside the FMU, an empty environment),
-  and with fmpy's own source-FMU build (CMake); the libraries built give the shipped binary's
-  outputs (to the bit on x86_64, where the compiler has no fused multiply-add to contract into).
+  and with fmpy's own source-FMU build (CMake; FMI 3.0 from ``sources/buildDescription.xml``); the
+  libraries built give the shipped binary's outputs (to the bit on x86_64, where the compiler has
+  no fused multiply-add to contract into).
 
 The tests that need mingw-w64, wine or CMake are skipped, naming what is missing, without them;
 ``.ci/run`` installs the Debian packages, so CI runs them.
@@ -23,7 +26,7 @@ from pathlib import Path
 import pytest
 
 import build_fmu
-from support import compile_c_host, fmu_path, simulate
+from support import compile_c_host, fmu_path
 from test_portability import BARE_ENV, C_HOST_SOURCE, outputs_of, run_c_host
 
 FMUS = build_fmu.model_names()
@@ -42,8 +45,8 @@ def _description(path):
     return read_model_description(str(path))
 
 
-def _extract(name, folder, keep=lambda member: True):
-    with zipfile.ZipFile(fmu_path(f"native/{name}")) as z:
+def _extract(name, folder, keep=lambda member: True, fmi=2):
+    with zipfile.ZipFile(fmu_path(f"native/{'fmi3/' if fmi == 3 else ''}{name}")) as z:
         for member in z.namelist():
             if keep(member):
                 z.extract(member, folder)
@@ -89,10 +92,12 @@ def _assert_same_run(got, ref, name, exact):
 # ---- Windows --------------------------------------------------------------------------------------
 
 @needs_mingw
+@pytest.mark.parametrize("fmi", [2, 3])
 @pytest.mark.parametrize("name", FMUS)
-def test_the_windows_binary_needs_only_windows_own_libraries(name, tmp_path):
-    folder = _extract(name, tmp_path, lambda m: m.startswith("binaries/win64/"))
-    dll = folder / "binaries" / "win64" / f"{name}.dll"
+def test_the_windows_binary_needs_only_windows_own_libraries(name, fmi, tmp_path):
+    platform_dir = "win64" if fmi == 2 else "x86_64-windows"
+    folder = _extract(name, tmp_path, lambda m: m.startswith(f"binaries/{platform_dir}/"), fmi=fmi)
+    dll = folder / "binaries" / platform_dir / f"{name}.dll"
     assert dll.exists(), "mingw-w64 is installed, so build_fmu.py must have built the Windows binary"
     objdump = shutil.which("x86_64-w64-mingw32-objdump") or "objdump"
     text = subprocess.run([objdump, "-p", str(dll)], capture_output=True, text=True, check=True).stdout
@@ -100,15 +105,23 @@ def test_the_windows_binary_needs_only_windows_own_libraries(name, tmp_path):
     assert imported <= {"KERNEL32.dll", "msvcrt.dll"}, imported
     table = text[text.index("[Ordinal/Name Pointer] Table"):].splitlines()[1:]
     exported = [line.split("]", 1)[1].strip() for line in table if line.strip().startswith("[")]
-    assert len(exported) >= 30 and all(e.startswith("fmi2") for e in exported), exported
+    assert len(exported) >= 30 and all(e.startswith(f"fmi{fmi}") for e in exported), exported
+
+
+def _cross_compile(source, exe):
+    subprocess.run([MINGW, "-O1", "-Wall", "-D__USE_MINGW_ANSI_STDIO=1", f"-I{build_fmu.fmi_headers()}",
+                    str(source), "-o", str(exe)], check=True)
+    return exe
 
 
 @pytest.fixture(scope="module")
 def windows_host(tmp_path_factory):
-    exe = tmp_path_factory.mktemp("windows_host") / "fmi2_host.exe"
-    subprocess.run([MINGW, "-O1", "-Wall", "-D__USE_MINGW_ANSI_STDIO=1", f"-I{build_fmu.fmi_headers()}",
-                    str(C_HOST_SOURCE), "-o", str(exe)], check=True)
-    return exe
+    return _cross_compile(C_HOST_SOURCE, tmp_path_factory.mktemp("windows_host") / "fmi2_host.exe")
+
+
+def _wine_env(tmp_path_factory):
+    base = tmp_path_factory.getbasetemp()
+    return dict(BARE_ENV, WINEPREFIX=str(base / "wineprefix"), WINEDEBUG="-all", HOME=str(base))
 
 
 @needs_mingw
@@ -119,18 +132,50 @@ def test_under_wine_the_windows_binary_gives_the_linux_events(name, tmp_path_fac
     temporary folder) and steps the default experiment."""
     md, ref = linux_runs(name)
     folder = _extract(name, tmp_path_factory.mktemp(f"win_{name}"))
-    env = dict(BARE_ENV, WINEPREFIX=str(tmp_path_factory.getbasetemp() / "wineprefix"), WINEDEBUG="-all",
-               HOME=str(tmp_path_factory.getbasetemp()))
+    env = _wine_env(tmp_path_factory)
     rc, rows, err = run_c_host(Path("Z:" + str(windows_host)), Path("Z:" + str(folder)), name, *_experiment(md),
                                outputs_of(name), md=md, env=env, prefix=(WINE,), timeout=600)
     assert rc == 0, err[-2000:]
     _assert_same_run(rows, ref, name, exact=False)  # n_events, s, last_event equal; t_last_event within 1e-12 s
 
 
+FMI3_HOST = C_HOST_SOURCE.parent / "fmi3_host.c"
+
+
+def _fmi3_lines(exe, folder, name, md, events, step, env, prefix=()):
+    """The FMI 3.0 C host's output: one line per event ("event,<t>,<flag>") and the end."""
+    args = [*prefix, str(exe), str(folder), name, md.guid, repr(float(md.defaultExperiment.stopTime)), repr(step),
+            str(events)]
+    proc = subprocess.run(args, capture_output=True, text=True, env=env, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    return [line.split(",") for line in proc.stdout.splitlines()]
+
+
+@needs_mingw
+@needs_wine
+@pytest.mark.parametrize("events, step", [(1, 1e-3), (2, 1e-5)], ids=["cs-event-mode", "me-euler"])
+@pytest.mark.parametrize("name", ["PogoStick", "PogoStickSMA", "Penetrator"])
+def test_under_wine_the_fmi3_windows_binary_gives_the_linux_events(name, events, step, tmp_path_factory):
+    """FMI 3.0 under wine: co-simulation with event mode and early return (each lastSuccessfulTime
+    an event time), and model exchange integrated by the host's own Euler steps (each event met)."""
+    base = tmp_path_factory.mktemp(f"fmi3_{name}_{events}")
+    linux = compile_c_host(FMI3_HOST, base / "fmi3_host")
+    windows = _cross_compile(FMI3_HOST, base / "fmi3_host.exe")
+    folder = _extract(name, base / "fmu", fmi=3)
+    md = _description(folder)
+    ref = _fmi3_lines(linux, folder, name, md, events, step, BARE_ENV)
+    got = _fmi3_lines(Path("Z:" + str(windows)), Path("Z:" + str(folder)), name, md, events, step,
+                      _wine_env(tmp_path_factory), prefix=(WINE,))
+    assert len(got) == len(ref) and sum(1 for r in ref if r[0] == "event") >= 5
+    for a, b in zip(got, ref):
+        assert a[0] == b[0] and a[2:] == b[2:]
+        assert abs(float(a[1]) - float(b[1])) <= 1e-12 * max(1.0, abs(float(b[1]))), (a, b)
+
+
 # ---- the source FMU -------------------------------------------------------------------------------
 
-def _sources_only(name, folder):
-    return _extract(name, folder, lambda m: m == "modelDescription.xml" or m.startswith("sources/"))
+def _sources_only(name, folder, fmi=2):
+    return _extract(name, folder, lambda m: m == "modelDescription.xml" or m.startswith("sources/"), fmi=fmi)
 
 
 @pytest.mark.parametrize("name", FMUS)
@@ -151,20 +196,21 @@ def test_the_source_fmu_builds_with_the_system_compiler_from_its_own_files(name,
 
 
 @pytest.mark.skipif(shutil.which("cmake") is None, reason="no cmake (fmpy builds source FMUs with CMake)")
-def test_fmpy_builds_the_source_fmu_and_simulates_it(tmp_path):
+@pytest.mark.parametrize("fmi", [2, 3])
+def test_fmpy_builds_the_source_fmu_and_simulates_it(tmp_path, fmi):
     """fmpy.build.build_platform_binary (CMake, fmpy's own FMI headers and flags) on the sources
     alone; simulate_fmu of the result gives the Python-hosted FMU's outputs."""
     from fmpy import simulate_fmu
     from fmpy.build import build_platform_binary
 
     name = "PogoStickSMA"
-    folder = _sources_only(name, tmp_path / "fmu")
+    folder = _sources_only(name, tmp_path / "fmu", fmi=fmi)
     (tmp_path / "build").mkdir()
     build_platform_binary(folder, build_dir=tmp_path / "build")
-    assert (folder / "binaries" / "linux64" / f"{name}.so").exists()
+    assert (folder / "binaries" / ("linux64" if fmi == 2 else "x86_64-linux") / f"{name}.so").exists()
     stop, step = _experiment(_description(folder))
     got = simulate_fmu(str(folder), stop_time=stop, output_interval=step)
-    ref = simulate(name, stop_time=stop, output_interval=step).res
+    ref = simulate_fmu(str(fmu_path(f"{'fmi3/' if fmi == 3 else ''}{name}")), stop_time=stop, output_interval=step)
     assert got["time"][-1] == ref["time"][-1] and got["n_events"][-1] == ref["n_events"][-1] > 10
     for column in ref.dtype.names:
         if EXACT:

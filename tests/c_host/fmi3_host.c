@@ -13,8 +13,27 @@
  * EVENTS = 0: neither (the FMU handles its events inside each step, as in FMI 2.0).
  * VR=VALUE: Float64 parameters set in Initialization Mode (Int32 if VALUE has the form iN).
  * Prints "end,<time>" after the last step.  The FMU's log goes to stderr.  Exit status 0 if the
- * run reached STOP, 1 if a call failed. */
+ * run reached STOP, 1 if a call failed.
+ *
+ * The same source builds for Windows with mingw-w64 (LoadLibrary, binaries/x86_64-windows/<id>.dll;
+ * the tests run it under wine against the native FMUs' Windows binaries). */
+#ifdef _WIN32
+#include <windows.h>
+#define PLATFORM "x86_64-windows"
+#define SUFFIX ".dll"
+#define OPEN(path) ((void *)LoadLibraryA(path))
+#define SYMBOL(lib, name) ((void *)GetProcAddress((HMODULE)(lib), name))
+#define CLOSE(lib) FreeLibrary((HMODULE)(lib))
+#define OPEN_ERROR() "LoadLibrary failed"
+#else
 #include <dlfcn.h>
+#define PLATFORM "x86_64-linux"
+#define SUFFIX ".so"
+#define OPEN(path) dlopen(path, RTLD_NOW | RTLD_LOCAL)
+#define SYMBOL(lib, name) dlsym(lib, name)
+#define CLOSE(lib) dlclose(lib)
+#define OPEN_ERROR() dlerror()
+#endif
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -25,7 +44,7 @@ static void logger(fmi3InstanceEnvironment env, fmi3Status status, fmi3String ca
     fprintf(stderr, "[%d|%s] %s\n", (int)status, category ? category : "", message ? message : "");
 }
 
-#define LOAD(name) name##TYPE *name = (name##TYPE *)dlsym(lib, #name); if (!name) { fprintf(stderr, "missing %s\n", #name); return 2; }
+#define LOAD(name) name##TYPE *name = (name##TYPE *)SYMBOL(lib, #name); if (!name) { fprintf(stderr, "missing %s\n", #name); return 2; }
 
 #define MAXN 64
 
@@ -33,14 +52,14 @@ static void logger(fmi3InstanceEnvironment env, fmi3Status status, fmi3String ca
  * the exit status (0 success, 1 a call failed). */
 static int finish(void *lib, fmi3Instance c, int ok, double t)
 {
-    fmi3TerminateTYPE *terminate = (fmi3TerminateTYPE *)dlsym(lib, "fmi3Terminate");
-    fmi3FreeInstanceTYPE *free_instance = (fmi3FreeInstanceTYPE *)dlsym(lib, "fmi3FreeInstance");
+    fmi3TerminateTYPE *terminate = (fmi3TerminateTYPE *)SYMBOL(lib, "fmi3Terminate");
+    fmi3FreeInstanceTYPE *free_instance = (fmi3FreeInstanceTYPE *)SYMBOL(lib, "fmi3FreeInstance");
     if (ok) {
         printf("end,%.17g\n", t);
         terminate(c);
     }
     free_instance(c);
-    dlclose(lib);
+    CLOSE(lib);
     return ok ? 0 : 1;
 }
 
@@ -104,9 +123,9 @@ int main(int argc, char **argv)
 {
     if (argc < 7) { fprintf(stderr, "usage: see the source\n"); return 2; }
     char path[4096], resources[4200];
-    snprintf(path, sizeof path, "%s/binaries/x86_64-linux/%s.so", argv[1], argv[2]);
-    void *lib = dlopen(path, RTLD_NOW | RTLD_LOCAL);
-    if (!lib) { fprintf(stderr, "dlopen: %s\n", dlerror()); return 2; }
+    snprintf(path, sizeof path, "%s/binaries/" PLATFORM "/%s" SUFFIX, argv[1], argv[2]);
+    void *lib = OPEN(path);
+    if (!lib) { fprintf(stderr, "loading %s: %s\n", path, OPEN_ERROR()); return 2; }
     LOAD(fmi3InstantiateCoSimulation) LOAD(fmi3EnterInitializationMode) LOAD(fmi3ExitInitializationMode)
     LOAD(fmi3DoStep) LOAD(fmi3SetFloat64) LOAD(fmi3SetInt32) LOAD(fmi3EnterEventMode)
     LOAD(fmi3UpdateDiscreteStates) LOAD(fmi3EnterStepMode)

@@ -24,6 +24,14 @@ static int refuse(PgInstance *in, const PgMsg *m)
     return PG_ST_ERROR;
 }
 
+int pg_inst_refuse(PgInstance *in, const PgMsg *m) { return refuse(in, m); }
+
+int pg_inst_refuse_text(PgInstance *in, const char *text)
+{
+    say(in, PG_ST_ERROR, "logStatusError", text);
+    return PG_ST_ERROR;
+}
+
 static const char *fn_prefix(const PgInstance *in) { return in->fmu->fmi == 3 ? "fmi3" : "fmi2"; }
 
 /* the FMI 2.0 function name as this FMU's FMI version spells it (fmi2.py _fn) */
@@ -57,12 +65,14 @@ void pg_inst_reset(PgInstance *in)
     st->t_start = 0.0, st->t_stop = INFINITY, st->t_ok = 0.0;
     in->inputs_changed = 1;
     in->h_fast = -1.0;
+    if (f->fmi == 3) pg3_reset(in);
 }
 
 void pg_inst_init(PgInstance *in, const PgFmu *fmu, PgLogFn log, void *log_env)
 {
     memset(in, 0, sizeof *in);
     in->fmu = fmu, in->log = log, in->log_env = log_env;
+    in->mode = 'c';
     pg_inst_reset(in);
 }
 
@@ -115,25 +125,43 @@ static void initial_outputs(PgInstance *in)
     double x[PG_MAX_X] = {0}, q[PG_MAX_Q] = {0};
     PgMsg m;
     int ny = n_model_outputs(in);
-    if (md->initial(st->par, x, q, &m) != PG_OK || md->outputs(st->t_start, x, q, st->u, st->par, st->out, &m) != PG_OK)
+    int ok = md->initial(st->par, x, q, &m) == PG_OK && md->outputs(st->t_start, x, q, st->u, st->par, st->out, &m) == PG_OK;
+    if (!ok)
         for (int i = 0; i < ny; ++i) st->out[i] = 0.0;
     st->out[ny] = 0.0, st->out[ny + 1] = st->t_start, st->out[ny + 2] = 0.0;
+    if (in->fmu->fmi == 3) { /* _complete_outputs: the states and the time (zeros where a rule is broken) */
+        for (int i = 0; i < md->nx; ++i) st->out[ny + 3 + i] = ok ? x[i] : 0.0;
+        st->out[ny + 3 + md->nx] = ok ? st->t_start : 0.0;
+    }
     st->has_out = 1;
 }
 
-/* _update_outputs: the outputs at the point served last */
-static int update_outputs(PgInstance *in)
+/* _update_outputs: the outputs at the point served last, or at (t, x, q) (FMI 3.0 model exchange:
+ * the importer's time and states) */
+int pg_inst_update_outputs_at(PgInstance *in, double t, const double *x, const double *q)
 {
     PgState *st = &in->st;
     PgEngine *e = &st->sim;
     int ny = n_model_outputs(in);
-    int rc = pg_engine_outputs(e, e->t_out, e->x_out, e->q_out, st->out);
+    int rc = pg_engine_outputs(e, t, x, q, st->out);
+    if (in->fmu->fmi == 3) {
+        for (int i = 0; i < e->nx; ++i) st->out[ny + 3 + i] = x[i];
+        st->out[ny + 3 + e->nx] = t;
+    }
     st->out[ny] = (double)e->n_events;
     st->out[ny + 1] = e->has_last ? e->last.time : st->t_start;
     st->out[ny + 2] = e->has_last ? e->last.index + 1 : 0;
     st->has_out = 1;
     return rc;
 }
+
+static int update_outputs(PgInstance *in)
+{
+    PgEngine *e = &in->st.sim;
+    return pg_inst_update_outputs_at(in, e->t_out, e->x_out, e->q_out);
+}
+
+int pg_inst_update_outputs(PgInstance *in) { return update_outputs(in); }
 
 static double value_of(PgInstance *in, const PgVar *v)
 {
@@ -142,15 +170,25 @@ static double value_of(PgInstance *in, const PgVar *v)
     case 'm': return st->par[v->index];
     case 's': return st->set[v->index];
     case 'u': return st->u[v->index];
-    case 'y': case 'e':
+    case 'y': case 'e': case 'x': case 't':
         if (!st->has_out) initial_outputs(in);
-        return st->out[v->role == 'y' ? v->index : n_model_outputs(in) + v->index];
+        switch (v->role) {
+        case 'y': return st->out[v->index];
+        case 'e': return st->out[n_model_outputs(in) + v->index];
+        case 'x': return st->out[n_model_outputs(in) + 3 + v->index];
+        default: return st->out[n_model_outputs(in) + 3 + in->fmu->model->nx];
+        }
+    case 'd': case 'g': return pg3_derived(in, v);
     default: return 0.0;
     }
 }
 
 int pg_inst_get_real(PgInstance *in, const unsigned vr[], size_t n, double out[])
 {
+    if (in->fmu->fmi == 3) {
+        int rc = pg3_refresh(in);
+        if (rc) return rc;
+    }
     for (size_t i = 0; i < n; ++i) {
         const PgVar *v = variable(in, vr[i], 'R');
         if (!v) return PG_ST_ERROR;
@@ -161,6 +199,10 @@ int pg_inst_get_real(PgInstance *in, const unsigned vr[], size_t n, double out[]
 
 int pg_inst_get_integer(PgInstance *in, const unsigned vr[], size_t n, int out[])
 {
+    if (in->fmu->fmi == 3) {
+        int rc = pg3_refresh(in);
+        if (rc) return rc;
+    }
     for (size_t i = 0; i < n; ++i) {
         const PgVar *v = variable(in, vr[i], 'I');
         if (!v) return PG_ST_ERROR;
@@ -206,6 +248,7 @@ int pg_inst_set_real(PgInstance *in, const unsigned vr[], size_t n, const double
         int rc = set_value(in, v, values[i], 'f');
         if (rc) return rc;
     }
+    if (in->fmu->fmi == 3) pg3_after_set(in);
     return PG_ST_OK;
 }
 
@@ -217,6 +260,7 @@ int pg_inst_set_integer(PgInstance *in, const unsigned vr[], size_t n, const int
         int rc = set_value(in, v, (double)values[i], 'i');
         if (rc) return rc;
     }
+    if (in->fmu->fmi == 3) pg3_after_set(in);
     return PG_ST_OK;
 }
 
@@ -227,7 +271,7 @@ typedef struct {
     char *text;
 } Noted;
 
-typedef struct {
+typedef struct PgNotes {
     PgInstance *in;
     Noted *items;
     size_t n, cap;
@@ -298,6 +342,20 @@ static void notes_end(PgInstance *in, Notes *nt)
     free(nt->items);
 }
 
+PgNotes *pg_inst_notes_begin(PgInstance *in)
+{
+    Notes *nt = malloc(sizeof *nt);
+    if (nt) notes_begin(in, nt);
+    return nt;
+}
+
+void pg_inst_notes_end(PgInstance *in, PgNotes *nt)
+{
+    if (!nt) return;
+    notes_end(in, nt);
+    free(nt);
+}
+
 /* ---- initialization ------------------------------------------------------------------------ */
 int pg_inst_setup_experiment(PgInstance *in, double start, int stop_defined, double stop)
 {
@@ -354,21 +412,22 @@ int pg_inst_exit_initialization(PgInstance *in)
     in->h_fast = fast_step_limit(in);
     notes_end(in, &nt);
     update_outputs(in);
+    if (in->fmu->fmi == 3) pg3_after_exit_initialization(in);
     return PG_ST_OK;
 }
 
 /* ---- a communication step -------------------------------------------------------------------- */
-static void stopped_text(PgInstance *in, const char *call, PgMsg *m)
+void pg_inst_stopped_text(PgInstance *in, const char *call, double t, PgMsg *m)
 {
     char fn[40];
     fn_name(in, "SetFMUstate", fn, sizeof fn);
     pg_msg_printf(m, "%s refused: the instance stopped at t = ", call);
-    pg_msg_value(m, in->st.t_ok, 'f', "r");
+    pg_msg_value(m, t, 'f', "r");
     pg_msg_printf(m, " s (%s); restore a saved state (%s) or reset the instance", in->st.failed_text, fn);
 }
 
 /* _input_problem */
-static int input_problem(PgInstance *in, PgMsg *m)
+int pg_inst_input_problem(PgInstance *in, PgMsg *m)
 {
     const PgModel *md = in->fmu->model;
     for (int i = 0; i < md->nu; ++i) {
@@ -393,7 +452,7 @@ static int step_problem(PgInstance *in, double t, double h, PgMsg *m)
     pg_msg_clear(m);
     if (st->failed) {
         snprintf(call, sizeof call, "%sDoStep", api);
-        stopped_text(in, call, m);
+        pg_inst_stopped_text(in, call, st->t_ok, m);
         return 1;
     }
     if (!st->has_sim) {
@@ -452,12 +511,12 @@ static int step_problem(PgInstance *in, double t, double h, PgMsg *m)
         pg_msg_str(m, ")");
         return 1;
     }
-    if (in->inputs_changed) return input_problem(in, m);
+    if (in->inputs_changed) return pg_inst_input_problem(in, m);
     return 0;
 }
 
 /* _model_failed: remember why, so that later steps are refused */
-static int model_failed(PgInstance *in)
+int pg_inst_model_failed(PgInstance *in)
 {
     PgState *st = &in->st;
     st->failed = 1;
@@ -486,9 +545,9 @@ int pg_inst_do_step(PgInstance *in, double t, double h)
         rc = pg_engine_set_input(e, st->u);
         in->inputs_changed = 0;
     }
-    if (!rc) rc = pg_engine_advance(e, end);
+    if (!rc) rc = in->fmu->fmi == 3 ? pg3_advance_engine(in, end) : pg_engine_advance(e, end);
     notes_end(in, &nt);
-    if (rc) return model_failed(in);
+    if (rc) return pg_inst_model_failed(in);
     update_outputs(in);
     st->t_ok = e->t_out;
     return PG_ST_OK;
@@ -609,4 +668,5 @@ void pg_inst_restore(PgInstance *in, const PgState *state)
         in->h_fast = fast_step_limit(in);
         if (in->st.has_out) update_outputs(in);
     }
+    if (in->fmu->fmi == 3) pg3_after_restore(in);
 }

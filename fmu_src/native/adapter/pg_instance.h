@@ -39,7 +39,9 @@ typedef struct PgFmu {
     int n_log_categories;
 } PgFmu;
 
-#define PG_MAX_OUT (64 + 3)
+/* the served outputs: the model's, the engine's (n_events, t_last_event, last_event), then for
+ * FMI 3.0 the states and the time */
+#define PG_MAX_OUT (64 + 3 + PG_MAX_X + 1)
 
 typedef void (*PgLogFn)(void *env, int status, const char *category, const char *message);
 
@@ -53,6 +55,12 @@ typedef struct PgState {
     double t_start, t_stop, t_ok;
     int failed;
     char failed_text[PG_MSG_MAX];
+    /* FMI 3.0 (fmi3.py, Fmi3Slave._get_fmu_state "fmi3"): model exchange's time and states, the
+     * guards armed to fire */
+    double me_t;
+    int has_me_x;
+    double me_x[PG_MAX_X];
+    int armed[PG_MAX_EVENTS];
 } PgState;
 
 typedef struct PgInstance {
@@ -62,6 +70,11 @@ typedef struct PgInstance {
     PgState st;
     int inputs_changed;
     double h_fast;
+    /* FMI 3.0: the interface and its flags (fixed at instantiation), and what is not state */
+    char mode; /* 'c' co-simulation, 'm' model exchange */
+    int event_mode_used, early_return_allowed;
+    int me_stale, cs_stale, event_mode, has_stop;
+    double stop;
 } PgInstance;
 
 void pg_inst_init(PgInstance *in, const PgFmu *fmu, PgLogFn log, void *log_env);
@@ -85,5 +98,40 @@ size_t pg_inst_serialized_size(const PgInstance *in);
 int pg_inst_serialize(PgInstance *in, const PgState *state, unsigned char *bytes, size_t size);
 int pg_inst_deserialize(PgInstance *in, const unsigned char *bytes, size_t size, PgState *state);
 void pg_inst_restore(PgInstance *in, const PgState *state);
+
+/* ---- FMI 3.0 (fmu_src/native/adapter/pg_instance3.c, the twin of runtime/fmi3.py) ---------- */
+void pg3_attach(PgInstance *in, char mode, int event_mode_used, int early_return_allowed);
+/* before any get: refresh what inputs set in Event Mode or model exchange made stale */
+int pg3_refresh(PgInstance *in);
+/* after a successful set: mark what the inputs make stale */
+void pg3_after_set(PgInstance *in);
+double pg3_derived(PgInstance *in, const PgVar *v);
+void pg3_after_exit_initialization(PgInstance *in);
+void pg3_after_restore(PgInstance *in);
+void pg3_reset(PgInstance *in);
+int pg3_set_time(PgInstance *in, double t);
+int pg3_set_continuous_states(PgInstance *in, const double *x, size_t n);
+int pg3_get_continuous_states(PgInstance *in, double *x);
+int pg3_get_derivatives(PgInstance *in, double *dx);
+int pg3_get_event_indicators(PgInstance *in, double *z);
+int pg3_completed_integrator_step(PgInstance *in, int *enter_event_mode);
+/* valuesOfContinuousStatesChanged in *changed */
+int pg3_update_discrete_states(PgInstance *in, int *changed);
+int pg3_do_step(PgInstance *in, double t, double h, int *event_handling_needed, int *early_return, double *last);
+void pg3_set_event_mode(PgInstance *in, int on);
+
+/* the adapter's pieces the FMI 3.0 extension uses */
+int pg_inst_refuse(PgInstance *in, const PgMsg *m);
+int pg_inst_refuse_text(PgInstance *in, const char *text);
+int pg_inst_update_outputs_at(PgInstance *in, double t, const double *x, const double *q);
+int pg_inst_update_outputs(PgInstance *in);
+int pg_inst_model_failed(PgInstance *in);
+int pg_inst_input_problem(PgInstance *in, PgMsg *m);
+void pg_inst_stopped_text(PgInstance *in, const char *call, double t, PgMsg *m);
+typedef struct PgNotes PgNotes;
+PgNotes *pg_inst_notes_begin(PgInstance *in);
+void pg_inst_notes_end(PgInstance *in, PgNotes *nt);
+/* the communication step's engine run (fmi2.py _advance_engine; FMI 3.0: stop at events) */
+int pg3_advance_engine(PgInstance *in, double end);
 
 #endif

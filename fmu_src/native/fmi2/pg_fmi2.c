@@ -9,23 +9,16 @@
 #include <string.h>
 
 #include "fmi2Functions.h"
+#include "pg_handles.h"
 #include "pg_instance.h"
 
 #include "call_states.h"
 
 extern const PgFmu PG_FMU;
 
-#define STATE_MAGIC 0x706f6e61u /* 'pona': a state handle of a native pogofmu FMU */
 #define ST_OK fmi2OK
 #define ST_WARNING fmi2Warning
 #define ST_ERROR fmi2Error
-
-typedef struct {
-    unsigned magic;
-    const PgFmu *owner; /* the FMU (this copy of this build) whose state it is */
-    unsigned mode;      /* the instance's call state when the state was taken */
-    PgState state;
-} StateHandle;
 
 typedef struct {
     char *name;
@@ -307,108 +300,51 @@ fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
     return (fmi2Status)pg_inst_no_such_type(&INST->inst, vr, nvr, "String");
 }
 
-/* ---- FMU states ----------------------------------------------------------------------------- */
-static StateHandle *state_handle(Inst *in, void *state, const char *what)
-{
-    StateHandle *h = state;
-    if (!h || h->magic != STATE_MAGIC || h->owner != &PG_FMU) {
-        char text[300];
-        snprintf(text, sizeof text, "%s refused: %s", what,
-                 !h ? "no FMU state given (NULL)"
-                 : h->magic != STATE_MAGIC ? "not an FMU state of a native pogofmu FMU (or one already freed)"
-                 : "the state belongs to another FMU (another model or build): restore it into an instance of the "
-                   "FMU that saved it");
-        emit(in, ST_ERROR, "logStatusError", text);
-        return NULL;
-    }
-    return h;
-}
-
+/* ---- FMU states (adapter/pg_handles.c) ------------------------------------------------------ */
 fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
 {
     CHECK(c && FMUstate);
     REQUIRE(fmi2FMUstate, "fmi2GetFMUstate");
-    StateHandle *h = *FMUstate;
-    if (h && h->magic != STATE_MAGIC) {
-        emit(INST, ST_ERROR, "logStatusError", "get FMU state refused: the state to overwrite is not one of this FMU");
-        return fmi2Error;
-    }
-    if (!h) h = malloc(sizeof *h);
-    if (!h) return fmi2Error;
-    h->magic = STATE_MAGIC;
-    h->owner = &PG_FMU;
-    h->mode = INST->mode;
-    h->state = INST->inst.st;
-    *FMUstate = h;
-    return fmi2OK;
+    return (fmi2Status)pg_handle_get(&INST->inst, INST->mode, FMUstate);
 }
 
 fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate)
 {
     CHECK(c);
     REQUIRE(fmi2FMUstate, "fmi2SetFMUstate");
-    StateHandle *h = state_handle(INST, FMUstate, "set FMU state");
-    if (!h) return fmi2Error;
-    pg_inst_restore(&INST->inst, &h->state);
-    if (h->mode) INST->mode = h->mode;
-    return fmi2OK;
+    unsigned mode = 0;
+    int st = pg_handle_set(&INST->inst, FMUstate, &mode);
+    if (!st && mode) INST->mode = mode;
+    return (fmi2Status)st;
 }
 
 fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
 {
     CHECK(c);
     REQUIRE(fmi2FMUstate, "fmi2FreeFMUstate");
-    StateHandle *h = FMUstate ? *FMUstate : NULL;
-    if (!h) return fmi2OK;
-    if (h->magic != STATE_MAGIC) {
-        emit(INST, ST_ERROR, "logStatusError", "free FMU state refused: not an FMU state of a native pogofmu FMU");
-        return fmi2Error;
-    }
-    h->magic = 0;
-    free(h);
-    *FMUstate = NULL;
-    return fmi2OK;
+    return (fmi2Status)pg_handle_free(&INST->inst, FMUstate);
 }
 
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate, size_t *size)
 {
     CHECK(c && size);
     REQUIRE(fmi2FMUstate, "fmi2SerializedFMUstateSize");
-    if (!state_handle(INST, FMUstate, "serialized FMU state size")) return fmi2Error;
-    *size = pg_inst_serialized_size(&INST->inst);
-    return fmi2OK;
+    return (fmi2Status)pg_handle_size(&INST->inst, FMUstate, size);
 }
 
 fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate, fmi2Byte serializedState[], size_t size)
 {
     CHECK(c && serializedState);
     REQUIRE(fmi2FMUstate, "fmi2SerializeFMUstate");
-    StateHandle *h = state_handle(INST, FMUstate, "serialize FMU state");
-    if (!h) return fmi2Error;
-    return (fmi2Status)pg_inst_serialize(&INST->inst, &h->state, (unsigned char *)serializedState, size);
+    return (fmi2Status)pg_handle_serialize(&INST->inst, FMUstate, (unsigned char *)serializedState, size);
 }
 
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedState[], size_t size, fmi2FMUstate *FMUstate)
 {
     CHECK(c && serializedState && FMUstate);
     REQUIRE(fmi2FMUstate, "fmi2DeSerializeFMUstate");
-    StateHandle *h = malloc(sizeof *h);
-    if (!h) return fmi2Error;
-    int st = pg_inst_deserialize(&INST->inst, (const unsigned char *)serializedState, size, &h->state);
-    if (st) {
-        free(h);
-        return (fmi2Status)st;
-    }
-    h->magic = STATE_MAGIC;
-    h->owner = &PG_FMU;
-    h->mode = h->state.has_sim ? MODE_STEP : MODE_INSTANTIATED;
-    if (*FMUstate && ((StateHandle *)*FMUstate)->magic == STATE_MAGIC) {
-        *(StateHandle *)*FMUstate = *h;
-        free(h);
-    } else {
-        *FMUstate = h;
-    }
-    return fmi2OK;
+    return (fmi2Status)pg_handle_deserialize(&INST->inst, (const unsigned char *)serializedState, size, FMUstate,
+                                             MODE_STEP, MODE_INSTANTIATED);
 }
 
 /* ---- the rest of co-simulation --------------------------------------------------------------- */

@@ -90,9 +90,10 @@ def engine_library(model_name: str, folder: Path, cc: Optional[str] = None) -> P
 
 
 ADAPTER = NATIVE / "adapter"
-ADAPTER_SOURCES = ("pg_instance.c", "pg_sha256.c")
-FMI_ENTRY = {2: NATIVE / "fmi2" / "pg_fmi2.c"}
-FMI_HEADERS = {2: ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")}
+ADAPTER_SOURCES = ("pg_instance.c", "pg_instance3.c", "pg_handles.c", "pg_sha256.c")
+FMI_ENTRY = {2: NATIVE / "fmi2" / "pg_fmi2.c", 3: NATIVE / "fmi3" / "pg_fmi3.c"}
+FMI_HEADERS = {2: ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"),
+               3: ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")}
 MINGW = "x86_64-w64-mingw32-gcc"
 # Windows: mingw-w64's own C99 printf/strtod (not msvcrt's: "1e-005", inexact parsing), so that
 # the messages read as on Linux; libgcc linked in, symbols stripped, no build time stamp in the DLL

@@ -1,0 +1,96 @@
+/* See pg_handles.h. */
+#include "pg_handles.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+#include "pg_support.h"
+
+int pg_handle_get(PgInstance *in, unsigned mode, void **slot)
+{
+    PgHandle *h = *slot;
+    if (h && h->magic != PG_HANDLE_MAGIC)
+        return pg_inst_refuse_text(in, "get FMU state refused: the state to overwrite is not one of this FMU");
+    if (!h) h = malloc(sizeof *h);
+    if (!h) return PG_ST_ERROR;
+    h->magic = PG_HANDLE_MAGIC;
+    h->owner = in->fmu;
+    h->mode = mode;
+    h->state = in->st;
+    *slot = h;
+    return PG_ST_OK;
+}
+
+PgHandle *pg_handle_check(PgInstance *in, void *state, const char *what)
+{
+    PgHandle *h = state;
+    if (!h || h->magic != PG_HANDLE_MAGIC || h->owner != in->fmu) {
+        PgMsg m;
+        pg_msg_clear(&m);
+        pg_msg_printf(&m, "%s refused: %s", what,
+                      !h ? "no FMU state given (NULL)"
+                      : h->magic != PG_HANDLE_MAGIC ? "not an FMU state of a native pogofmu FMU (or one already freed)"
+                      : "the state belongs to another FMU (another model or build): restore it into an instance of "
+                        "the FMU that saved it");
+        pg_inst_refuse(in, &m);
+        return NULL;
+    }
+    return h;
+}
+
+int pg_handle_set(PgInstance *in, void *state, unsigned *mode)
+{
+    PgHandle *h = pg_handle_check(in, state, "set FMU state");
+    if (!h) return PG_ST_ERROR;
+    pg_inst_restore(in, &h->state);
+    *mode = h->mode;
+    return PG_ST_OK;
+}
+
+int pg_handle_free(PgInstance *in, void **slot)
+{
+    PgHandle *h = slot ? *slot : NULL;
+    if (!h) return PG_ST_OK;
+    if (h->magic != PG_HANDLE_MAGIC)
+        return pg_inst_refuse_text(in, "free FMU state refused: not an FMU state of a native pogofmu FMU");
+    h->magic = 0;
+    free(h);
+    *slot = NULL;
+    return PG_ST_OK;
+}
+
+int pg_handle_size(PgInstance *in, void *state, size_t *size)
+{
+    if (!pg_handle_check(in, state, "serialized FMU state size")) return PG_ST_ERROR;
+    *size = pg_inst_serialized_size(in);
+    return PG_ST_OK;
+}
+
+int pg_handle_serialize(PgInstance *in, void *state, unsigned char *bytes, size_t size)
+{
+    PgHandle *h = pg_handle_check(in, state, "serialize FMU state");
+    if (!h) return PG_ST_ERROR;
+    return pg_inst_serialize(in, &h->state, bytes, size);
+}
+
+int pg_handle_deserialize(PgInstance *in, const unsigned char *bytes, size_t size, void **slot,
+                          unsigned mode_initialized, unsigned mode_instantiated)
+{
+    PgHandle *h = malloc(sizeof *h);
+    if (!h) return PG_ST_ERROR;
+    int st = pg_inst_deserialize(in, bytes, size, &h->state);
+    if (st) {
+        free(h);
+        return st;
+    }
+    h->magic = PG_HANDLE_MAGIC;
+    h->owner = in->fmu;
+    h->mode = h->state.has_sim ? mode_initialized : mode_instantiated;
+    if (*slot && ((PgHandle *)*slot)->magic == PG_HANDLE_MAGIC) {
+        *(PgHandle *)*slot = *h;
+        free(h);
+    } else {
+        *slot = h;
+    }
+    return PG_ST_OK;
+}

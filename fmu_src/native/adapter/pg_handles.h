@@ -1,0 +1,32 @@
+/* pogofmu native FMUs: FMU state handles, shared by the FMI 2.0 and FMI 3.0 entry files — a copy
+ * of the instance's PgState with a magic number, its owner (this FMU: this copy of this build)
+ * and the call state it was taken in. */
+#ifndef PG_HANDLES_H
+#define PG_HANDLES_H
+
+#include "pg_instance.h"
+
+#define PG_HANDLE_MAGIC 0x706f6e61u /* 'pona': a state handle of a native pogofmu FMU */
+
+typedef struct PgHandle {
+    unsigned magic;
+    const PgFmu *owner;
+    unsigned mode; /* the instance's call state when the state was taken (0: none) */
+    PgState state;
+} PgHandle;
+
+/* Get: into *slot (a new handle, or the one there overwritten); the status */
+int pg_handle_get(PgInstance *in, unsigned mode, void **slot);
+/* the handle behind a state pointer, or NULL with an Error logged ("<what> refused: ...") */
+PgHandle *pg_handle_check(PgInstance *in, void *state, const char *what);
+/* Set: the state restored; *mode the call state it was taken in (0: none) */
+int pg_handle_set(PgInstance *in, void *state, unsigned *mode);
+int pg_handle_free(PgInstance *in, void **slot);
+int pg_handle_size(PgInstance *in, void *state, size_t *size);
+int pg_handle_serialize(PgInstance *in, void *state, unsigned char *bytes, size_t size);
+/* Deserialize into *slot; the handle's call state is `mode_initialized` if the state is past
+ * initialization, `mode_instantiated` otherwise */
+int pg_handle_deserialize(PgInstance *in, const unsigned char *bytes, size_t size, void **slot,
+                          unsigned mode_initialized, unsigned mode_instantiated);
+
+#endif

@@ -1,0 +1,724 @@
+/* FMI 3.0 entry points of the native FMUs, model exchange and co-simulation (event mode, early
+ * return): every function of the standard exists once here, checks the instance's call state
+ * against the one table of call_states.h, and hands the work to the adapter
+ * (fmu_src/native/adapter/pg_instance.c and its FMI 3.0 part pg_instance3.c). No Python: the FMU
+ * needs only the C library and libm. Built with the generated files of one model (`PG_FMU`). */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "fmi3Functions.h"
+#include "pg_handles.h"
+#include "pg_instance.h"
+
+#include "call_states.h"
+
+extern const PgFmu PG_FMU;
+
+#define ST_OK fmi3OK
+#define ST_WARNING fmi3Warning
+#define ST_ERROR fmi3Error
+
+typedef struct {
+    char *name;
+    fmi3InstanceEnvironment env;
+    fmi3LogMessageCallback log;
+    int logging_on;
+    char **categories; /* enabled categories (NULL: all) */
+    size_t n_categories;
+    unsigned mode;
+    int me; /* a model-exchange instance */
+    PgInstance inst;
+} Inst;
+
+static void emit(Inst *in, int status, const char *category, const char *message)
+{
+    if (in->log) in->log(in->env, (fmi3Status)status, category, message);
+}
+
+/* OK messages go out only with logging on and their category enabled; warnings and errors always */
+static int wanted(Inst *in, int status, const char *category)
+{
+    if (status >= ST_WARNING) return 1;
+    if (!in->logging_on) return 0;
+    if (!in->categories) return 1;
+    for (size_t i = 0; i < in->n_categories; ++i)
+        if (strcmp(in->categories[i], category) == 0) return 1;
+    return 0;
+}
+
+static void log_from_adapter(void *env, int status, const char *category, const char *message)
+{
+    Inst *in = env;
+    if (wanted(in, status, category)) emit(in, status, category, message);
+}
+
+static int allowed(Inst *in, int rule, const char *function)
+{
+    const CallRule *r = &CALL_RULES[rule];
+    unsigned mask = in->me ? r->me : r->cs;
+    char text[700], where[400];
+    if (!mask) {
+        snprintf(text, sizeof text, "%s refused: it is a %s function, and this instance is a %s instance", function,
+                 in->me ? "co-simulation" : "model-exchange", in->me ? "model-exchange" : "co-simulation");
+    } else if (!(in->mode & mask)) {
+        mode_list(mask, 1, where, sizeof where);
+        snprintf(text, sizeof text, "%s refused: not allowed in %s (the standard allows it in %s)", function,
+                 mode_name(in->mode, 1), where);
+    } else {
+        return 1;
+    }
+    emit(in, ST_ERROR, "logStatusError", text);
+    return 0;
+}
+
+static fmi3Status unsupported(Inst *in, const char *what)
+{
+    char msg[300];
+    snprintf(msg, sizeof msg, "%s is not supported by this FMU", what);
+    if (in) emit(in, ST_ERROR, "logStatusError", msg);
+    return fmi3Error;
+}
+
+static void free_categories(Inst *in)
+{
+    for (size_t i = 0; i < in->n_categories; ++i) free(in->categories[i]);
+    free(in->categories);
+    in->categories = NULL;
+    in->n_categories = 0;
+}
+
+static char *copy_text(const char *text)
+{
+    char *out = malloc(strlen(text) + 1);
+    if (out) strcpy(out, text);
+    return out;
+}
+
+#define INST ((Inst *)c)
+#define CHECK(c) do { if (!(c)) return fmi3Error; } while (0)
+#define REQUIRE(rule, function) do { if (!allowed(INST, RULE_##rule, function)) return fmi3Error; } while (0)
+#define LEADS_TO(st, m) do { if ((st) <= ST_WARNING) INST->mode = (m); } while (0)
+#define UNUSED(x) (void)(x)
+
+const char *fmi3GetVersion(void) { return fmi3Version; }
+
+fmi3Status fmi3SetDebugLogging(fmi3Instance c, fmi3Boolean loggingOn, size_t nCategories, const fmi3String categories[])
+{
+    CHECK(c);
+    REQUIRE(fmi3SetDebugLogging, "fmi3SetDebugLogging");
+    const PgFmu *f = &PG_FMU;
+    for (size_t i = 0; i < nCategories; ++i) {
+        int known = 0;
+        for (int k = 0; k < f->n_log_categories && !known; ++k)
+            known = categories[i] && strcmp(categories[i], f->log_categories[k]) == 0;
+        if (!known) {
+            char text[1200];
+            size_t used = (size_t)snprintf(text, sizeof text, "fmi3SetDebugLogging refused: %s%s%s is not a log category "
+                                           "of this FMU (the categories are", categories[i] ? "'" : "",
+                                           categories[i] ? categories[i] : "NULL", categories[i] ? "'" : "");
+            for (int k = 0; k < f->n_log_categories && used < sizeof text; ++k)
+                used += (size_t)snprintf(text + used, sizeof text - used, "%s%s", k ? ", " : " ", f->log_categories[k]);
+            if (used < sizeof text) snprintf(text + used, sizeof text - used, ")");
+            emit(INST, ST_ERROR, "logStatusError", text);
+            return fmi3Error;
+        }
+    }
+    free_categories(INST);
+    INST->logging_on = loggingOn;
+    if (nCategories > 0) {
+        INST->categories = calloc(nCategories, sizeof(char *));
+        if (!INST->categories) return fmi3Error;
+        for (size_t i = 0; i < nCategories; ++i) {
+            INST->categories[i] = copy_text(categories[i]);
+            INST->n_categories = i + 1;
+        }
+    }
+    return fmi3OK;
+}
+
+static Inst *instantiate(fmi3String instanceName, fmi3String token, fmi3Boolean loggingOn,
+                         fmi3InstanceEnvironment env, fmi3LogMessageCallback log, int me, int event_mode_used,
+                         int early_return_allowed, size_t n_required)
+{
+    Inst *in = calloc(1, sizeof *in);
+    if (!in) return NULL;
+    in->name = copy_text(instanceName ? instanceName : "");
+    if (!in->name) {
+        free(in);
+        return NULL;
+    }
+    in->env = env, in->log = log, in->logging_on = loggingOn, in->me = me;
+    char text[600];
+    if (n_required > 0) {
+        emit(in, fmi3Error, "logStatusError", "fmi3InstantiateCoSimulation: intermediate variable access is not "
+             "supported (nRequiredIntermediateVariables must be 0)");
+    } else if (!token || strcmp(token, PG_FMU.token) != 0) {
+        snprintf(text, sizeof text, "instantiation token %s does not match this FMU's (%s): the model description "
+                 "read by the importer belongs to another FMU or build", token ? token : "(null)", PG_FMU.token);
+        emit(in, fmi3Error, "logStatusError", text);
+    } else {
+        pg_inst_init(&in->inst, &PG_FMU, log_from_adapter, in);
+        pg3_attach(&in->inst, me ? 'm' : 'c', event_mode_used, early_return_allowed);
+        in->mode = MODE_INSTANTIATED;
+        return in;
+    }
+    free(in->name);
+    free(in);
+    return NULL;
+}
+
+fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String instantiationToken,
+                                          fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
+                                          fmi3InstanceEnvironment instanceEnvironment,
+                                          fmi3LogMessageCallback logMessage)
+{
+    UNUSED(resourcePath), UNUSED(visible); /* a native FMU needs no resources */
+    return instantiate(instanceName, instantiationToken, loggingOn, instanceEnvironment, logMessage, 1, 0, 0, 0);
+}
+
+fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String instantiationToken,
+                                         fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
+                                         fmi3Boolean eventModeUsed, fmi3Boolean earlyReturnAllowed,
+                                         const fmi3ValueReference requiredIntermediateVariables[],
+                                         size_t nRequiredIntermediateVariables,
+                                         fmi3InstanceEnvironment instanceEnvironment,
+                                         fmi3LogMessageCallback logMessage,
+                                         fmi3IntermediateUpdateCallback intermediateUpdate)
+{
+    UNUSED(resourcePath), UNUSED(visible), UNUSED(requiredIntermediateVariables), UNUSED(intermediateUpdate);
+    return instantiate(instanceName, instantiationToken, loggingOn, instanceEnvironment, logMessage, 0, eventModeUsed,
+                       earlyReturnAllowed, nRequiredIntermediateVariables);
+}
+
+fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3String instantiationToken,
+                                               fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
+                                               fmi3InstanceEnvironment instanceEnvironment,
+                                               fmi3LogMessageCallback logMessage, fmi3ClockUpdateCallback clockUpdate,
+                                               fmi3LockPreemptionCallback lockPreemption,
+                                               fmi3UnlockPreemptionCallback unlockPreemption)
+{
+    UNUSED(instanceName), UNUSED(instantiationToken), UNUSED(resourcePath), UNUSED(visible), UNUSED(loggingOn);
+    UNUSED(clockUpdate), UNUSED(lockPreemption), UNUSED(unlockPreemption);
+    if (logMessage)
+        logMessage(instanceEnvironment, fmi3Error, "logStatusError",
+                   "fmi3InstantiateScheduledExecution is not supported by this FMU (model exchange and "
+                   "co-simulation only)");
+    return NULL;
+}
+
+void fmi3FreeInstance(fmi3Instance c)
+{
+    if (!c) return;
+    free_categories(INST);
+    free(INST->name);
+    free(INST);
+}
+
+fmi3Status fmi3EnterInitializationMode(fmi3Instance c, fmi3Boolean toleranceDefined, fmi3Float64 tolerance,
+                                       fmi3Float64 startTime, fmi3Boolean stopTimeDefined, fmi3Float64 stopTime)
+{
+    CHECK(c);
+    REQUIRE(fmi3EnterInitializationMode, "fmi3EnterInitializationMode");
+    if (toleranceDefined && !(tolerance > 0 && tolerance < HUGE_VAL)) {
+        char text[300];
+        snprintf(text, sizeof text, "fmi3EnterInitializationMode refused: tolerance = %g violates the rule: with "
+                 "toleranceDefined the tolerance is a number > 0 and finite", tolerance);
+        emit(INST, ST_ERROR, "logStatusError", text);
+        return fmi3Error;
+    }
+    int st = pg_inst_setup_experiment(&INST->inst, startTime, stopTimeDefined, stopTime);
+    LEADS_TO(st, MODE_INITIALIZATION);
+    return (fmi3Status)st;
+}
+
+fmi3Status fmi3ExitInitializationMode(fmi3Instance c)
+{
+    CHECK(c);
+    REQUIRE(fmi3ExitInitializationMode, "fmi3ExitInitializationMode");
+    int st = pg_inst_exit_initialization(&INST->inst);
+    /* model exchange, and co-simulation with eventModeUsed, go on in Event Mode */
+    LEADS_TO(st, (INST->me || INST->inst.event_mode_used) ? MODE_EVENT : MODE_STEP);
+    return (fmi3Status)st;
+}
+
+fmi3Status fmi3EnterEventMode(fmi3Instance c)
+{
+    CHECK(c);
+    REQUIRE(fmi3EnterEventMode, "fmi3EnterEventMode");
+    if (!INST->me && !INST->inst.event_mode_used) {
+        emit(INST, ST_ERROR, "logStatusError", "fmi3EnterEventMode refused: this co-simulation instance was "
+             "instantiated with eventModeUsed = false (it handles its events inside fmi3DoStep)");
+        return fmi3Error;
+    }
+    pg3_set_event_mode(&INST->inst, 1);
+    LEADS_TO(fmi3OK, MODE_EVENT);
+    return fmi3OK;
+}
+
+fmi3Status fmi3Terminate(fmi3Instance c)
+{
+    CHECK(c);
+    REQUIRE(fmi3Terminate, "fmi3Terminate");
+    LEADS_TO(fmi3OK, MODE_TERMINATED);
+    return fmi3OK;
+}
+
+fmi3Status fmi3Reset(fmi3Instance c)
+{
+    CHECK(c);
+    REQUIRE(fmi3Reset, "fmi3Reset");
+    pg_inst_reset(&INST->inst);
+    LEADS_TO(fmi3OK, MODE_INSTANTIATED);
+    return fmi3OK;
+}
+
+/* ---- variables ------------------------------------------------------------------------------ */
+static int no_type(Inst *in, const char *function, const char *type, size_t nvr, const fmi3ValueReference vr[])
+{
+    if (nvr == 0) return fmi3OK;
+    char msg[256];
+    snprintf(msg, sizeof msg, "%s: value reference %u is not a variable of type %s (this FMU has Float64 and "
+             "Int32 variables only)", function, vr ? (unsigned)vr[0] : 0u, type);
+    if (in) emit(in, ST_ERROR, "logStatusError", msg);
+    return fmi3Error;
+}
+
+fmi3Status fmi3GetFloat64(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, fmi3Float64 values[], size_t nValues)
+{
+    CHECK(c);
+    REQUIRE(fmi3GetValues, "fmi3GetFloat64");
+    if (nValues != nvr) return unsupported(INST, "fmi3GetFloat64 with nValues != nValueReferences (arrays)");
+    if (nvr && (!vr || !values)) return fmi3Error;
+    return (fmi3Status)pg_inst_get_real(&INST->inst, vr, nvr, values);
+}
+
+fmi3Status fmi3GetInt32(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, fmi3Int32 values[], size_t nValues)
+{
+    CHECK(c);
+    REQUIRE(fmi3GetValues, "fmi3GetInt32");
+    if (nValues != nvr) return unsupported(INST, "fmi3GetInt32 with nValues != nValueReferences (arrays)");
+    if (nvr && (!vr || !values)) return fmi3Error;
+    return (fmi3Status)pg_inst_get_integer(&INST->inst, vr, nvr, values);
+}
+
+fmi3Status fmi3GetBoolean(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, fmi3Boolean values[], size_t nValues)
+{
+    UNUSED(values), UNUSED(nValues);
+    CHECK(c);
+    REQUIRE(fmi3GetValues, "fmi3GetBoolean");
+    if (nvr && !vr) return fmi3Error;
+    return (fmi3Status)pg_inst_no_such_type(&INST->inst, vr, nvr, "Boolean");
+}
+
+fmi3Status fmi3GetString(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, fmi3String values[], size_t nValues)
+{
+    UNUSED(values), UNUSED(nValues);
+    CHECK(c);
+    REQUIRE(fmi3GetValues, "fmi3GetString");
+    if (nvr && !vr) return fmi3Error;
+    return (fmi3Status)pg_inst_no_such_type(&INST->inst, vr, nvr, "String");
+}
+
+fmi3Status fmi3SetFloat64(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, const fmi3Float64 values[],
+                          size_t nValues)
+{
+    CHECK(c);
+    REQUIRE(fmi3SetFloat, "fmi3SetFloat64");
+    if (nValues != nvr) return unsupported(INST, "fmi3SetFloat64 with nValues != nValueReferences (arrays)");
+    if (nvr && (!vr || !values)) return fmi3Error;
+    return (fmi3Status)pg_inst_set_real(&INST->inst, vr, nvr, values);
+}
+
+fmi3Status fmi3SetInt32(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, const fmi3Int32 values[], size_t nValues)
+{
+    CHECK(c);
+    REQUIRE(fmi3SetDiscrete, "fmi3SetInt32");
+    if (nValues != nvr) return unsupported(INST, "fmi3SetInt32 with nValues != nValueReferences (arrays)");
+    if (nvr && (!vr || !values)) return fmi3Error;
+    return (fmi3Status)pg_inst_set_integer(&INST->inst, vr, nvr, values);
+}
+
+fmi3Status fmi3SetBoolean(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, const fmi3Boolean values[],
+                          size_t nValues)
+{
+    UNUSED(values), UNUSED(nValues);
+    CHECK(c);
+    REQUIRE(fmi3SetDiscrete, "fmi3SetBoolean");
+    if (nvr && !vr) return fmi3Error;
+    return (fmi3Status)pg_inst_no_such_type(&INST->inst, vr, nvr, "Boolean");
+}
+
+fmi3Status fmi3SetString(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, const fmi3String values[],
+                         size_t nValues)
+{
+    UNUSED(values), UNUSED(nValues);
+    CHECK(c);
+    REQUIRE(fmi3SetDiscrete, "fmi3SetString");
+    if (nvr && !vr) return fmi3Error;
+    return (fmi3Status)pg_inst_no_such_type(&INST->inst, vr, nvr, "String");
+}
+
+/* types this FMU has no variables of: an error naming the function and the value reference */
+#define NO_TYPE_GET(T, CT)                                                                                      \
+    fmi3Status fmi3Get##T(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, CT values[], size_t nValues) \
+    {                                                                                                           \
+        UNUSED(values), UNUSED(nValues);                                                                        \
+        return (fmi3Status)no_type(INST, "fmi3Get" #T, #T, nvr, vr);                                           \
+    }
+#define NO_TYPE_SET(T, CT)                                                                                      \
+    fmi3Status fmi3Set##T(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, const CT values[],          \
+                          size_t nValues)                                                                       \
+    {                                                                                                           \
+        UNUSED(values), UNUSED(nValues);                                                                        \
+        return (fmi3Status)no_type(INST, "fmi3Set" #T, #T, nvr, vr);                                           \
+    }
+#define NO_TYPE(T, CT) NO_TYPE_GET(T, CT) NO_TYPE_SET(T, CT)
+NO_TYPE(Float32, fmi3Float32)
+NO_TYPE(Int8, fmi3Int8)
+NO_TYPE(UInt8, fmi3UInt8)
+NO_TYPE(Int16, fmi3Int16)
+NO_TYPE(UInt16, fmi3UInt16)
+NO_TYPE(UInt32, fmi3UInt32)
+NO_TYPE(Int64, fmi3Int64)
+NO_TYPE(UInt64, fmi3UInt64)
+
+fmi3Status fmi3GetBinary(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, size_t valueSizes[],
+                         fmi3Binary values[], size_t nValues)
+{
+    UNUSED(valueSizes), UNUSED(values), UNUSED(nValues);
+    return (fmi3Status)no_type(INST, "fmi3GetBinary", "Binary", nvr, vr);
+}
+
+fmi3Status fmi3SetBinary(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, const size_t valueSizes[],
+                         const fmi3Binary values[], size_t nValues)
+{
+    UNUSED(valueSizes), UNUSED(values), UNUSED(nValues);
+    return (fmi3Status)no_type(INST, "fmi3SetBinary", "Binary", nvr, vr);
+}
+
+fmi3Status fmi3GetClock(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, fmi3Clock values[])
+{
+    UNUSED(values);
+    return (fmi3Status)no_type(INST, "fmi3GetClock", "Clock", nvr, vr);
+}
+
+fmi3Status fmi3SetClock(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, const fmi3Clock values[])
+{
+    UNUSED(values);
+    return (fmi3Status)no_type(INST, "fmi3SetClock", "Clock", nvr, vr);
+}
+
+fmi3Status fmi3GetNumberOfVariableDependencies(fmi3Instance c, fmi3ValueReference valueReference, size_t *nDependencies)
+{
+    UNUSED(valueReference), UNUSED(nDependencies);
+    return unsupported(INST, "fmi3GetNumberOfVariableDependencies (the model description lists the dependencies)");
+}
+
+fmi3Status fmi3GetVariableDependencies(fmi3Instance c, fmi3ValueReference dependent, size_t elementIndicesOfDependent[],
+                                       fmi3ValueReference independents[], size_t elementIndicesOfIndependents[],
+                                       fmi3DependencyKind dependencyKinds[], size_t nDependencies)
+{
+    UNUSED(dependent), UNUSED(elementIndicesOfDependent), UNUSED(independents);
+    UNUSED(elementIndicesOfIndependents), UNUSED(dependencyKinds), UNUSED(nDependencies);
+    return unsupported(INST, "fmi3GetVariableDependencies (the model description lists the dependencies)");
+}
+
+/* ---- FMU states (adapter/pg_handles.c) ------------------------------------------------------ */
+fmi3Status fmi3GetFMUState(fmi3Instance c, fmi3FMUState *FMUState)
+{
+    CHECK(c && FMUState);
+    REQUIRE(fmi3FMUState, "fmi3GetFMUState");
+    return (fmi3Status)pg_handle_get(&INST->inst, INST->mode, FMUState);
+}
+
+fmi3Status fmi3SetFMUState(fmi3Instance c, fmi3FMUState FMUState)
+{
+    CHECK(c);
+    REQUIRE(fmi3FMUState, "fmi3SetFMUState");
+    unsigned mode = 0;
+    int st = pg_handle_set(&INST->inst, FMUState, &mode);
+    if (!st && mode) INST->mode = mode;
+    return (fmi3Status)st;
+}
+
+fmi3Status fmi3FreeFMUState(fmi3Instance c, fmi3FMUState *FMUState)
+{
+    CHECK(c);
+    REQUIRE(fmi3FMUState, "fmi3FreeFMUState");
+    return (fmi3Status)pg_handle_free(&INST->inst, FMUState);
+}
+
+fmi3Status fmi3SerializedFMUStateSize(fmi3Instance c, fmi3FMUState FMUState, size_t *size)
+{
+    CHECK(c && size);
+    REQUIRE(fmi3FMUState, "fmi3SerializedFMUStateSize");
+    return (fmi3Status)pg_handle_size(&INST->inst, FMUState, size);
+}
+
+fmi3Status fmi3SerializeFMUState(fmi3Instance c, fmi3FMUState FMUState, fmi3Byte serializedState[], size_t size)
+{
+    CHECK(c && serializedState);
+    REQUIRE(fmi3FMUState, "fmi3SerializeFMUState");
+    return (fmi3Status)pg_handle_serialize(&INST->inst, FMUState, (unsigned char *)serializedState, size);
+}
+
+fmi3Status fmi3DeserializeFMUState(fmi3Instance c, const fmi3Byte serializedState[], size_t size, fmi3FMUState *FMUState)
+{
+    CHECK(c && serializedState && FMUState);
+    REQUIRE(fmi3FMUState, "fmi3DeserializeFMUState");
+    /* the state's call state: past initialization, Step Mode (co-simulation) or Event Mode (model exchange) */
+    return (fmi3Status)pg_handle_deserialize(&INST->inst, (const unsigned char *)serializedState, size, FMUState,
+                                             INST->me ? MODE_EVENT : MODE_STEP, MODE_INSTANTIATED);
+}
+
+/* ---- not provided --------------------------------------------------------------------------- */
+fmi3Status fmi3GetDirectionalDerivative(fmi3Instance c, const fmi3ValueReference unknowns[], size_t nUnknowns,
+                                        const fmi3ValueReference knowns[], size_t nKnowns, const fmi3Float64 seed[],
+                                        size_t nSeed, fmi3Float64 sensitivity[], size_t nSensitivity)
+{
+    UNUSED(unknowns), UNUSED(nUnknowns), UNUSED(knowns), UNUSED(nKnowns), UNUSED(seed), UNUSED(nSeed);
+    UNUSED(sensitivity), UNUSED(nSensitivity);
+    CHECK(c);
+    REQUIRE(fmi3GetDirectionalDerivative, "fmi3GetDirectionalDerivative");
+    return unsupported(INST, "fmi3GetDirectionalDerivative (providesDirectionalDerivative = false)");
+}
+
+fmi3Status fmi3GetAdjointDerivative(fmi3Instance c, const fmi3ValueReference unknowns[], size_t nUnknowns,
+                                    const fmi3ValueReference knowns[], size_t nKnowns, const fmi3Float64 seed[],
+                                    size_t nSeed, fmi3Float64 sensitivity[], size_t nSensitivity)
+{
+    UNUSED(unknowns), UNUSED(nUnknowns), UNUSED(knowns), UNUSED(nKnowns), UNUSED(seed), UNUSED(nSeed);
+    UNUSED(sensitivity), UNUSED(nSensitivity);
+    CHECK(c);
+    REQUIRE(fmi3GetDirectionalDerivative, "fmi3GetAdjointDerivative");
+    return unsupported(INST, "fmi3GetAdjointDerivative (providesAdjointDerivatives = false)");
+}
+
+fmi3Status fmi3EnterConfigurationMode(fmi3Instance c)
+{
+    return unsupported(INST, "fmi3EnterConfigurationMode (this FMU has no structural parameters)");
+}
+
+fmi3Status fmi3ExitConfigurationMode(fmi3Instance c)
+{
+    return unsupported(INST, "fmi3ExitConfigurationMode (this FMU has no structural parameters)");
+}
+
+#define NO_CLOCKS(call_) return unsupported(INST, call_ " (this FMU has no clocks)")
+fmi3Status fmi3GetIntervalDecimal(fmi3Instance c, const fmi3ValueReference vr[], size_t n, fmi3Float64 intervals[],
+                                  fmi3IntervalQualifier qualifiers[])
+{
+    UNUSED(vr), UNUSED(n), UNUSED(intervals), UNUSED(qualifiers);
+    NO_CLOCKS("fmi3GetIntervalDecimal");
+}
+fmi3Status fmi3GetIntervalFraction(fmi3Instance c, const fmi3ValueReference vr[], size_t n, fmi3UInt64 counters[],
+                                   fmi3UInt64 resolutions[], fmi3IntervalQualifier qualifiers[])
+{
+    UNUSED(vr), UNUSED(n), UNUSED(counters), UNUSED(resolutions), UNUSED(qualifiers);
+    NO_CLOCKS("fmi3GetIntervalFraction");
+}
+fmi3Status fmi3GetShiftDecimal(fmi3Instance c, const fmi3ValueReference vr[], size_t n, fmi3Float64 shifts[])
+{
+    UNUSED(vr), UNUSED(n), UNUSED(shifts);
+    NO_CLOCKS("fmi3GetShiftDecimal");
+}
+fmi3Status fmi3GetShiftFraction(fmi3Instance c, const fmi3ValueReference vr[], size_t n, fmi3UInt64 counters[],
+                                fmi3UInt64 resolutions[])
+{
+    UNUSED(vr), UNUSED(n), UNUSED(counters), UNUSED(resolutions);
+    NO_CLOCKS("fmi3GetShiftFraction");
+}
+fmi3Status fmi3SetIntervalDecimal(fmi3Instance c, const fmi3ValueReference vr[], size_t n, const fmi3Float64 intervals[])
+{
+    UNUSED(vr), UNUSED(n), UNUSED(intervals);
+    NO_CLOCKS("fmi3SetIntervalDecimal");
+}
+fmi3Status fmi3SetIntervalFraction(fmi3Instance c, const fmi3ValueReference vr[], size_t n, const fmi3UInt64 counters[],
+                                   const fmi3UInt64 resolutions[])
+{
+    UNUSED(vr), UNUSED(n), UNUSED(counters), UNUSED(resolutions);
+    NO_CLOCKS("fmi3SetIntervalFraction");
+}
+fmi3Status fmi3SetShiftDecimal(fmi3Instance c, const fmi3ValueReference vr[], size_t n, const fmi3Float64 shifts[])
+{
+    UNUSED(vr), UNUSED(n), UNUSED(shifts);
+    NO_CLOCKS("fmi3SetShiftDecimal");
+}
+fmi3Status fmi3SetShiftFraction(fmi3Instance c, const fmi3ValueReference vr[], size_t n, const fmi3UInt64 counters[],
+                                const fmi3UInt64 resolutions[])
+{
+    UNUSED(vr), UNUSED(n), UNUSED(counters), UNUSED(resolutions);
+    NO_CLOCKS("fmi3SetShiftFraction");
+}
+fmi3Status fmi3EvaluateDiscreteStates(fmi3Instance c) { NO_CLOCKS("fmi3EvaluateDiscreteStates"); }
+fmi3Status fmi3ActivateModelPartition(fmi3Instance c, fmi3ValueReference clockReference, fmi3Float64 activationTime)
+{
+    UNUSED(clockReference), UNUSED(activationTime);
+    return unsupported(INST, "fmi3ActivateModelPartition (scheduled execution is not supported)");
+}
+
+fmi3Status fmi3GetOutputDerivatives(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, const fmi3Int32 orders[],
+                                    fmi3Float64 values[], size_t nValues)
+{
+    UNUSED(vr), UNUSED(nvr), UNUSED(orders), UNUSED(values), UNUSED(nValues);
+    CHECK(c);
+    REQUIRE(fmi3GetOutputDerivatives, "fmi3GetOutputDerivatives");
+    return unsupported(INST, "fmi3GetOutputDerivatives (maxOutputDerivativeOrder = 0)");
+}
+
+/* ---- event mode (both interfaces) ----------------------------------------------------------- */
+static void put(fmi3Boolean *flag, int value)
+{
+    if (flag) *flag = value ? fmi3True : fmi3False;
+}
+
+fmi3Status fmi3UpdateDiscreteStates(fmi3Instance c, fmi3Boolean *discreteStatesNeedUpdate, fmi3Boolean *terminateSimulation,
+                                    fmi3Boolean *nominalsOfContinuousStatesChanged,
+                                    fmi3Boolean *valuesOfContinuousStatesChanged, fmi3Boolean *nextEventTimeDefined,
+                                    fmi3Float64 *nextEventTime)
+{
+    CHECK(c);
+    REQUIRE(fmi3UpdateDiscreteStates, "fmi3UpdateDiscreteStates");
+    int changed = 0;
+    int st = pg3_update_discrete_states(&INST->inst, &changed);
+    if (st > ST_WARNING) return (fmi3Status)st;
+    put(discreteStatesNeedUpdate, 0), put(terminateSimulation, 0), put(nominalsOfContinuousStatesChanged, 0);
+    put(valuesOfContinuousStatesChanged, changed), put(nextEventTimeDefined, 0);
+    if (nextEventTime) *nextEventTime = 0.0;
+    return (fmi3Status)st;
+}
+
+/* ---- model exchange ------------------------------------------------------------------------- */
+fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance c)
+{
+    CHECK(c);
+    REQUIRE(fmi3EnterContinuousTimeMode, "fmi3EnterContinuousTimeMode");
+    pg3_set_event_mode(&INST->inst, 0);
+    LEADS_TO(fmi3OK, MODE_CONTINUOUS);
+    return fmi3OK;
+}
+
+/* A count an importer passes must be the FMU's: the message names both. */
+static int right_count(Inst *in, const char *function, const char *arg, size_t given, size_t have, const char *what)
+{
+    if (given == have) return 1;
+    char text[300];
+    snprintf(text, sizeof text, "%s refused: %s = %zu, and this FMU has %s = %zu", function, arg, given, what, have);
+    emit(in, ST_ERROR, "logStatusError", text);
+    return 0;
+}
+
+#define NX ((size_t)PG_FMU.model->nx)
+#define NZ ((size_t)PG_FMU.model->ne)
+
+fmi3Status fmi3CompletedIntegratorStep(fmi3Instance c, fmi3Boolean noSetFMUStatePriorToCurrentPoint,
+                                       fmi3Boolean *enterEventMode, fmi3Boolean *terminateSimulation)
+{
+    UNUSED(noSetFMUStatePriorToCurrentPoint);
+    CHECK(c);
+    REQUIRE(fmi3CompletedIntegratorStep, "fmi3CompletedIntegratorStep");
+    int enter = 0;
+    int st = pg3_completed_integrator_step(&INST->inst, &enter);
+    if (st > ST_WARNING) return (fmi3Status)st;
+    put(enterEventMode, enter), put(terminateSimulation, 0);
+    return (fmi3Status)st;
+}
+
+fmi3Status fmi3SetTime(fmi3Instance c, fmi3Float64 time)
+{
+    CHECK(c);
+    REQUIRE(fmi3SetTime, "fmi3SetTime");
+    return (fmi3Status)pg3_set_time(&INST->inst, time);
+}
+
+fmi3Status fmi3SetContinuousStates(fmi3Instance c, const fmi3Float64 continuousStates[], size_t nContinuousStates)
+{
+    CHECK(c);
+    REQUIRE(fmi3SetContinuousStates, "fmi3SetContinuousStates");
+    if (!right_count(INST, "fmi3SetContinuousStates", "nContinuousStates", nContinuousStates, NX, "nx")) return fmi3Error;
+    if (nContinuousStates && !continuousStates) return fmi3Error;
+    return (fmi3Status)pg3_set_continuous_states(&INST->inst, continuousStates, nContinuousStates);
+}
+
+fmi3Status fmi3GetContinuousStateDerivatives(fmi3Instance c, fmi3Float64 derivatives[], size_t nContinuousStates)
+{
+    CHECK(c);
+    REQUIRE(fmi3GetContinuous, "fmi3GetContinuousStateDerivatives");
+    if (!right_count(INST, "fmi3GetContinuousStateDerivatives", "nContinuousStates", nContinuousStates, NX, "nx"))
+        return fmi3Error;
+    if (nContinuousStates && !derivatives) return fmi3Error;
+    return (fmi3Status)pg3_get_derivatives(&INST->inst, derivatives);
+}
+
+fmi3Status fmi3GetEventIndicators(fmi3Instance c, fmi3Float64 eventIndicators[], size_t nEventIndicators)
+{
+    CHECK(c);
+    REQUIRE(fmi3GetContinuous, "fmi3GetEventIndicators");
+    if (!right_count(INST, "fmi3GetEventIndicators", "nEventIndicators", nEventIndicators, NZ, "nz")) return fmi3Error;
+    if (nEventIndicators && !eventIndicators) return fmi3Error;
+    return (fmi3Status)pg3_get_event_indicators(&INST->inst, eventIndicators);
+}
+
+fmi3Status fmi3GetContinuousStates(fmi3Instance c, fmi3Float64 continuousStates[], size_t nContinuousStates)
+{
+    CHECK(c);
+    REQUIRE(fmi3GetContinuous, "fmi3GetContinuousStates");
+    if (!right_count(INST, "fmi3GetContinuousStates", "nContinuousStates", nContinuousStates, NX, "nx")) return fmi3Error;
+    if (nContinuousStates && !continuousStates) return fmi3Error;
+    return (fmi3Status)pg3_get_continuous_states(&INST->inst, continuousStates);
+}
+
+fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance c, fmi3Float64 nominals[], size_t nContinuousStates)
+{
+    CHECK(c);
+    REQUIRE(fmi3GetContinuous, "fmi3GetNominalsOfContinuousStates");
+    if (!right_count(INST, "fmi3GetNominalsOfContinuousStates", "nContinuousStates", nContinuousStates, NX, "nx"))
+        return fmi3Error;
+    if (nContinuousStates && !nominals) return fmi3Error;
+    for (size_t i = 0; i < nContinuousStates; ++i) nominals[i] = 1.0;
+    return fmi3OK;
+}
+
+fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance c, size_t *nEventIndicators)
+{
+    CHECK(c && nEventIndicators);
+    REQUIRE(fmi3GetNumbers, "fmi3GetNumberOfEventIndicators");
+    *nEventIndicators = NZ;
+    return fmi3OK;
+}
+
+fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance c, size_t *nContinuousStates)
+{
+    CHECK(c && nContinuousStates);
+    REQUIRE(fmi3GetNumbers, "fmi3GetNumberOfContinuousStates");
+    *nContinuousStates = NX;
+    return fmi3OK;
+}
+
+/* ---- co-simulation -------------------------------------------------------------------------- */
+fmi3Status fmi3EnterStepMode(fmi3Instance c)
+{
+    CHECK(c);
+    REQUIRE(fmi3EnterStepMode, "fmi3EnterStepMode");
+    pg3_set_event_mode(&INST->inst, 0);
+    LEADS_TO(fmi3OK, MODE_STEP);
+    return fmi3OK;
+}
+
+fmi3Status fmi3DoStep(fmi3Instance c, fmi3Float64 currentCommunicationPoint, fmi3Float64 communicationStepSize,
+                      fmi3Boolean noSetFMUStatePriorToCurrentPoint, fmi3Boolean *eventHandlingNeeded,
+                      fmi3Boolean *terminateSimulation, fmi3Boolean *earlyReturn, fmi3Float64 *lastSuccessfulTime)
+{
+    UNUSED(noSetFMUStatePriorToCurrentPoint);
+    CHECK(c);
+    REQUIRE(fmi3DoStep, "fmi3DoStep");
+    int event = 0, early = 0;
+    double last = 0.0;
+    int st = pg3_do_step(&INST->inst, currentCommunicationPoint, communicationStepSize, &event, &early, &last);
+    if (st > ST_WARNING) return (fmi3Status)st;
+    put(eventHandlingNeeded, event), put(terminateSimulation, 0), put(earlyReturn, early);
+    if (lastSuccessfulTime) *lastSuccessfulTime = last;
+    return (fmi3Status)st;
+}
