@@ -291,9 +291,10 @@ def _variable_attributes(model, v):
     return attrs
 
 
-def model_description_fmi2(cls, token: str, source_files=()) -> bytes:
+def model_description_fmi2(cls, token: str, source_files=(), directional=False) -> bytes:
     """The FMI 2.0 modelDescription.xml; ``source_files`` (a source FMU's compilation units, in
-    ``sources/``) are listed in ``<CoSimulation><SourceFiles>``."""
+    ``sources/``) are listed in ``<CoSimulation><SourceFiles>``; ``directional``: the FMU provides
+    directional derivatives (the native FMUs)."""
     model = cls.model
     variables = cls.variables()
     root = ET.Element("fmiModelDescription", {
@@ -308,7 +309,7 @@ def model_description_fmi2(cls, token: str, source_files=()) -> bytes:
         "maxOutputDerivativeOrder": "0", "canRunAsynchronuously": "false",
         "canBeInstantiatedOnlyOncePerProcess": "false", "canNotUseMemoryManagementFunctions": "true",
         "canGetAndSetFMUstate": "true", "canSerializeFMUstate": "true",
-        "providesDirectionalDerivative": "false"})
+        "providesDirectionalDerivative": "true" if directional else "false"})
     if source_files:
         files = ET.SubElement(root.find("CoSimulation"), "SourceFiles")
         for name in source_files:
@@ -345,7 +346,7 @@ def _dependencies(knowns):
     return {"dependencies": " ".join(map(str, knowns)), "dependenciesKind": " ".join(["dependent"] * len(knowns))}
 
 
-def model_description_fmi3(cls, token: str) -> bytes:
+def model_description_fmi3(cls, token: str, directional=False) -> bytes:
     """FMI 3.0: model exchange and co-simulation in one description (pogofmu.runtime.fmi3 for the extra
     variables: state locals, derivatives, event indicators, and the independent variable time)."""
     from pogofmu.dependencies import structure
@@ -364,7 +365,8 @@ def model_description_fmi3(cls, token: str) -> bytes:
         "version": project_version(), "generationTool": f"pogofmu {project_version()} (build_fmu.py)",
         "generationDateAndTime": _build_date(), "variableNamingConvention": "flat"})
     common = {"modelIdentifier": model.name, "canGetAndSetFMUState": "true", "canSerializeFMUState": "true",
-              "providesDirectionalDerivatives": "false", "providesAdjointDerivatives": "false",
+              "providesDirectionalDerivatives": "true" if directional else "false",
+              "providesAdjointDerivatives": "false",
               "canBeInstantiatedOnlyOncePerProcess": "false"}
     ET.SubElement(root, "ModelExchange", dict(common, needsCompletedIntegratorStep="true"))
     ET.SubElement(root, "CoSimulation", dict(common, canHandleVariableCommunicationStepSize="true",
@@ -508,9 +510,9 @@ def build_native(name: str, dest: Path, fmi_version: int = 2) -> Path:
         except CompileError as exc:
             raise BuildError(f"{name}: the native FMU does not compile: {exc}") from None
         if fmi_version == 2:
-            description = model_description_fmi2(cls, nb.token, nb.units)
+            description = model_description_fmi2(cls, nb.token, nb.units, directional=True)
         else:
-            description = model_description_fmi3(cls, nb.token)
+            description = model_description_fmi3(cls, nb.token, directional=True)
             (nb.sources / "buildDescription.xml").write_bytes(build_description_fmi3(name, nb.units))
         members = [("modelDescription.xml", description, False)]
         members += [(f"binaries/{platform}/{name}{lib.suffix}", lib.read_bytes(), True)

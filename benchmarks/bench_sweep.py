@@ -14,10 +14,17 @@ every output recorded, a grid over the stiffness ``k`` from 80 to 120 N/m (every
   the workers' imports of fmpy and scipy) is timed apart and not counted: it is paid once per
   sweep, not per run. Sending the FMU to the workers and extracting it there are counted.
 
+* **native**: the native FMU (dist/native/PogoStick.fmu, issue 18) the same ways — through fmpy's
+  Python loop (bare, extracted once) and through the sweep, whose runner drives it by the FMU's
+  own C stepping loop (``pogofmu_fmi2_run_grid``); its table must equal the Python-hosted FMU's
+  sweep table to the bit (every column but the run's wall time).
+
 Printed: wall and CPU time of each; the per-run overhead of the sweep (1 worker) over bare
 ``simulate_fmu`` (ii) in CPU time — every CPU second the sweep costs: the worker's, and this
 process's, which holds the client and the scheduler (target <= 10 %; the wall-time figure is
-printed too); and the speed-up of 2 workers over 1 in wall time (target >= 1.8x on 2 cores).
+printed too); the speed-up of 2 workers over 1 in wall time (target >= 1.8x on 2 cores); and
+the sweep's CPU seconds per run of the Python-hosted FMU over the native one's (1 worker each:
+target >= 10x).
 The CPU figure stands up to other load on the machine, the speed-up does not: run it alone for
 the figures of the README. Exit status 1 if a target is missed.
 
@@ -41,6 +48,7 @@ STOP_TIME = 10.0
 STEP = 1e-3
 OVERHEAD_TARGET = 0.10
 SPEEDUP_TARGET = 1.8
+NATIVE_TARGET = 10.0
 
 
 def bare(fmu: Path, ks, extracted: bool):
@@ -76,7 +84,7 @@ def _import_worker_side():
     import pogofmu.sweep  # noqa: F401
 
 
-def swept(fmu: Path, ks, workers: int, tmp: Path):
+def swept(fmu: Path, ks, workers: int, tmp: Path, name: str = ""):
     from pogofmu.sweep import Settings, Sweep, close_cluster, open_cluster, run_sweep
 
     t0 = time.perf_counter()
@@ -87,7 +95,7 @@ def swept(fmu: Path, ks, workers: int, tmp: Path):
     pids = [os.getpid(), *client.run(os.getpid).values()]  # this process holds the client and the scheduler
     try:
         sweep = Sweep(str(fmu), ["k"], [(k,) for k in ks], Settings(stop_time=STOP_TIME, step=STEP),
-                      str(tmp / f"sweep-{workers}.parquet"))
+                      str(tmp / f"sweep-{name}{workers}.parquet"))
         t0, c0 = time.perf_counter(), _cpu(pids)
         run_sweep(sweep, client, progress=False, log=lambda *a: None)
         wall, cpu = time.perf_counter() - t0, _cpu(pids) - c0
@@ -100,10 +108,12 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=1000, help="number of runs (default 1000)")
     ap.add_argument("--fmu", default=str(ROOT / "dist" / "PogoStick.fmu"))
+    ap.add_argument("--native-fmu", default=str(ROOT / "dist" / "native" / "PogoStick.fmu"))
     args, _ = ap.parse_known_args(argv)  # tasks.py bench passes every script the same options
-    fmu = Path(args.fmu)
-    if not fmu.is_file():
-        sys.exit(f"{fmu} missing: python3 tasks.py build")
+    fmu, native = Path(args.fmu), Path(args.native_fmu)
+    for path in (fmu, native):
+        if not path.is_file():
+            sys.exit(f"{path} missing: python3 tasks.py build")
     n = args.runs
     ks = [80.0 + 40.0 * i / max(1, n - 1) for i in range(n)]
     print(f"(c) sweep on Dask vs bare simulate_fmu: {n} PogoStick runs, {STOP_TIME:g} s at {STEP:g} s, "
@@ -120,6 +130,11 @@ def main(argv=None):
         line("sweep, 1 worker", t1, c1, f"cluster start {s1:.2f} s; CPU of worker + client + scheduler")
         t2, c2, s2 = swept(fmu, ks, 2, Path(tmp))
         line("sweep, 2 workers", t2, c2, f"cluster start {s2:.2f} s")
+        t_nb, c_nb = bare(native, ks, extracted=True)
+        line("native: bare simulate_fmu(dir)", t_nb, c_nb, "the native FMU through fmpy's Python loop")
+        t_n1, c_n1, _ = swept(native, ks, 1, Path(tmp), "native-")
+        line("native: sweep, 1 worker", t_n1, c_n1, "the FMU's own C stepping loop")
+        same = _same_table(Path(tmp) / "sweep-1.parquet", Path(tmp) / "sweep-native-1.parquet")
     overhead = c1 / c_bare - 1.0
     speedup = t1 / t2
     ok_o, ok_s = overhead <= OVERHEAD_TARGET, speedup >= SPEEDUP_TARGET
@@ -130,7 +145,19 @@ def main(argv=None):
           f"wall {100 * (t1 / t_bare - 1):+.1f} %")
     print(f"  speed-up 2 workers / 1 worker: {speedup:.2f}x (target >= {SPEEDUP_TARGET}x: "
           f"{'holds' if ok_s else 'MISSED'})")
-    return 0 if ok_o and ok_s else 1
+    native_ratio = c1 / c_n1
+    ok_n = native_ratio >= NATIVE_TARGET and same
+    print(f"  sweep CPU per run, Python-hosted / native FMU: {native_ratio:.1f}x (target >= {NATIVE_TARGET:g}x: "
+          f"{'holds' if native_ratio >= NATIVE_TARGET else 'MISSED'}); the tables "
+          f"{'are the same to the bit' if same else 'DIFFER'} (every column but wall_s)")
+    return 0 if ok_o and ok_s and ok_n else 1
+
+
+def _same_table(a: Path, b: Path) -> bool:
+    import pyarrow.parquet as pq
+
+    ta, tb = pq.read_table(a).drop(["wall_s"]), pq.read_table(b).drop(["wall_s"])
+    return ta.schema.names == tb.schema.names and ta.to_pylist() == tb.to_pylist()
 
 
 if __name__ == "__main__":

@@ -77,6 +77,9 @@ def test_the_model_description_is_the_python_hosted_fmus(name):
         units = sorted(n[len("sources/"):] for n in z.namelist() if n.startswith("sources/") and n.endswith(".c"))
     assert sorted(f.get("name") for f in files) == units and f"{name}_model.c" in units
     cs.remove(files)
+    cs.text = a.find("CoSimulation").text  # (the whitespace that held <SourceFiles>)
+    assert cs.attrib.pop("providesDirectionalDerivative") == "true"  # (the native FMUs provide them)
+    assert a.find("CoSimulation").attrib.pop("providesDirectionalDerivative") == "false"
     for root in (a, b):
         for key in ("guid", "generationDateAndTime"):
             root.attrib.pop(key, None)
@@ -229,6 +232,9 @@ def test_the_fmi3_model_description_is_the_python_hosted_fmus(name):
 
     a, b = _description(f"fmi3/{name}"), _description(f"native/fmi3/{name}")
     assert a.get("instantiationToken") != b.get("instantiationToken")
+    for interface in ("ModelExchange", "CoSimulation"):  # (the native FMUs provide directional derivatives)
+        assert b.find(interface).attrib.pop("providesDirectionalDerivatives") == "true"
+        assert a.find(interface).attrib.pop("providesDirectionalDerivatives") == "false"
     for root in (a, b):
         for key in ("instantiationToken", "generationDateAndTime"):
             root.attrib.pop(key, None)

@@ -22,7 +22,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from pogofmu import cli
-from support import fmu_path, reference_events, simulate
+from support import DIST, fmu_path, reference_events, simulate
 
 POGOFMU = Path(sys.executable).with_name("pogofmu")  # the console script of the venv
 
@@ -112,6 +112,33 @@ def test_grid_2x3_with_2_workers_equals_direct_fmpy_runs_and_1_worker(tmp_path):
         for name in ("time", "y", "E", "n_events"):
             assert np.array_equal(mine.column(name).to_numpy(), direct[name]), name
     assert len({r["t_last_event"] for r in two}) == 6  # the parameters did reach the FMU
+
+
+def test_a_native_fmu_is_swept_by_its_own_c_loop_with_the_python_fmus_table(tmp_path, scheduler):
+    """dist/native/PogoStick.fmu exports pogofmu_fmi2_run_grid: the sweep's runner steps it in C.
+    Every column of its table (but the wall time), its time series and its failed rows (a leg that
+    bottoms out, k = 1) are those of the Python-hosted FMU swept through fmpy."""
+    from pogofmu.sweep import Runner, Settings
+
+    native = DIST / "native" / "PogoStick.fmu"
+    for path, has_loop in ((native, True), (fmu_path("PogoStick"), False)):
+        runner = Runner(str(path))
+        row, _ = runner.run({"k": 100.0}, Settings(stop_time=0.01))
+        assert row["status"] == "ok" and bool(runner.c_loop) is has_loop, path
+    grid = ["--grid", "k=1,80,120", "--grid", "c=0.2,1.0", "--set", "m=1", "--stop-time", "6", "--events"]
+    for name, fmu in (("py", fmu_path("PogoStick")), ("native", native)):
+        assert _sweep(fmu, *grid, "--scheduler", scheduler, "--out", tmp_path / f"{name}.parquet",
+                      "--timeseries", tmp_path / f"ts-{name}") == 0
+    a, b = _rows(tmp_path / "py.parquet"), _rows(tmp_path / "native.parquet")
+    assert a == b
+    assert sum(r["status"] == "error" for r in a) == 2 and sum(r["status"] == "ok" for r in a) == 4
+    import pyarrow.dataset as ds
+
+    ta = ds.dataset(tmp_path / "ts-py", format="parquet", partitioning="hive").to_table()
+    tb = ds.dataset(tmp_path / "ts-native", format="parquet", partitioning="hive").to_table()
+    assert ta.num_rows == tb.num_rows > 4 * 6000
+    assert ta.sort_by([("run_id", "ascending"), ("time", "ascending")]).equals(
+        tb.sort_by([("run_id", "ascending"), ("time", "ascending")]))
 
 
 def test_monte_carlo_is_reproducible_from_the_seed(tmp_path, scheduler):

@@ -4,7 +4,9 @@
     pogofmu sweep dist/Penetrator.fmu --sample K=lognormal(9.21,0.5) --samples 200 --seed 1 --out soil.parquet
 
 The runs are the shipped FMU artefact simulated by fmpy (``simulate_fmu``) in Dask worker
-processes: a local cluster (``--workers W``, one thread each) or an existing one
+processes — or, for an FMI 2.0 FMU whose binary exports ``pogofmu_fmi2_run_grid`` (the native
+FMUs, dist/native/), by that function: fmpy's communication loop written in C over the FMU's own
+FMI functions, the same rows to the bit without fmpy's Python per step (``Runner.run``); a local cluster (``--workers W``, one thread each) or an existing one
 (``--scheduler tcp://host:8786``). The FMU file is sent to the workers once and extracted once
 per worker; each run gets a fresh FMU instance (0.7 ms, while extracting costs ~8 ms a run).
 Runs go in chunks, one Dask task per chunk, so that scheduling costs little against the runs.
@@ -215,6 +217,61 @@ class Runner:
         self.vars = {v.name: v for v in self.md.modelVariables}
         ex = self.md.defaultExperiment  # its step as it is (fmpy alone would coarsen it to <= 1000 points)
         self.default_step = float(ex.stepSize) if ex is not None and ex.stepSize is not None else None
+        self.c_loop = None  # known after the first instance: does the binary bring its own loop?
+
+    def _grid_loop(self, fmu):
+        """The FMU binary's ``pogofmu_fmi2_run_grid`` (a ctypes function), or None."""
+        if self.c_loop is None:
+            import ctypes
+
+            fn = getattr(fmu.dll, "pogofmu_fmi2_run_grid", None) if self.md.fmiVersion == "2.0" else None
+            if fn is not None:
+                fn.restype = ctypes.c_int
+                fn.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_double,
+                               ctypes.c_void_p, ctypes.c_size_t, ctypes.c_void_p, ctypes.c_size_t,
+                               ctypes.c_void_p, ctypes.c_size_t, ctypes.POINTER(ctypes.c_size_t)]
+            self.c_loop = fn or False
+        return self.c_loop or None
+
+    def _simulate_in_c(self, loop, fmu, start_values, stop_time, step, record):
+        """What ``simulate_fmu`` does for an FMI 2.0 co-simulation FMU without inputs — set up,
+        start values in both phases, initialize, the loop (here in the FMU's C), terminate — and
+        its result array (the same columns, types and rows)."""
+        import ctypes
+
+        import numpy as np
+        from fmpy.fmi1 import FMICallException
+        from fmpy.simulation import apply_start_values, settable_in_initialization_mode, settable_in_instantiated
+
+        ex = self.md.defaultExperiment
+        start = float(ex.startTime) if ex is not None and ex.startTime is not None else 0.0
+        stop = float(stop_time) if stop_time is not None else (
+            float(ex.stopTime) if ex is not None and ex.stopTime is not None else start + 1.0)
+        tolerance = float(ex.tolerance) if ex is not None and ex.tolerance is not None else None
+        fmu.setupExperiment(tolerance=tolerance, startTime=start, stopTime=stop)
+        rest = apply_start_values(fmu, self.md, dict(start_values), settable=settable_in_instantiated)
+        fmu.enterInitializationMode()
+        apply_start_values(fmu, self.md, rest, settable=settable_in_initialization_mode)
+        fmu.exitInitializationMode()
+        names = set(record)
+        reals = [v for v in self.md.modelVariables if v.name in names and v.type == "Real"]
+        ints = [v for v in self.md.modelVariables if v.name in names and v.type == "Integer"]
+        rvr = (ctypes.c_uint32 * max(1, len(reals)))(*[v.valueReference for v in reals])
+        ivr = (ctypes.c_uint32 * max(1, len(ints)))(*[v.valueReference for v in ints])
+        max_rows = int(math.ceil((stop - start) / step * (1 + 1e-9))) + 2
+        out = np.empty((max_rows, 1 + len(reals) + len(ints)))
+        rows = ctypes.c_size_t(0)
+        status = loop(fmu.component, start, stop, step, rvr, len(reals), ivr, len(ints),
+                      out.ctypes.data, max_rows, ctypes.byref(rows))
+        if status > 1:
+            raise FMICallException(function="fmi2DoStep", status=status)
+        fmu.terminate()
+        table = out[:rows.value]
+        res = np.empty(rows.value, dtype=[("time", np.float64), *((v.name, np.float64) for v in reals),
+                                          *((v.name, np.int32) for v in ints)])
+        for k, name in enumerate(res.dtype.names):
+            res[name] = table[:, k]
+        return res
 
     def run(self, point: Dict[str, float], settings: Settings):
         """Simulate one point; returns (row, result array or None). Never raises for a failed run."""
@@ -241,9 +298,14 @@ class Runner:
         t0 = time.perf_counter()
         fmu = instantiate_fmu(self.unzipdir, self.md, "CoSimulation", False, True, logger)
         try:
-            res = simulate_fmu(self.unzipdir, model_description=self.md, fmu_instance=fmu,
-                               start_values=start, stop_time=settings.stop_time,
-                               output_interval=settings.step or self.default_step, output=record, validate=False)
+            loop = self._grid_loop(fmu)
+            if loop is not None and (settings.step or self.default_step):
+                res = self._simulate_in_c(loop, fmu, start, settings.stop_time, settings.step or self.default_step,
+                                          record)
+            else:
+                res = simulate_fmu(self.unzipdir, model_description=self.md, fmu_instance=fmu,
+                                   start_values=start, stop_time=settings.stop_time,
+                                   output_interval=settings.step or self.default_step, output=record, validate=False)
             fmu.freeInstance()
             stop = settings.stop_time if settings.stop_time is not None else float(self.md.defaultExperiment.stopTime)
             if not math.isclose(res["time"][-1], stop, rel_tol=0, abs_tol=1e-9 * max(1.0, abs(stop))):

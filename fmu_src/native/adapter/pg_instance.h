@@ -99,6 +99,11 @@ int pg_inst_serialize(PgInstance *in, const PgState *state, unsigned char *bytes
 int pg_inst_deserialize(PgInstance *in, const unsigned char *bytes, size_t size, PgState *state);
 void pg_inst_restore(PgInstance *in, const PgState *state);
 
+/* directional derivatives (pg_derivatives.c): sensitivity = J seed, J the Jacobian of the unknowns
+ * with respect to the knowns at the point the outputs describe; `fn` names the FMI function */
+int pg_inst_directional(PgInstance *in, const unsigned *unknowns, size_t n_unknowns, const unsigned *knowns,
+                        size_t n_knowns, const double *seed, double *sensitivity, const char *fn);
+
 /* ---- FMI 3.0 (fmu_src/native/adapter/pg_instance3.c, the twin of runtime/fmi3.py) ---------- */
 void pg3_attach(PgInstance *in, char mode, int event_mode_used, int early_return_allowed);
 /* before any get: refresh what inputs set in Event Mode or model exchange made stale */

@@ -67,6 +67,12 @@ typedef struct PgModel {
                   PgMsg *m);
     int (*time_scales)(const double *p, PgScale *out, int *n, PgMsg *m);
     int (*error_scales)(const double *p, PgScale *out, int *n, PgMsg *m);
+    /* directional derivatives (the flow's and the outputs' on dual numbers, pogofmu.codegen.dual):
+     * df = (d flow / dx) sx + (d flow / du) su, dy likewise, at (t, x) in mode q */
+    int (*flow_jvp)(double t, const double *x, const double *q, const double *u, const double *p, const double *sx,
+                    const double *su, double *df, PgMsg *m);
+    int (*outputs_jvp)(double t, const double *x, const double *q, const double *u, const double *p, const double *sx,
+                       const double *su, double *dy, PgMsg *m);
 } PgModel;
 
 #endif

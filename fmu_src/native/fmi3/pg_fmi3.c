@@ -478,11 +478,20 @@ fmi3Status fmi3GetDirectionalDerivative(fmi3Instance c, const fmi3ValueReference
                                         const fmi3ValueReference knowns[], size_t nKnowns, const fmi3Float64 seed[],
                                         size_t nSeed, fmi3Float64 sensitivity[], size_t nSensitivity)
 {
-    UNUSED(unknowns), UNUSED(nUnknowns), UNUSED(knowns), UNUSED(nKnowns), UNUSED(seed), UNUSED(nSeed);
-    UNUSED(sensitivity), UNUSED(nSensitivity);
     CHECK(c);
     REQUIRE(fmi3GetDirectionalDerivative, "fmi3GetDirectionalDerivative");
-    return unsupported(INST, "fmi3GetDirectionalDerivative (providesDirectionalDerivative = false)");
+    /* every variable is a scalar: one seed per known, one sensitivity per unknown */
+    if (nSeed != nKnowns || nSensitivity != nUnknowns) {
+        char text[300];
+        snprintf(text, sizeof text, "fmi3GetDirectionalDerivative refused: nSeed = %zu and nSensitivity = %zu must "
+                 "equal nKnowns = %zu and nUnknowns = %zu (every variable of this FMU is a scalar)", nSeed,
+                 nSensitivity, nKnowns, nUnknowns);
+        emit(INST, ST_ERROR, "logStatusError", text);
+        return fmi3Error;
+    }
+    if ((nUnknowns && (!unknowns || !sensitivity)) || (nKnowns && (!knowns || !seed))) return fmi3Error;
+    return (fmi3Status)pg_inst_directional(&INST->inst, unknowns, nUnknowns, knowns, nKnowns, seed, sensitivity,
+                                           "fmi3GetDirectionalDerivative");
 }
 
 fmi3Status fmi3GetAdjointDerivative(fmi3Instance c, const fmi3ValueReference unknowns[], size_t nUnknowns,

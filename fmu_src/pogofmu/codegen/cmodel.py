@@ -20,6 +20,7 @@ from pogofmu.runtime.engine.settings import check_solver_parameters, domain_slac
 from pogofmu.runtime.model import HybridModel, Params
 
 from .cprint import Printer, c_string, literal, message_lines, result_nodes
+from .dual import Dual, dual_math, value_and_tangent
 from .trace import BOOL, FLOAT, INT, Sym, TraceError, explore, symbol
 
 ARGS = {
@@ -35,8 +36,13 @@ ARGS = {
     "domain": "double t, const double *x, const double *q, const double *u, const double *p, const double *s, "
               "PgMsg *m",
     "scales": "const double *p, PgScale *out, int *n, PgMsg *m",
+    "flow_jvp": "double t, const double *x, const double *q, const double *u, const double *p, const double *sx, "
+                "const double *su, double *df, PgMsg *m",
+    "outputs_jvp": "double t, const double *x, const double *q, const double *u, const double *p, const double *sx, "
+                   "const double *su, double *dy, PgMsg *m",
 }
-INPUTS = {"t": "t", "x": "x[{i}]", "q": "q[{i}]", "u": "u[{i}]", "p": "p[{i}]", "s": "s[{i}]"}
+INPUTS = {"t": "t", "x": "x[{i}]", "q": "q[{i}]", "u": "u[{i}]", "p": "p[{i}]", "s": "s[{i}]",
+          "sx": "sx[{i}]", "su": "su[{i}]"}
 
 
 def _kind_of(v) -> str:
@@ -75,6 +81,13 @@ class Inputs:
     def s(self):
         return Params({par.name: symbol("s", i, INT if par.integer else FLOAT)
                        for i, par in enumerate(SOLVER_PARAMETERS)})
+
+    # seeded: the states and the inputs as dual numbers, their tangents the seeds sx, su
+    def x_seeded(self):
+        return [Dual(symbol("x", i), symbol("sx", i)) for i in range(len(self.model.states))]
+
+    def u_seeded(self):
+        return tuple(Dual(symbol("u", i), symbol("su", i)) for i in range(len(self.model.inputs)))
 
 
 def _raise_lines(path, ref):
@@ -191,6 +204,27 @@ class ModelWriter:
             "pg_outputs", ARGS["outputs"],
             lambda: model.output_fn(inp.t(), inp.x(), inp.q(), inp.u(), inp.p()), outputs_leaf, "outputs")
 
+        # directional derivatives: the flow and the outputs on dual numbers (codegen.dual)
+        def flow_jvp():
+            with dual_math():
+                t, x, q, u, p = inp.t(), inp.x_seeded(), inp.q(), inp.u_seeded(), inp.p()
+                f = model.bind(q, u, p)(t, x) if model.bind is not None else model.flow(t, x, q, u, p)
+                return [value_and_tangent(v)[1] for v in f]
+        counts["flow_jvp"] = self.function("pg_flow_jvp", ARGS["flow_jvp"], flow_jvp,
+                                           self._vector("df", nx, "the flow's derivative"), "flow derivative")
+
+        def outputs_jvp():
+            with dual_math():
+                out = model.output_fn(inp.t(), inp.x_seeded(), inp.q(), inp.u_seeded(), inp.p())
+                return {k: value_and_tangent(v)[1] for k, v in out.items()}
+
+        def outputs_jvp_leaf(value, ref):
+            if not isinstance(value, dict) or set(value) != set(names):
+                raise TraceError(f"{model.name}: the outputs returned {sorted(value)}, not {sorted(names)}")
+            return [f"dy[{j}] = {ref(value[n])};" for j, n in enumerate(names)] + ["return PG_OK;"]
+        counts["outputs_jvp"] = self.function("pg_outputs_jvp", ARGS["outputs_jvp"], outputs_jvp, outputs_jvp_leaf,
+                                              "outputs derivative")
+
         def domain():
             return model.domain(inp.t(), inp.x(), inp.q(), inp.u(), inp.p(), domain_slack(inp.s()))
 
@@ -251,7 +285,7 @@ class ModelWriter:
             "    OUTPUT_NAMES, EVENT_NAMES, EVENT_DIRECTION,",
             f"    {int(model.time_scales is not None)}, {int(model.error_scales is not None)},",
             "    pg_check_settings, pg_check, pg_initial, pg_flow, pg_guard, pg_active, pg_jump, pg_outputs, "
-            "pg_domain, pg_time_scales, pg_error_scales,",
+            "pg_domain, pg_time_scales, pg_error_scales, pg_flow_jvp, pg_outputs_jvp,",
             "};", "",
         ]
         return "\n".join(head + self.functions + tail)

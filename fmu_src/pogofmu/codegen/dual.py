@@ -1,0 +1,226 @@
+"""Forward-mode derivatives of a model's functions, traced: dual numbers over traced values.
+
+A :class:`Dual` is a value and its tangent (the derivative along a seed direction), each a traced
+value (:class:`~.trace.Sym`) or a number. Calling a model function with duals in place of its
+states and inputs, inside :func:`~.trace.explore`, records the function's operations *and* those
+of the chain rule; printed as C (:mod:`.cprint`) it is the exact Jacobian-vector product of the
+function at a point — the directional derivatives the native FMUs provide (issue 18), from the
+same Python model, with no second copy of any equation. Branches of the model (modes, ``max``,
+``abs``) are decisions on the *values*, so the derivative is that of the branch taken.
+
+A tangent that is known to be zero is the number ``0.0`` and costs no operation.
+"""
+from __future__ import annotations
+
+from contextlib import contextmanager
+
+from pogofmu.runtime import fmath
+
+from .trace import TRACED_MATH, Sym, TraceError
+
+
+def _zero(d) -> bool:
+    return not isinstance(d, Sym) and d == 0
+
+
+def _add(a, b):
+    if _zero(a):
+        return b
+    if _zero(b):
+        return a
+    return a + b
+
+
+def _sub(a, b):
+    if _zero(b):
+        return a
+    if _zero(a):
+        return -b
+    return a - b
+
+
+def _mul(a, b):
+    """A product where ``b`` is a tangent (zero skips the operation)."""
+    if _zero(b) or _zero(a):
+        return 0.0
+    return a * b
+
+
+def _parts(v):
+    if isinstance(v, Dual):
+        return v.v, v.d
+    if isinstance(v, (Sym, int, float)) and not isinstance(v, bool):
+        return v, 0.0
+    if isinstance(v, bool):
+        return v, 0.0
+    raise TraceError(f"a derivative of an operation on {type(v).__name__} {v!r}")
+
+
+class Dual:
+    """``v + d ε`` with ``ε² = 0``: the value ``v`` and the tangent ``d``."""
+
+    __slots__ = ("v", "d")
+    __hash__ = None
+
+    def __init__(self, v, d=0.0):
+        self.v, self.d = v, d
+
+    # ---- arithmetic ----
+    def __add__(self, o):
+        ov, od = _parts(o)
+        return Dual(self.v + ov, _add(self.d, od))
+
+    def __radd__(self, o):
+        ov, od = _parts(o)
+        return Dual(ov + self.v, _add(od, self.d))
+
+    def __sub__(self, o):
+        ov, od = _parts(o)
+        return Dual(self.v - ov, _sub(self.d, od))
+
+    def __rsub__(self, o):
+        ov, od = _parts(o)
+        return Dual(ov - self.v, _sub(od, self.d))
+
+    def __mul__(self, o):
+        ov, od = _parts(o)
+        return Dual(self.v * ov, _add(_mul(ov, self.d), _mul(self.v, od)))
+
+    def __rmul__(self, o):
+        ov, od = _parts(o)
+        return Dual(ov * self.v, _add(_mul(ov, self.d), _mul(self.v, od)))
+
+    def __truediv__(self, o):
+        ov, od = _parts(o)
+        q = self.v / ov
+        return Dual(q, _tangent_div(self.d, q, od, ov))
+
+    def __rtruediv__(self, o):
+        ov, od = _parts(o)
+        q = ov / self.v
+        return Dual(q, _tangent_div(od, q, self.d, self.v))
+
+    def __pow__(self, o):
+        return _pow(self, o)
+
+    def __rpow__(self, o):
+        return _pow(o, self)
+
+    def __neg__(self):
+        return Dual(-self.v, 0.0 if _zero(self.d) else -self.d)
+
+    def __pos__(self):
+        return self
+
+    def __abs__(self):
+        if self.v >= 0:  # a decision on the value: the derivative of the branch taken
+            return Dual(abs(self.v), self.d)
+        return Dual(abs(self.v), 0.0 if _zero(self.d) else -self.d)
+
+    def __trunc__(self):
+        import math
+
+        return math.trunc(self.v)
+
+    # ---- comparisons and truth: the value's ----
+    def __lt__(self, o): return self.v < _parts(o)[0]
+    def __le__(self, o): return self.v <= _parts(o)[0]
+    def __gt__(self, o): return self.v > _parts(o)[0]
+    def __ge__(self, o): return self.v >= _parts(o)[0]
+    def __eq__(self, o): return self.v == _parts(o)[0]
+    def __ne__(self, o): return self.v != _parts(o)[0]
+
+    def __bool__(self):
+        return bool(self.v)
+
+    def __float__(self):
+        raise TraceError("float() of a traced value (write v, or v * 1.0 for an int)")
+
+    def __format__(self, spec):
+        return format(self.v, spec)
+
+    def __repr__(self):
+        return repr(self.v)
+
+    __str__ = __repr__
+
+
+def _tangent_div(da, q, db, b):
+    """The tangent of a / b = q: (da - q db) / b."""
+    num = _sub(da, _mul(q, db))
+    return 0.0 if _zero(num) else num / b
+
+
+def _pow(a, b):
+    av, ad = _parts(a)
+    bv, bd = _parts(b)
+    value = av ** bv
+    d = 0.0
+    if not _zero(ad):  # b a^(b-1) da
+        d = _mul(bv * av ** (bv - 1), ad)
+    if not _zero(bd):  # a^b log(a) db
+        d = _add(d, _mul(value * TRACED_MATH["log"](av), bd))
+    return Dual(value, d)
+
+
+def _unary(name, derivative):
+    traced = TRACED_MATH[name]
+
+    def fn(x):
+        if not isinstance(x, Dual):
+            return traced(x)
+        value = traced(x.v)
+        return Dual(value, 0.0 if _zero(x.d) else _mul(derivative(x.v, value), x.d))
+    return fn
+
+
+def _atan2(y, x):
+    (yv, yd), (xv, xd) = _parts(y), _parts(x)
+    value = TRACED_MATH["atan2"](yv, xv)
+    if _zero(yd) and _zero(xd):
+        return value
+    r2 = xv * xv + yv * yv
+    return Dual(value, _tangent_div(_sub(_mul(xv, yd), _mul(yv, xd)), 0.0, 0.0, r2))
+
+
+def _hypot(a, b):
+    (av, ad), (bv, bd) = _parts(a), _parts(b)
+    value = TRACED_MATH["hypot"](av, bv)
+    if _zero(ad) and _zero(bd):
+        return value
+    return Dual(value, _tangent_div(_add(_mul(av, ad), _mul(bv, bd)), 0.0, 0.0, value))
+
+
+DUAL_MATH = {
+    "sqrt": _unary("sqrt", lambda v, r: 0.5 / r),
+    "exp": _unary("exp", lambda v, r: r),
+    "log": _unary("log", lambda v, r: 1.0 / v),
+    "cos": _unary("cos", lambda v, r: -TRACED_MATH["sin"](v)),
+    "sin": _unary("sin", lambda v, r: TRACED_MATH["cos"](v)),
+    "atan2": _atan2,
+    "hypot": _hypot,
+    "isfinite": lambda x: TRACED_MATH["isfinite"](_parts(x)[0]),
+    "is_number": lambda x: TRACED_MATH["is_number"](_parts(x)[0]),
+}
+
+
+@contextmanager
+def dual_math():
+    """Inside :func:`~.trace.explore` (which has put the traced functions in place):
+    ``pogofmu.runtime.fmath``'s functions replaced by dual-aware ones."""
+    saved = {name: getattr(fmath, name) for name in DUAL_MATH}
+    try:
+        for name, fn in DUAL_MATH.items():
+            setattr(fmath, name, fn)
+        yield
+    finally:
+        for name, fn in saved.items():
+            setattr(fmath, name, fn)
+
+
+def value_and_tangent(v):
+    """(value, tangent) of a result: a dual's parts; anything else has a zero tangent."""
+    return _parts(v)
+
+
+__all__ = ["Dual", "dual_math", "value_and_tangent"]
