@@ -315,6 +315,24 @@ def test_work_precision_study_reproduces_figs_21_22(tmp_path, scheduler):
     direct = simulate("PogoStick", start_values={"log_events": 1, "method": 8, "rel_tol": 1e-9}, output_interval=1e-3)
     got = sorted((int(e["index"]), float(e["time_s"])) for e in events if key(e) == (8, 0.01, 1e-9))
     assert [t for _, t in got] == [e["time"] for e in direct.events()]
+    # the work-accuracy half of Fig. 21: work counted, the global error against the closed form
+    from pogofmu.closed_form import basic_state
+
+    y_exact = float(basic_state(10.0)[0])
+    assert abs(y_exact - 0.890238635473) < 1e-11  # (the FMU at rel_tol 1e-12 agrees to 2e-14)
+    unbounded5 = sorted((r for r in summary if key(r)[:2] == (5, 0.0)), key=lambda r: -float(r["rel_tol"]))
+    flows = [int(r["n_flow"]) for r in unbounded5]
+    assert flows == sorted(flows) and flows[-1] > 5 * flows[0], flows  # tighter tolerance, more work
+    y_err = {float(r["rel_tol"]): float(r["y_error_m"]) for r in unbounded5}
+    assert y_err[1e-10] < y_err[1e-4] / 1e4 and y_err[1e-10] < 1e-8, y_err
+    peer = _csv(out / "work_precision_scipy.csv")
+    assert len(peer) == 2 * 2 * 10 and (out / "work_precision_work.png").stat().st_size > 10_000
+    rk45 = {float(r["rel_tol"]): r for r in peer if r["solver"] == "scipy RK45" and float(r["max_step"]) == 0.0}
+    for r in unbounded5:  # the same pair and error control: the same work and accuracy within small factors
+        other = rk45[float(r["rel_tol"])]
+        if int(other["n_events"]) == 19 and float(r["rel_tol"]) <= 1e-5:
+            assert 0.5 < int(r["n_flow"]) / int(other["n_flow"]) < 2.0, (r, other)
+            assert 0.1 < float(r["y_error_m"]) / max(float(other["y_error_m"]), 1e-17) < 10.0, (r, other)
 
 
 def test_soil_study_against_direct_runs(tmp_path, scheduler):

@@ -99,6 +99,36 @@ def _first_rising_root(f, f_float, period, samples=4000):
     return None
 
 
+def basic_state(t: float, params: Optional[dict] = None, digits: int = 40):
+    """``(y, ydot)`` of the basic pogo stick at time ``t`` (mpmath numbers): the segment after the
+    latest event before ``t`` — a parabola in flight, the damped oscillator in contact — evaluated
+    in closed form. The reference of the study's global error at the stop time."""
+    import mpmath
+
+    p = dict(DEFAULTS, **(params or {}))
+    events = basic_events(p, t_end=t, digits=digits)
+    with mpmath.workdps(digits + 10):
+        mp = mpmath.mpf
+        m, k, c, xi, g = (mp(p[n]) for n in ("m", "k", "c", "x_i", "g"))
+        T = mp(t)
+        if not events:
+            tau = T
+            return mp(p["y_0"]) + mp(p["ydot_0"]) * tau - g * tau ** 2 / 2, mp(p["ydot_0"]) - g * tau
+        last = events[-1]
+        s = T - last["time"]
+        if last["event"] == "liftoff":  # flight from the ground at the liftoff velocity
+            v = last["ydot"]
+            return xi + v * s - g * s ** 2 / 2, v - g * s
+        sigma = c / (2 * m)
+        wd = mpmath.sqrt(k / m - sigma ** 2)
+        u0 = m * g / k
+        A, B = u0, (last["ydot"] + sigma * u0) / wd
+        e = mpmath.exp(-sigma * s)
+        u = e * (A * mpmath.cos(wd * s) + B * mpmath.sin(wd * s))
+        udot = e * ((B * wd - sigma * A) * mpmath.cos(wd * s) - (A * wd + sigma * B) * mpmath.sin(wd * s))
+        return xi + (u - u0), udot  # y = x_i + x, x = u + x_eq, x_eq = -u0
+
+
 @lru_cache(maxsize=32)
 def _cached(key, t_end):
     return tuple({"index": e["index"], "name": e["event"], "time": float(e["time"]), "y": float(e["y"]),

@@ -3,7 +3,11 @@
 * ``work-precision`` — the paper's Figs 21-22 for PogoStick.fmu: the largest event-time error
   against the closed form over the 19 events of the default drop, against ``rel_tol`` (1e-3 ...
   1e-12), for method 5 (Dormand-Prince 5(4)) and 8 (DOP853), with ``max_step`` 0.01 s and
-  unbounded (0), and the number of events located in the 10 s.
+  unbounded (0), and the number of events located in the 10 s; and the work-accuracy diagram:
+  the global error of the state at the stop time (against the closed form) against the work —
+  flow evaluations, counted, and CPU time — for the FMU's engine and for scipy's ``solve_ivp``
+  RK45 (ode45's pair) and DOP853 at the same tolerances, both integrating the same model
+  functions with a restart loop at their own located events.
 * ``soil`` — Monte Carlo of Penetrator.fmu over an uncertain Hunt-Crossley soil (K, n, c_r):
   distributions of the deepest penetration ``delta_max``, the first rebound height (apex of the
   mass after the first liftoff) and the number of hops (liftoffs) in the run.
@@ -93,8 +97,101 @@ def slope(tols, errs):
     return float(np.polyfit(np.log10(tols), np.log10(errs), 1)[0])
 
 
+STOP = 10.0  # [s] the default drop's run
+ABS_TOL = 1e-12  # the FMU's default abs_tol, used by both solvers
+
+
+def _counted(model):
+    """The model with its flow wrapped to count evaluations: (model, counter list)."""
+    from dataclasses import replace
+
+    count = [0]
+    if model.bind is not None:
+        bind = model.bind
+
+        def counted_bind(q, u, p):
+            f = bind(q, u, p)
+
+            def g(t, x):
+                count[0] += 1
+                return f(t, x)
+            return g
+        return replace(model, bind=counted_bind), count
+    flow = model.flow
+
+    def counted_flow(t, x, q, u, p):
+        count[0] += 1
+        return flow(t, x, q, u, p)
+    return replace(model, flow=counted_flow), count
+
+
+def engine_work(method: int, max_step: float, rel_tol: float, stop: float = STOP):
+    """The FMU's engine (host-side: the same code, the same bits) on the default drop: flow
+    evaluations, CPU seconds, events, and the mass state (y, ydot) at ``stop``."""
+    import time
+
+    from pogofmu.runtime.engine import Simulator
+    from pogofmu.runtime.models import get
+
+    model, count = _counted(get("PogoStick"))
+    t0 = time.process_time()
+    sim = Simulator(model, {"method": method, "max_step": max_step, "rel_tol": rel_tol, "abs_tol": ABS_TOL},
+                    keep_history=True)
+    sim.advance(stop)
+    cpu = time.process_time() - t0
+    names = [v.name for v in model.states]
+    return {"n_flow": count[0], "cpu_s": cpu, "n_events": sim.n_events,
+            "y": float(sim.x_out[names.index("y")]), "ydot": float(sim.x_out[names.index("ydot")])}
+
+
+def scipy_work(method: str, max_step: float, rel_tol: float, stop: float = STOP):
+    """scipy ``solve_ivp`` (``RK45`` or ``DOP853``) on the same model functions — the flow of the
+    mode, the active guards as terminal events with their directions, the jumps applied in a
+    restart loop — as a user of scipy would integrate the hybrid model: flow evaluations (its
+    ``nfev``), CPU seconds, the located events [(name, t)] and (y, ydot) at ``stop``."""
+    import time
+
+    import numpy as np
+    from scipy.integrate import solve_ivp
+
+    from pogofmu.runtime.models import get
+
+    model = get("PogoStick")
+    p = model.params()
+    u = tuple(float(v.start) for v in model.inputs)
+    x, q = model.initial(p)
+    t, nfev, events = 0.0, 0, []
+    t0 = time.process_time()
+    while t < stop:
+        f = model.bind(q, u, p) if model.bind is not None else (lambda t, x, q=q: model.flow(t, x, q, u, p))
+        active = [ev for ev in model.events if ev.active(q)]
+        funcs = []
+        for ev in active:
+            def g(t, y, ev=ev, q=q):
+                return ev.guard(list(y), q, u, p)
+            g.terminal, g.direction = True, float(ev.direction)
+            funcs.append(g)
+        sol = solve_ivp(lambda t, y: f(t, list(y)), (t, stop), list(x), method=method, rtol=rel_tol, atol=ABS_TOL,
+                        max_step=max_step or np.inf, events=funcs)
+        nfev += sol.nfev
+        if sol.status != 1:
+            x = list(sol.y[:, -1])
+            break
+        k = min((i for i, te in enumerate(sol.t_events) if len(te)), key=lambda i: sol.t_events[i][0])
+        t = float(sol.t_events[k][0])
+        x, q = active[k].jump(list(sol.y_events[k][0]), q, u, p)
+        events.append((active[k].name, t))
+    cpu = time.process_time() - t0
+    names = [v.name for v in model.states]
+    return {"n_flow": int(nfev), "cpu_s": cpu, "events": events, "y": float(x[names.index("y")]),
+            "ydot": float(x[names.index("ydot")])}
+
+
 def work_precision(out: Path, fmu: Path, reference: Optional[Path] = None, workers=None, scheduler=None, progress=True):
+    from pogofmu.closed_form import basic_state
+
     ref = reference_times(reference)
+    y_ref, ydot_ref = (float(v) for v in basic_state(STOP))
     out.mkdir(parents=True, exist_ok=True)
     names, points = make_points([("method", [5, 8]), ("max_step", [0.01, 0.0]), ("rel_tol", TOLERANCES)])
     # the event times do not depend on the communication grid (README "How the solver works"): 0.1 s
@@ -107,10 +204,28 @@ def work_precision(out: Path, fmu: Path, reference: Optional[Path] = None, worke
         errs = event_errors(r["event_t"] or [], r["event_name"] or [], ref) if r["status"] == "ok" else []
         key = {"method": r["method"], "max_step": r["max_step"], "rel_tol": r["rel_tol"]}
         events += [{**key, **e} for e in errs]
+        work = engine_work(r["method"], r["max_step"], r["rel_tol"])
+        if work["n_events"] != r["n_events"]:  # the host-side run must be the FMU's
+            raise SweepError(f"the engine run of {key} found {work['n_events']} events, the FMU {r['n_events']}")
         rows.append({**key, "status": r["status"], "n_events": r["n_events"], "n_reference": len(ref),
                      "max_event_error_s": max((e["error_s"] for e in errs), default=float("nan")),
-                     "wall_s": r["wall_s"], "message": r["message"]})
+                     "wall_s": r["wall_s"], "message": r["message"], "n_flow": work["n_flow"],
+                     "cpu_s": work["cpu_s"], "y_error_m": abs(work["y"] - y_ref),
+                     "ydot_error_m_s": abs(work["ydot"] - ydot_ref)})
     _write_csv(out / "work_precision.csv", rows, list(rows[0]))
+    peer = []
+    for method in ("RK45", "DOP853"):
+        for max_step in (0.01, 0.0):
+            for rel_tol in TOLERANCES:
+                w = scipy_work(method, max_step, rel_tol)
+                errs = event_errors([t for _, t in w["events"]], [n for n, _ in w["events"]], ref)
+                peer.append({"solver": f"scipy {method}", "max_step": max_step, "rel_tol": rel_tol,
+                             "n_events": len(w["events"]), "n_reference": len(ref),
+                             "max_event_error_s": max((e["error_s"] for e in errs), default=float("nan")),
+                             "n_flow": w["n_flow"], "cpu_s": w["cpu_s"], "y_error_m": abs(w["y"] - y_ref),
+                             "ydot_error_m_s": abs(w["ydot"] - ydot_ref)})
+    _write_csv(out / "work_precision_scipy.csv", peer, list(peer[0]))
+    _work_figure(out / "work_precision_work.png", rows, peer, len(ref))
     _write_csv(out / "work_precision_events.csv", events, list(events[0]) if events else ["method"])
     curves = {}
     for r in rows:
@@ -133,6 +248,7 @@ def work_precision(out: Path, fmu: Path, reference: Optional[Path] = None, worke
     ax1.set_ylabel("largest event-time error [s]")
     ax1.set_title("PogoStick.fmu, default drop, 10 s: error against the closed form (Fig. 21)", fontsize=9)
     ax2.axhline(len(ref), color="0.6", lw=0.8)
+    ax2.yaxis.set_major_locator(_integer_ticks())
     ax2.set_ylabel("events located in 10 s")
     ax2.set_xlabel("rel_tol")
     ax2.set_title(f"number of events (closed form: {len(ref)}) (Fig. 22)", fontsize=9)
@@ -142,8 +258,48 @@ def work_precision(out: Path, fmu: Path, reference: Optional[Path] = None, worke
     fig.tight_layout()
     fig.savefig(out / "work_precision.png", dpi=110)
     plt.close(fig)
-    print(f"wrote {out / 'work_precision.csv'}, {out / 'work_precision_events.csv'}, {out / 'work_precision.png'}")
+    print(f"wrote {out / 'work_precision.csv'}, {out / 'work_precision_events.csv'}, {out / 'work_precision.png'}, "
+          f"{out / 'work_precision_scipy.csv'}, {out / 'work_precision_work.png'}")
     return rows
+
+
+def _integer_ticks():
+    from matplotlib.ticker import MaxNLocator
+
+    return MaxNLocator(integer=True)
+
+
+def _work_figure(path: Path, rows, peer, n_reference):
+    """Work-accuracy (Fig. 21's other half): the global error of y at the stop time against flow
+    evaluations and against CPU time, the FMU's engine beside scipy, every run that located every
+    event (one that missed some has followed another trajectory)."""
+    plt = _plt()
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.6), sharey=True)
+    curves = {}
+    for r in rows:
+        label = f"pogofmu method {r['method']}"
+        curves.setdefault((label, r["max_step"]), []).append(r)
+    for r in peer:
+        curves.setdefault((r["solver"], r["max_step"]), []).append(r)
+    for (label, max_step), rs in sorted(curves.items()):
+        full = [r for r in rs if r["n_events"] == n_reference]
+        style = dict(marker="o" if "5" in label or "RK45" in label else "s", ls="-" if max_step else "--", lw=1.0,
+                     ms=4, color=("C0" if "5" in label else "C1") if label.startswith("pogofmu") else
+                     ("C2" if "RK45" in label else "C3"))
+        text = f"{label}, max_step {'0.01 s' if max_step else 'unbounded'}"
+        for ax, key in ((axes[0], "n_flow"), (axes[1], "cpu_s")):
+            ax.loglog([r[key] for r in full], [max(r["y_error_m"], 1e-17) for r in full], label=text, **style)
+    axes[0].set_xlabel("flow evaluations")
+    axes[1].set_xlabel("CPU time [s]")
+    axes[0].set_ylabel("|y(10 s) - y_exact(10 s)| [m]")
+    axes[0].set_title("PogoStick, default drop: global error against work (Fig. 21)", fontsize=9)
+    axes[1].set_title("the same against CPU time (this machine)", fontsize=9)
+    for ax in axes:
+        ax.grid(True, which="both", alpha=0.3)
+    axes[1].legend(fontsize=6.5)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
 
 
 # =============================================================================================
