@@ -218,6 +218,40 @@ class Runner:
         ex = self.md.defaultExperiment  # its step as it is (fmpy alone would coarsen it to <= 1000 points)
         self.default_step = float(ex.stepSize) if ex is not None and ex.stepSize is not None else None
         self.c_loop = None  # known after the first instance: does the binary bring its own loop?
+        self._slaves = threading.local()  # with a C loop: this thread's FMU object, its library kept loaded
+
+    def _instantiate(self, logger):
+        """A fresh FMU instance for one run. With the C loop, the thread's FMU object (its library
+        loaded and its functions bound once) instantiates again: fmpy's ``instantiate_fmu`` binds
+        every function anew each time, which costs more than the run itself."""
+        from fmpy.simulation import instantiate_fmu
+
+        slave = getattr(self._slaves, "fmu", None)
+        if slave is None:
+            fmu = instantiate_fmu(self.unzipdir, self.md, "CoSimulation", False, True, logger)
+            if self._grid_loop(fmu) is not None:
+                self._slaves.fmu = fmu
+            return fmu
+        from ctypes import byref
+
+        from fmpy import calloc, free
+        from fmpy.fmi2 import (fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions,
+                               fmi2CallbackLoggerTYPE)
+        from fmpy.logging import addLoggerProxy
+
+        callbacks = fmi2CallbackFunctions()
+        callbacks.logger = fmi2CallbackLoggerTYPE(logger)
+        callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+        callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+        addLoggerProxy(byref(callbacks))
+        slave.instantiate(visible=False, callbacks=callbacks, loggingOn=True)
+        return slave
+
+    def _free(self, fmu):
+        if getattr(self._slaves, "fmu", None) is fmu:
+            fmu.fmi2FreeInstance(fmu.component)  # the instance only: the library stays for the next run
+        else:
+            fmu.freeInstance()
 
     def _grid_loop(self, fmu):
         """The FMU binary's ``pogofmu_fmi2_run_grid`` (a ctypes function), or None."""
@@ -278,7 +312,6 @@ class Runner:
         import numpy as np
         from fmpy import simulate_fmu
         from fmpy.fmi1 import FMICallException
-        from fmpy.simulation import instantiate_fmu
 
         messages = []  # this run's log (a worker with several threads runs several at once)
 
@@ -296,7 +329,7 @@ class Runner:
         row = {"status": "ok", "message": ""}
         res = None
         t0 = time.perf_counter()
-        fmu = instantiate_fmu(self.unzipdir, self.md, "CoSimulation", False, True, logger)
+        fmu = self._instantiate(logger)
         try:
             loop = self._grid_loop(fmu)
             if loop is not None and (settings.step or self.default_step):
@@ -306,7 +339,7 @@ class Runner:
                 res = simulate_fmu(self.unzipdir, model_description=self.md, fmu_instance=fmu,
                                    start_values=start, stop_time=settings.stop_time,
                                    output_interval=settings.step or self.default_step, output=record, validate=False)
-            fmu.freeInstance()
+            self._free(fmu)
             stop = settings.stop_time if settings.stop_time is not None else float(self.md.defaultExperiment.stopTime)
             if not math.isclose(res["time"][-1], stop, rel_tol=0, abs_tol=1e-9 * max(1.0, abs(stop))):
                 row.update(status="incomplete", message=f"the run stopped at t = {res['time'][-1]!r} s "
@@ -314,7 +347,7 @@ class Runner:
         except FMICallException as exc:
             # fmi2Error leaves the instance usable enough to free; after fmi2Fatal nothing may be called
             if exc.status == 3:
-                fmu.freeInstance()
+                self._free(fmu)
             row.update(status="error" if exc.status == 3 else "fatal", message=_problem(messages, str(exc)))
             res = None
         except Exception as exc:  # noqa: BLE001 (a run never takes the sweep down)
