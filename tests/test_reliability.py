@@ -222,7 +222,11 @@ def _unzipped(tmp_path, name):
     return d
 
 
-@pytest.mark.parametrize("names", [SAME, MIXED, SAME[:2] + MIXED], ids=["same FMU x4", "five FMUs", "seven"])
+NATIVE = [f"native/{n}" for n in MIXED]
+
+
+@pytest.mark.parametrize("names", [SAME, MIXED, SAME[:2] + MIXED, NATIVE + MIXED],
+                         ids=["same FMU x4", "five FMUs", "seven", "native and Python-hosted, ten"])
 def test_first_instantiations_from_pthreads_in_a_c_host_without_python(names, tmp_path):
     """A pthreads C host with an empty environment: the threads call fmi2Instantiate of the same or of
     different FMUs at once (each library used to start the interpreter under its own lock: SIGSEGV,
@@ -236,7 +240,7 @@ def test_first_instantiations_from_pthreads_in_a_c_host_without_python(names, tm
         d = _unzipped(tmp_path, n)
         md = read_model_description(str(d / "modelDescription.xml"))
         vr = next(v.valueReference for v in md.modelVariables if v.name == expected[n][0])
-        args.append(f"{d}:{n}:{md.guid}#{vr}")
+        args.append(f"{d}:{md.coSimulation.modelIdentifier}:{md.guid}#{vr}")
     for _ in range(8):
         proc = subprocess.run([str(host), *args], capture_output=True, text=True, timeout=300,
                               env={"PATH": "/usr/bin:/bin"})
