@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """The project's two commands (and a few more), runnable on a machine with nothing but Python.
 
-    python3 tasks.py run     # build + validate every FMU, simulate default experiments -> results/,
+    python3 tasks.py run     # build + validate every FMU, simulate default experiments -> results/
+                             # (the native FMUs' -> results/native/),
                              # run the SpaceHopper SSP on the Moon
     python3 tasks.py test    # the test suite (what CI runs)
     python3 tasks.py bench   # the benchmarks (benchmarks/)
@@ -61,6 +62,11 @@ def main(argv):
         rc = subprocess.call([sys.executable, "-m", "pogofmu.cli", "run", *rest], cwd=ROOT)
         if rc:
             return rc
+        if (ROOT / "dist" / "native").is_dir():  # the native FMUs (no Python inside): the same experiments
+            rc = subprocess.call([sys.executable, "-m", "pogofmu.cli", "run", "--dist", str(ROOT / "dist" / "native"),
+                                  "--out", str(ROOT / "results" / "native"), *rest], cwd=ROOT)
+            if rc:
+                return rc
         # the system-level example: the SpaceHopper on the Moon, run by the project's SSP master
         for body in ("moon",):
             rc |= subprocess.call([sys.executable, "-m", "pogofmu.cli", "ssp", "run", str(ROOT / "dist" / "SpaceHopper.ssp"),
