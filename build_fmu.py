@@ -134,12 +134,13 @@ def fmi_headers() -> Path:
 
 
 def compile_launcher(fmi_version: int = 2, cache: Path = CACHE):
-    """Compile fmu_src/native/pogofmu_fmi.c for FMI 2 or 3; cached by the hash of source, headers
+    """Compile fmu_src/native/pogofmu_fmi.c (with python/python_embed.c) for FMI 2 or 3; cached by the hash of sources, headers
     and flags.  Returns the library's path, or None (with a warning) without a C compiler."""
     cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc") or shutil.which("clang")
-    source = NATIVE / "pogofmu_fmi.c"
+    sources = [NATIVE / "pogofmu_fmi.c", NATIVE / "python" / "python_embed.c"]  # entry points + bridge; CPython
     flags = ["-std=c11", "-O2", "-fPIC", "-shared", "-fvisibility=hidden", "-Wall", "-Wextra",
-             "-Wno-unused-parameter", f"-DPOGOFMU_FMI={fmi_version}", f"-I{fmi_headers()}"]
+             "-Wno-unused-parameter", f"-DPOGOFMU_FMI={fmi_version}", f"-I{fmi_headers()}",
+             f"-I{NATIVE / 'python'}"]
     libs = ["-ldl", "-lpthread"]
     if cc is None:
         print("WARNING: no C compiler found (set CC): the FMUs get pythonfmu's Linux binary instead of the "
@@ -147,7 +148,7 @@ def compile_launcher(fmi_version: int = 2, cache: Path = CACHE):
               "importer", file=sys.stderr)
         return None
     digest = hashlib.sha256(" ".join(flags + libs).encode())
-    for part in sorted(NATIVE.glob("*.[ch]")):  # the launcher and the headers it includes
+    for part in sorted([*NATIVE.glob("*.[ch]"), *(NATIVE / "python").glob("*.[ch]")]):  # the launcher, its headers
         digest.update(part.name.encode() + b"\0" + part.read_bytes())
     for header in sorted(fmi_headers().glob(f"fmi{fmi_version}*.h")):
         digest.update(header.read_bytes())
@@ -155,7 +156,7 @@ def compile_launcher(fmi_version: int = 2, cache: Path = CACHE):
     out = cache / f"pogofmu_fmi{fmi_version}_{digest.hexdigest()[:16]}.so"
     if not out.exists():
         tmp = out.with_suffix(f".{os.getpid()}.tmp")
-        proc = subprocess.run([cc, *flags, str(source), "-o", str(tmp), *libs], capture_output=True, text=True)
+        proc = subprocess.run([cc, *flags, *map(str, sources), "-o", str(tmp), *libs], capture_output=True, text=True)
         if proc.returncode:
             raise BuildError(f"compiling the native launcher failed ({cc}):\n{proc.stderr}")
         os.replace(tmp, out)
