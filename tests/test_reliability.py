@@ -250,6 +250,37 @@ def test_first_instantiations_from_pthreads_in_a_c_host_without_python(names, tm
             assert status == "ok" and float(y) == expected[n][1], (n, line)
 
 
+FMI3_MIXED = [f"fmi3/{n}" for n in MIXED] + [f"native/fmi3/{n}" for n in MIXED]
+
+
+@pytest.mark.parametrize("names", [["fmi3/PogoStick"] * 4, FMI3_MIXED], ids=["same FMU x4", "ten FMI 3.0 FMUs"])
+def test_fmi3_first_instantiations_from_pthreads_in_a_c_host_without_python(names, tmp_path):
+    """FMI 3.0 co-simulation with event mode and early return, from a pthreads C host with an empty
+    environment: the threads instantiate Python-hosted and native FMUs at once and each run ends
+    with what the same host computes with that FMU alone (time, output, events handled)."""
+    from fmpy import read_model_description
+
+    host = compile_c_host(ROOT / "tests" / "c_host" / "fmi3_threads.c", tmp_path / "fmi3_threads")
+    args = []
+    for n in names:
+        d = _unzipped(tmp_path, n)
+        md = read_model_description(str(d / "modelDescription.xml"))
+        vr = next(v.valueReference for v in md.modelVariables if v.causality == "output" and v.type == "Float64")
+        args.append(f"{d}:{md.coSimulation.modelIdentifier}:{md.guid}#{vr}")
+    env = {"PATH": "/usr/bin:/bin"}
+    alone = {}
+    for a in set(args):
+        proc = subprocess.run([str(host), a], capture_output=True, text=True, timeout=300, env=env)
+        assert proc.returncode == 0, (a, proc.stdout, proc.stderr[-2000:])
+        alone[a] = proc.stdout.split(None, 1)[1].strip()
+    assert any(int(v.split()[-1]) > 0 for v in alone.values())  # events handled in Event Mode
+    for _ in range(5):
+        proc = subprocess.run([str(host), *args], capture_output=True, text=True, timeout=300, env=env)
+        assert proc.returncode == 0, (proc.returncode, proc.stdout, proc.stderr[-2000:])
+        for line, a in zip(proc.stdout.splitlines(), args):
+            assert line.split(None, 1)[1].strip() == alone[a], (a, line)
+
+
 # ---------------------------------------------------------------------------------------------
 # 3. the standard's call sequence: refused with Error naming the function and the state
 # ---------------------------------------------------------------------------------------------
