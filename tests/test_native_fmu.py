@@ -45,16 +45,18 @@ def unzipped(tmp_path_factory):
     return get
 
 
+@pytest.mark.parametrize("folder, platform", [("native", "linux64"), ("native/fmi3", "x86_64-linux")],
+                         ids=["fmi2", "fmi3"])
 @pytest.mark.parametrize("name", FMUS)
-def test_the_binary_needs_only_the_c_library(name, unzipped):
-    lib = unzipped(f"native/{name}") / "binaries" / "linux64" / f"{name}.so"
+def test_the_binary_needs_only_the_c_library(name, folder, platform, unzipped):
+    lib = unzipped(f"{folder}/{name}") / "binaries" / platform / f"{name}.so"
     dynamic = subprocess.run(["readelf", "-d", str(lib)], capture_output=True, text=True, check=True).stdout
     needed = {line.split("[")[1].split("]")[0] for line in dynamic.splitlines() if "(NEEDED)" in line}
     assert needed <= {"libc.so.6", "libm.so.6"}, needed
     undefined = subprocess.run(["nm", "-D", "--undefined-only", str(lib)], capture_output=True, text=True,
                                check=True).stdout.split()
     assert not [s for s in undefined if s.startswith(("Py", "_Py", "dlopen"))], undefined
-    with zipfile.ZipFile(fmu_path(f"native/{name}")) as z:
+    with zipfile.ZipFile(fmu_path(f"{folder}/{name}")) as z:
         assert not [n for n in z.namelist() if n.startswith("resources/") and n.endswith(".py")]
 
 
@@ -212,17 +214,6 @@ def test_every_native_fmu_was_built():
 
 
 # ---- FMI 3.0 (dist/native/fmi3/) --------------------------------------------------------------
-
-@pytest.mark.parametrize("name", FMUS)
-def test_the_fmi3_binary_needs_only_the_c_library(name, unzipped):
-    lib = unzipped(f"native/fmi3/{name}") / "binaries" / "x86_64-linux" / f"{name}.so"
-    dynamic = subprocess.run(["readelf", "-d", str(lib)], capture_output=True, text=True, check=True).stdout
-    needed = {line.split("[")[1].split("]")[0] for line in dynamic.splitlines() if "(NEEDED)" in line}
-    assert needed <= {"libc.so.6", "libm.so.6"}, needed
-    undefined = subprocess.run(["nm", "-D", "--undefined-only", str(lib)], capture_output=True, text=True,
-                               check=True).stdout.split()
-    assert not [s for s in undefined if s.startswith(("Py", "_Py", "dlopen"))], undefined
-
 
 @pytest.mark.parametrize("name", FMUS)
 def test_the_fmi3_model_description_is_the_python_hosted_fmus(name):

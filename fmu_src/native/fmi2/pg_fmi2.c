@@ -11,6 +11,7 @@
 #include "fmi2Functions.h"
 #include "pg_handles.h"
 #include "pg_instance.h"
+#include "pg_logging.h"
 
 #include "call_states.h"
 
@@ -23,9 +24,7 @@ extern const PgFmu PG_FMU;
 typedef struct {
     char *name;
     fmi2CallbackFunctions cb;
-    int logging_on;
-    char **categories; /* enabled categories (NULL: all) */
-    size_t n_categories;
+    PgLogFilter filter; /* fmi2SetDebugLogging */
     unsigned mode;
     PgInstance inst;
 } Inst;
@@ -46,21 +45,10 @@ static void emit(Inst *in, int status, const char *category, const char *message
     free(text);
 }
 
-/* OK messages go out only with logging on and their category enabled; warnings and errors always */
-static int wanted(Inst *in, int status, const char *category)
-{
-    if (status >= ST_WARNING) return 1;
-    if (!in->logging_on) return 0;
-    if (!in->categories) return 1;
-    for (size_t i = 0; i < in->n_categories; ++i)
-        if (strcmp(in->categories[i], category) == 0) return 1;
-    return 0;
-}
-
 static void log_from_adapter(void *env, int status, const char *category, const char *message)
 {
     Inst *in = env;
-    if (wanted(in, status, category)) emit(in, status, category, message);
+    if (pg_log_wanted(&in->filter, status, category)) emit(in, status, category, message);
 }
 
 static int allowed(Inst *in, int rule, const char *function)
@@ -89,13 +77,6 @@ static fmi2Status unsupported(Inst *in, const char *what)
     return fmi2Error;
 }
 
-static void free_categories(Inst *in)
-{
-    for (size_t i = 0; i < in->n_categories; ++i) free(in->categories[i]);
-    free(in->categories);
-    in->categories = NULL;
-    in->n_categories = 0;
-}
 
 #define INST ((Inst *)c)
 #define CHECK(c) do { if (!(c)) return fmi2Error; } while (0)
@@ -120,7 +101,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     }
     strcpy(in->name, name);
     if (functions) in->cb = *functions;
-    in->logging_on = loggingOn;
+    in->filter.on = loggingOn;
     char text[600];
     if (fmuType != fmi2CoSimulation) {
         emit(in, fmi2Error, "logStatusError",
@@ -142,7 +123,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
 void fmi2FreeInstance(fmi2Component c)
 {
     if (!c) return;
-    free_categories(INST);
+    pg_log_free(&INST->filter);
     free(INST->name);
     free(INST);
 }
@@ -151,35 +132,11 @@ fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nC
 {
     CHECK(c);
     REQUIRE(fmi2SetDebugLogging, "fmi2SetDebugLogging");
-    const PgFmu *f = &PG_FMU;
-    for (size_t i = 0; i < nCategories; ++i) {
-        int known = 0;
-        for (int k = 0; k < f->n_log_categories && !known; ++k)
-            known = categories[i] && strcmp(categories[i], f->log_categories[k]) == 0;
-        if (!known) {
-            char text[1200];
-            size_t used = (size_t)snprintf(text, sizeof text, "fmi2SetDebugLogging refused: %s%s%s is not a log category "
-                                           "of this FMU (the categories are", categories[i] ? "'" : "",
-                                           categories[i] ? categories[i] : "NULL", categories[i] ? "'" : "");
-            for (int k = 0; k < f->n_log_categories && used < sizeof text; ++k)
-                used += (size_t)snprintf(text + used, sizeof text - used, "%s%s", k ? ", " : " ", f->log_categories[k]);
-            if (used < sizeof text) snprintf(text + used, sizeof text - used, ")");
-            emit(INST, ST_ERROR, "logStatusError", text);
-            return fmi2Error;
-        }
-    }
-    free_categories(INST);
-    INST->logging_on = loggingOn;
-    if (nCategories > 0) {
-        INST->categories = calloc(nCategories, sizeof(char *));
-        if (!INST->categories) return fmi2Error;
-        for (size_t i = 0; i < nCategories; ++i) {
-            INST->categories[i] = malloc(strlen(categories[i]) + 1);
-            if (INST->categories[i]) strcpy(INST->categories[i], categories[i]);
-            INST->n_categories = i + 1;
-        }
-    }
-    return fmi2OK;
+    char text[1200];
+    int rc = pg_log_set(&INST->filter, &PG_FMU, loggingOn, nCategories, categories, "fmi2SetDebugLogging", text,
+                        sizeof text);
+    if (rc > 0) emit(INST, ST_ERROR, "logStatusError", text);
+    return rc ? fmi2Error : fmi2OK;
 }
 
 fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fmi2Real tolerance,

@@ -11,6 +11,7 @@
 #include "fmi3Functions.h"
 #include "pg_handles.h"
 #include "pg_instance.h"
+#include "pg_logging.h"
 
 #include "call_states.h"
 
@@ -24,9 +25,7 @@ typedef struct {
     char *name;
     fmi3InstanceEnvironment env;
     fmi3LogMessageCallback log;
-    int logging_on;
-    char **categories; /* enabled categories (NULL: all) */
-    size_t n_categories;
+    PgLogFilter filter; /* fmi3SetDebugLogging */
     unsigned mode;
     int me; /* a model-exchange instance */
     PgInstance inst;
@@ -37,21 +36,10 @@ static void emit(Inst *in, int status, const char *category, const char *message
     if (in->log) in->log(in->env, (fmi3Status)status, category, message);
 }
 
-/* OK messages go out only with logging on and their category enabled; warnings and errors always */
-static int wanted(Inst *in, int status, const char *category)
-{
-    if (status >= ST_WARNING) return 1;
-    if (!in->logging_on) return 0;
-    if (!in->categories) return 1;
-    for (size_t i = 0; i < in->n_categories; ++i)
-        if (strcmp(in->categories[i], category) == 0) return 1;
-    return 0;
-}
-
 static void log_from_adapter(void *env, int status, const char *category, const char *message)
 {
     Inst *in = env;
-    if (wanted(in, status, category)) emit(in, status, category, message);
+    if (pg_log_wanted(&in->filter, status, category)) emit(in, status, category, message);
 }
 
 static int allowed(Inst *in, int rule, const char *function)
@@ -81,13 +69,6 @@ static fmi3Status unsupported(Inst *in, const char *what)
     return fmi3Error;
 }
 
-static void free_categories(Inst *in)
-{
-    for (size_t i = 0; i < in->n_categories; ++i) free(in->categories[i]);
-    free(in->categories);
-    in->categories = NULL;
-    in->n_categories = 0;
-}
 
 static char *copy_text(const char *text)
 {
@@ -108,34 +89,11 @@ fmi3Status fmi3SetDebugLogging(fmi3Instance c, fmi3Boolean loggingOn, size_t nCa
 {
     CHECK(c);
     REQUIRE(fmi3SetDebugLogging, "fmi3SetDebugLogging");
-    const PgFmu *f = &PG_FMU;
-    for (size_t i = 0; i < nCategories; ++i) {
-        int known = 0;
-        for (int k = 0; k < f->n_log_categories && !known; ++k)
-            known = categories[i] && strcmp(categories[i], f->log_categories[k]) == 0;
-        if (!known) {
-            char text[1200];
-            size_t used = (size_t)snprintf(text, sizeof text, "fmi3SetDebugLogging refused: %s%s%s is not a log category "
-                                           "of this FMU (the categories are", categories[i] ? "'" : "",
-                                           categories[i] ? categories[i] : "NULL", categories[i] ? "'" : "");
-            for (int k = 0; k < f->n_log_categories && used < sizeof text; ++k)
-                used += (size_t)snprintf(text + used, sizeof text - used, "%s%s", k ? ", " : " ", f->log_categories[k]);
-            if (used < sizeof text) snprintf(text + used, sizeof text - used, ")");
-            emit(INST, ST_ERROR, "logStatusError", text);
-            return fmi3Error;
-        }
-    }
-    free_categories(INST);
-    INST->logging_on = loggingOn;
-    if (nCategories > 0) {
-        INST->categories = calloc(nCategories, sizeof(char *));
-        if (!INST->categories) return fmi3Error;
-        for (size_t i = 0; i < nCategories; ++i) {
-            INST->categories[i] = copy_text(categories[i]);
-            INST->n_categories = i + 1;
-        }
-    }
-    return fmi3OK;
+    char text[1200];
+    int rc = pg_log_set(&INST->filter, &PG_FMU, loggingOn, nCategories, categories, "fmi3SetDebugLogging", text,
+                        sizeof text);
+    if (rc > 0) emit(INST, ST_ERROR, "logStatusError", text);
+    return rc ? fmi3Error : fmi3OK;
 }
 
 static Inst *instantiate(fmi3String instanceName, fmi3String token, fmi3Boolean loggingOn,
@@ -149,7 +107,7 @@ static Inst *instantiate(fmi3String instanceName, fmi3String token, fmi3Boolean 
         free(in);
         return NULL;
     }
-    in->env = env, in->log = log, in->logging_on = loggingOn, in->me = me;
+    in->env = env, in->log = log, in->filter.on = loggingOn, in->me = me;
     char text[600];
     if (n_required > 0) {
         emit(in, fmi3Error, "logStatusError", "fmi3InstantiateCoSimulation: intermediate variable access is not "
@@ -211,7 +169,7 @@ fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3Stri
 void fmi3FreeInstance(fmi3Instance c)
 {
     if (!c) return;
-    free_categories(INST);
+    pg_log_free(&INST->filter);
     free(INST->name);
     free(INST);
 }

@@ -90,7 +90,8 @@ def engine_library(model_name: str, folder: Path, cc: Optional[str] = None) -> P
 
 
 ADAPTER = NATIVE / "adapter"
-ADAPTER_SOURCES = ("pg_instance.c", "pg_instance3.c", "pg_derivatives.c", "pg_handles.c", "pg_sha256.c")
+ADAPTER_SOURCES = ("pg_instance.c", "pg_instance3.c", "pg_derivatives.c", "pg_handles.c", "pg_logging.c",
+                   "pg_sha256.c")
 FMI_ENTRY = {2: NATIVE / "fmi2" / "pg_fmi2.c", 3: NATIVE / "fmi3" / "pg_fmi3.c"}
 FMI_HEADERS = {2: ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"),
                3: ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")}
