@@ -44,11 +44,11 @@ def _stage_names(count):
     return [f"    double *k{j} = K + {j} * PG_MAX_X;" for j in range(count)]
 
 
-def dopri5() -> str:
-    A, B, C, E, P = tab.DOPRI5_A, tab.DOPRI5_B, tab.DOPRI5_C, tab.DOPRI5_E, tab.DOPRI5_P
-    ns = len(B)
-    lines = ["/* DOPRI5: Dormand-Prince 5(4) with Shampine's dense output */",
-             "int pg_dopri5_step(PgFun fun, void *ctx, double t, const double *y, const double *f, double h, int n,",
+def _step_function(title, name, A, B, C, ns):
+    """``pg_<name>_step``: the stages of the tableau (A, C), the solution with the weights B, and
+    the last stage (FSAL) at the step's end."""
+    lines = [f"/* {title} */",
+             f"int pg_{name}_step(PgFun fun, void *ctx, double t, const double *y, const double *f, double h, int n,",
              "                   double *y_new, double *f_new, double *K, PgMsg *m)", "{",
              "    double tmp[PG_MAX_X] = {0};", *_stage_names(ns + 1),
              "    for (int i = 0; i < n; ++i) k0[i] = f[i];"]
@@ -56,6 +56,13 @@ def dopri5() -> str:
     lines += [f"    for (int i = 0; i < n; ++i) y_new[i] = y[i] + h*({_sum(B, lambda j: f'k{j}')});",
               "    if (fun(ctx, t + h, y_new, f_new, m)) return PG_ARITH;",
               f"    for (int i = 0; i < n; ++i) k{ns}[i] = f_new[i];", "    return PG_OK;", "}", ""]
+    return lines
+
+
+def dopri5() -> str:
+    A, B, C, E, P = tab.DOPRI5_A, tab.DOPRI5_B, tab.DOPRI5_C, tab.DOPRI5_E, tab.DOPRI5_P
+    ns = len(B)
+    lines = _step_function("DOPRI5: Dormand-Prince 5(4) with Shampine's dense output", "dopri5", A, B, C, ns)
     lines += ["double pg_dopri5_error_norm(const double *K, double h, const double *y, const double *y_new, double atol,",
               "                            double rtol, int n)", "{",
               *_const_stages(ns + 1, E),
@@ -83,15 +90,8 @@ def dopri5() -> str:
 def dop853() -> str:
     A, B, C = tab.DOP853_A, tab.DOP853_B, tab.DOP853_C
     ns, nx = tab.DOP853_N_STAGES, tab.DOP853_N_STAGES_EXTENDED
-    lines = ["/* DOP853: Prince-Dormand 8(5,3) with the 7th-order dense output of Hairer, Norsett & Wanner */",
-             "int pg_dop853_step(PgFun fun, void *ctx, double t, const double *y, const double *f, double h, int n,",
-             "                   double *y_new, double *f_new, double *K, PgMsg *m)", "{",
-             "    double tmp[PG_MAX_X] = {0};", *_stage_names(ns + 1),
-             "    for (int i = 0; i < n; ++i) k0[i] = f[i];"]
-    lines += _stage_lines(A, C, 1, ns, "y", "t", "return PG_ARITH;")
-    lines += [f"    for (int i = 0; i < n; ++i) y_new[i] = y[i] + h*({_sum(B, lambda j: f'k{j}')});",
-              "    if (fun(ctx, t + h, y_new, f_new, m)) return PG_ARITH;",
-              f"    for (int i = 0; i < n; ++i) k{ns}[i] = f_new[i];", "    return PG_OK;", "}", ""]
+    lines = _step_function("DOP853: Prince-Dormand 8(5,3) with the 7th-order dense output of Hairer, Norsett & Wanner",
+                           "dop853", A, B, C, ns)
     lines += ["double pg_dop853_error_norm(const double *K, double h, const double *y, const double *y_new, double atol,",
               "                            double rtol, int n)", "{",
               *_const_stages(ns + 1, tab.DOP853_E5, tab.DOP853_E3),
