@@ -21,8 +21,8 @@ For each model of the registry (``pogofmu.runtime.models``: every module there w
 
 Each model gives two FMUs: FMI 2.0 co-simulation in ``dist/<Model>.fmu`` and FMI 3.0 (model
 exchange and co-simulation with event mode, ``pogofmu.runtime.fmi3``) in ``dist/fmi3/<Model>.fmu``, whose
-only binary is the launcher built with ``-DPOGOFMU_FMI=3`` (no FMI 3.0 Windows binary: pythonfmu's
-speak FMI 2.0).
+only binary is the launcher for FMI 3.0 (``native/fmi3/pg_fmi3.c`` with the bridge to Python; no
+FMI 3.0 Windows binary: pythonfmu's speak FMI 2.0).
 
 The zip is deterministic: with SOURCE_DATE_EPOCH set, the same sources give the same FMU bytes.
 
@@ -133,14 +133,22 @@ def fmi_headers() -> Path:
     return Path(fmpy.__file__).parent / "c-code"
 
 
+def launcher_sources(fmi_version: int):
+    """The C files of the Python-hosted FMUs' binary: the entry file of that FMI version (the one the
+    native FMUs are built from, ``fmu_src/native/fmi2/pg_fmi2.c`` or ``fmi3/pg_fmi3.c``), the log
+    filter, and the Python backend (``native/python/``: the bridge, the embedding of CPython)."""
+    return [NATIVE / f"fmi{fmi_version}" / f"pg_fmi{fmi_version}.c", NATIVE / "pg_logging.c",
+            NATIVE / "python" / "pg_bridge.c", NATIVE / "python" / "python_embed.c"]
+
+
 def compile_launcher(fmi_version: int = 2, cache: Path = CACHE):
-    """Compile fmu_src/native/pogofmu_fmi.c (with python/python_embed.c) for FMI 2 or 3; cached by the hash of sources, headers
-    and flags.  Returns the library's path, or None (with a warning) without a C compiler."""
+    """Compile the Python-hosted FMUs' binary for FMI 2 or 3 (:func:`launcher_sources`); cached by
+    the hash of sources, headers and flags.  Returns the library's path, or None (with a warning)
+    without a C compiler."""
     cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc") or shutil.which("clang")
-    sources = [NATIVE / "pogofmu_fmi.c", NATIVE / "python" / "python_embed.c"]  # entry points + bridge; CPython
+    sources = launcher_sources(fmi_version)
     flags = ["-std=c11", "-O2", "-fPIC", "-shared", "-fvisibility=hidden", "-Wall", "-Wextra",
-             "-Wno-unused-parameter", f"-DPOGOFMU_FMI={fmi_version}", f"-I{fmi_headers()}",
-             f"-I{NATIVE / 'python'}"]
+             "-Wno-unused-parameter", f"-I{fmi_headers()}", f"-I{NATIVE}", f"-I{NATIVE / 'python'}"]
     libs = ["-ldl", "-lpthread"]
     if cc is None:
         print("WARNING: no C compiler found (set CC): the FMUs get pythonfmu's Linux binary instead of the "
@@ -148,7 +156,7 @@ def compile_launcher(fmi_version: int = 2, cache: Path = CACHE):
               "importer", file=sys.stderr)
         return None
     digest = hashlib.sha256(" ".join(flags + libs).encode())
-    for part in sorted([*NATIVE.glob("*.[ch]"), *(NATIVE / "python").glob("*.[ch]")]):  # the launcher, its headers
+    for part in sorted({*sources, *NATIVE.glob("*.[ch]"), *(NATIVE / "python").glob("*.[ch]")}):  # sources, headers
         digest.update(part.name.encode() + b"\0" + part.read_bytes())
     for header in sorted(fmi_headers().glob(f"fmi{fmi_version}*.h")):
         digest.update(header.read_bytes())
@@ -208,7 +216,7 @@ def stage(module_name: str, cls, stage_dir: Path, fmi_version: int, token_seed: 
         target.parent.mkdir(parents=True, exist_ok=True)
         target.write_bytes(data)
     (res / f"{module}.py").write_text(slave_source(package, module_name, cls.__name__))
-    shutil.copy2(NATIVE / "pogofmu_boot.py", res / "pogofmu_boot.py")
+    shutil.copy2(NATIVE / "python" / "pogofmu_boot.py", res / "pogofmu_boot.py")
     (res / "slavemodule.txt").write_text(module)  # pythonfmu's binaries read it
     lines = ["# read by the native launcher and resources/pogofmu_boot.py (written by build_fmu.py)",
              f"package={package}", f"module={module}", f"class={cls.__name__}", f"token={token}",

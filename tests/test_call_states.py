@@ -324,3 +324,39 @@ def test_random_call_sequences_follow_the_standard(machine):
     from hypothesis.stateful import run_state_machine_as_test
 
     run_state_machine_as_test(machine, settings=SETTINGS)
+
+
+def test_every_fmi_function_is_defined_once_for_both_backends():
+    """The call-state machines above hold for both kinds of FMU because there is one entry file per
+    FMI version: every fmi2*/fmi3* function is defined in exactly one C file of fmu_src/native —
+    fmi2/pg_fmi2.c or fmi3/pg_fmi3.c, where each checks the call state from call_states.h — and
+    that file is compiled into the Python-hosted FMUs' binary (with the bridge to Python) and into
+    the native FMUs' (with the native backend) alike."""
+    import re
+
+    import build_fmu
+    from pogofmu.codegen.build import FMI_ENTRY
+    from support import ROOT
+
+    native = ROOT / "fmu_src" / "native"
+    definition = re.compile(r"^[A-Za-z_][\w \*]*?\b(fmi[23][A-Z]\w*)\s*\([^;]*?\)\s*\{", re.M | re.S)
+    macro = re.compile(r"^NO_TYPE\((\w+),", re.M)  # fmi3Get<T> and fmi3Set<T> from one macro
+    where = {}
+    for path in sorted(native.rglob("*.c")):
+        text = path.read_text()
+        names = [m.group(1) for m in definition.finditer(text)]
+        names += [f"fmi3{kind}{t}" for t in macro.findall(text) for kind in ("Get", "Set")]
+        for name in names:
+            where.setdefault(name, []).append(path.relative_to(native).as_posix())
+    twice = {name: files for name, files in where.items() if len(files) > 1}
+    assert not twice, f"FMI functions defined more than once: {twice}"
+    files = {f for fs in where.values() for f in fs}
+    assert files == {"fmi2/pg_fmi2.c", "fmi3/pg_fmi3.c"}, files
+    for fmi in (2, 3):
+        n = sum(1 for fs in where.values() if fs == [f"fmi{fmi}/pg_fmi{fmi}.c"])
+        assert n >= (33 if fmi == 2 else 75), (fmi, n)  # the standard's (FMI 2.0 CS: 33; FMI 3.0: 75)
+        entry = native / f"fmi{fmi}" / f"pg_fmi{fmi}.c"
+        assert entry in build_fmu.launcher_sources(fmi) and entry == FMI_ENTRY[fmi][0]
+        body = entry.read_text()
+        assert '#include "call_states.h"' in body and "pg_backend.h" in body and "Py" not in re.sub(
+            r"/\*.*?\*/", "", body, flags=re.S)

@@ -461,7 +461,8 @@ def test_the_coupling_study_writes_the_table_the_figure_and_the_slopes(tmp_path,
 
     out = tmp_path / "coupling"
     assert cli.main(["study", "coupling", "--out", str(out), "--steps", "1e-2,1e-3", "--bodies", "moon",
-                     "--algorithms", "gauss-seidel,fmi3-early-return,model-exchange", "--quiet"]) == 0
+                     "--algorithms", "gauss-seidel,fmi3-early-return,model-exchange", "--quiet",
+                     "--ssp", str(SSP1), "--ssp-fmi3", str(SSP2)]) == 0
     printed = capsys.readouterr().out
     with (out / "coupling.csv").open() as f:
         rows = list(csv.DictReader(f))

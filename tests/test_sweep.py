@@ -290,7 +290,8 @@ def _csv(path):
 
 def test_work_precision_study_reproduces_figs_21_22(tmp_path, scheduler):
     out = tmp_path / "wp"
-    assert cli.main(["study", "work-precision", "--out", str(out), "--scheduler", scheduler, "--no-progress"]) == 0
+    assert cli.main(["study", "work-precision", "--out", str(out), "--scheduler", scheduler, "--no-progress",
+                     "--fmu", str(DIST / "PogoStick.fmu")]) == 0
     ref = [e["time"] for e in reference_events()]
     summary = _csv(out / "work_precision.csv")
     events = _csv(out / "work_precision_events.csv")
@@ -338,7 +339,7 @@ def test_work_precision_study_reproduces_figs_21_22(tmp_path, scheduler):
 def test_soil_study_against_direct_runs(tmp_path, scheduler):
     out = tmp_path / "soil"
     assert cli.main(["study", "soil", "--out", str(out), "--samples", "4", "--seed", "3", "--stop-time", "3",
-                     "--scheduler", scheduler, "--no-progress"]) == 0
+                     "--scheduler", scheduler, "--no-progress", "--fmu", str(DIST / "Penetrator.fmu")]) == 0
     rows = _csv(out / "soil.csv")
     assert len(rows) == 4 and (out / "soil.png").stat().st_size > 10_000
     assert len({r["K"] for r in rows}) == 4

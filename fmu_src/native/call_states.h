@@ -8,7 +8,8 @@
  * A call in another state is refused with Error and a message naming the function, the state and
  * where the standard allows it; nothing else happens, so the instance stays usable.
  *
- * Included by the launcher's entry points (one table for every backend of the FMUs). */
+ * Included by the FMI entry files fmi2/pg_fmi2.c and fmi3/pg_fmi3.c (one table for both backends
+ * of the FMUs: the native engine and the bridge to Python). */
 #ifndef POGOFMU_CALL_STATES_H
 #define POGOFMU_CALL_STATES_H
 

@@ -11,9 +11,8 @@
 
 #include <stddef.h>
 
+#include "pg_backend.h" /* the statuses PG_ST_*, PgLogFn */
 #include "pg_engine.h"
-
-enum { PG_ST_OK = 0, PG_ST_WARNING = 1, PG_ST_DISCARD = 2, PG_ST_ERROR = 3, PG_ST_FATAL = 4 };
 
 /* one FMU variable: what build_fmu.py writes into the modelDescription (same value reference) */
 typedef struct PgVar {
@@ -42,8 +41,6 @@ typedef struct PgFmu {
 /* the served outputs: the model's, the engine's (n_events, t_last_event, last_event), then for
  * FMI 3.0 the states and the time */
 #define PG_MAX_OUT (64 + 3 + PG_MAX_X + 1)
-
-typedef void (*PgLogFn)(void *env, int status, const char *category, const char *message);
 
 /* what an FMU state holds (copied as a whole by fmi2GetFMUstate) */
 typedef struct PgState {

@@ -1,21 +1,18 @@
-/* FMI 2.0 co-simulation entry points of the native FMUs: every function of the standard exists
- * once here, checks the instance's call state against the one table of call_states.h, and hands
- * the work to the adapter (fmu_src/native/adapter/pg_instance.c). No Python: the FMU needs only
- * the C library and libm. Built with the generated files of one model (its PgFmu `PG_FMU`). */
+/* The FMI 2.0 co-simulation entry points of every pogofmu FMU, of both backends: every function of
+ * the standard exists once here, checks the instance's call state against the one table of
+ * call_states.h and its arguments, filters the log (pg_logging.h), and hands the work to the
+ * backend the binary is linked with (pg_backend.h): the native engine (adapter/pg_backend.c, no
+ * Python) or the bridge to the FMU's Python code (python/pg_bridge.c). */
 #include <math.h>
-#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "fmi2Functions.h"
-#include "pg_handles.h"
-#include "pg_instance.h"
+#include "pg_backend.h"
 #include "pg_logging.h"
 
 #include "call_states.h"
-
-extern const PgFmu PG_FMU;
 
 #define ST_OK fmi2OK
 #define ST_WARNING fmi2Warning
@@ -26,7 +23,7 @@ typedef struct {
     fmi2CallbackFunctions cb;
     PgLogFilter filter; /* fmi2SetDebugLogging */
     unsigned mode;
-    PgInstance inst;
+    PgBackend *b;
 } Inst;
 
 static void emit(Inst *in, int status, const char *category, const char *message)
@@ -45,7 +42,7 @@ static void emit(Inst *in, int status, const char *category, const char *message
     free(text);
 }
 
-static void log_from_adapter(void *env, int status, const char *category, const char *message)
+static void log_from_backend(void *env, int status, const char *category, const char *message)
 {
     Inst *in = env;
     if (pg_log_wanted(&in->filter, status, category)) emit(in, status, category, message);
@@ -90,7 +87,6 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
                               fmi2String fmuResourceLocation, const fmi2CallbackFunctions *functions,
                               fmi2Boolean visible, fmi2Boolean loggingOn)
 {
-    (void)fmuResourceLocation, (void)visible; /* a native FMU needs no resources */
     Inst *in = calloc(1, sizeof *in);
     if (!in) return NULL;
     const char *name = instanceName ? instanceName : "";
@@ -102,18 +98,16 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     strcpy(in->name, name);
     if (functions) in->cb = *functions;
     in->filter.on = loggingOn;
-    char text[600];
     if (fmuType != fmi2CoSimulation) {
         emit(in, fmi2Error, "logStatusError",
              "this FMU implements FMI 2.0 co-simulation only (fmuType must be fmi2CoSimulation)");
-    } else if (!fmuGUID || strcmp(fmuGUID, PG_FMU.token) != 0) {
-        snprintf(text, sizeof text, "instantiation token %s does not match this FMU's (%s): the model description "
-                 "read by the importer belongs to another FMU or build", fmuGUID ? fmuGUID : "(null)", PG_FMU.token);
-        emit(in, fmi2Error, "logStatusError", text);
     } else {
-        pg_inst_init(&in->inst, &PG_FMU, log_from_adapter, in);
-        in->mode = MODE_INSTANTIATED;
-        return in;
+        PgSetup setup = {in->name, fmuGUID, fmuResourceLocation, visible, 2, 'c', 0, 0, log_from_backend, in};
+        in->b = pgb_new(&setup);
+        if (in->b) {
+            in->mode = MODE_INSTANTIATED;
+            return in;
+        }
     }
     free(in->name);
     free(in);
@@ -123,6 +117,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
 void fmi2FreeInstance(fmi2Component c)
 {
     if (!c) return;
+    pgb_free(INST->b);
     pg_log_free(&INST->filter);
     free(INST->name);
     free(INST);
@@ -132,9 +127,12 @@ fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nC
 {
     CHECK(c);
     REQUIRE(fmi2SetDebugLogging, "fmi2SetDebugLogging");
+    if (nCategories && !categories) return fmi2Error;
     char text[1200];
-    int rc = pg_log_set(&INST->filter, &PG_FMU, loggingOn, nCategories, categories, "fmi2SetDebugLogging", text,
-                        sizeof text);
+    size_t n_known = 0;
+    const char *const *known = pgb_log_categories(INST->b, &n_known);
+    int rc = pg_log_set(&INST->filter, known, n_known, loggingOn, nCategories, categories, "fmi2SetDebugLogging",
+                        text, sizeof text);
     if (rc > 0) emit(INST, ST_ERROR, "logStatusError", text);
     return rc ? fmi2Error : fmi2OK;
 }
@@ -151,22 +149,23 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fm
         emit(INST, ST_ERROR, "logStatusError", text);
         return fmi2Error;
     }
-    return (fmi2Status)pg_inst_setup_experiment(&INST->inst, startTime, stopTimeDefined, stopTime);
+    return (fmi2Status)pgb_setup_experiment(INST->b, toleranceDefined, tolerance, startTime, stopTimeDefined, stopTime);
 }
 
 fmi2Status fmi2EnterInitializationMode(fmi2Component c)
 {
     CHECK(c);
     REQUIRE(fmi2EnterInitializationMode, "fmi2EnterInitializationMode");
-    LEADS_TO(fmi2OK, MODE_INITIALIZATION);
-    return fmi2OK;
+    fmi2Status st = (fmi2Status)pgb_enter_initialization(INST->b);
+    LEADS_TO(st, MODE_INITIALIZATION);
+    return st;
 }
 
 fmi2Status fmi2ExitInitializationMode(fmi2Component c)
 {
     CHECK(c);
     REQUIRE(fmi2ExitInitializationMode, "fmi2ExitInitializationMode");
-    fmi2Status st = (fmi2Status)pg_inst_exit_initialization(&INST->inst);
+    fmi2Status st = (fmi2Status)pgb_exit_initialization(INST->b);
     LEADS_TO(st, MODE_STEP);
     return st;
 }
@@ -175,17 +174,18 @@ fmi2Status fmi2Terminate(fmi2Component c)
 {
     CHECK(c);
     REQUIRE(fmi2Terminate, "fmi2Terminate");
-    LEADS_TO(fmi2OK, MODE_TERMINATED);
-    return fmi2OK;
+    fmi2Status st = (fmi2Status)pgb_terminate(INST->b);
+    LEADS_TO(st, MODE_TERMINATED);
+    return st;
 }
 
 fmi2Status fmi2Reset(fmi2Component c)
 {
     CHECK(c);
     REQUIRE(fmi2Reset, "fmi2Reset");
-    pg_inst_reset(&INST->inst);
-    LEADS_TO(fmi2OK, MODE_INSTANTIATED);
-    return fmi2OK;
+    fmi2Status st = (fmi2Status)pgb_reset(INST->b);
+    LEADS_TO(st, MODE_INSTANTIATED);
+    return st;
 }
 
 /* ---- variables ------------------------------------------------------------------------------ */
@@ -194,7 +194,7 @@ fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
     CHECK(c);
     REQUIRE(fmi2GetValues, "fmi2GetReal");
     if (nvr && (!vr || !value)) return fmi2Error;
-    return (fmi2Status)pg_inst_get_real(&INST->inst, vr, nvr, value);
+    return (fmi2Status)pgb_get_real(INST->b, vr, nvr, value);
 }
 
 fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Integer value[])
@@ -202,7 +202,7 @@ fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
     CHECK(c);
     REQUIRE(fmi2GetValues, "fmi2GetInteger");
     if (nvr && (!vr || !value)) return fmi2Error;
-    return (fmi2Status)pg_inst_get_integer(&INST->inst, vr, nvr, value);
+    return (fmi2Status)pgb_get_integer(INST->b, vr, nvr, value);
 }
 
 fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Boolean value[])
@@ -211,7 +211,7 @@ fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
     REQUIRE(fmi2GetValues, "fmi2GetBoolean");
     (void)value;
     if (nvr && !vr) return fmi2Error;
-    return (fmi2Status)pg_inst_no_such_type(&INST->inst, vr, nvr, "Boolean");
+    return (fmi2Status)pgb_no_such_type(INST->b, vr, nvr, "Boolean");
 }
 
 fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2String value[])
@@ -220,7 +220,7 @@ fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
     REQUIRE(fmi2GetValues, "fmi2GetString");
     (void)value;
     if (nvr && !vr) return fmi2Error;
-    return (fmi2Status)pg_inst_no_such_type(&INST->inst, vr, nvr, "String");
+    return (fmi2Status)pgb_no_such_type(INST->b, vr, nvr, "String");
 }
 
 fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[])
@@ -228,7 +228,7 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
     CHECK(c);
     REQUIRE(fmi2SetValues, "fmi2SetReal");
     if (nvr && (!vr || !value)) return fmi2Error;
-    return (fmi2Status)pg_inst_set_real(&INST->inst, vr, nvr, value);
+    return (fmi2Status)pgb_set_real(INST->b, vr, nvr, value);
 }
 
 fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Integer value[])
@@ -236,7 +236,7 @@ fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
     CHECK(c);
     REQUIRE(fmi2SetValues, "fmi2SetInteger");
     if (nvr && (!vr || !value)) return fmi2Error;
-    return (fmi2Status)pg_inst_set_integer(&INST->inst, vr, nvr, value);
+    return (fmi2Status)pgb_set_integer(INST->b, vr, nvr, value);
 }
 
 fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Boolean value[])
@@ -245,7 +245,7 @@ fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
     REQUIRE(fmi2SetValues, "fmi2SetBoolean");
     (void)value;
     if (nvr && !vr) return fmi2Error;
-    return (fmi2Status)pg_inst_no_such_type(&INST->inst, vr, nvr, "Boolean");
+    return (fmi2Status)pgb_no_such_type(INST->b, vr, nvr, "Boolean");
 }
 
 fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2String value[])
@@ -254,15 +254,15 @@ fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
     REQUIRE(fmi2SetValues, "fmi2SetString");
     (void)value;
     if (nvr && !vr) return fmi2Error;
-    return (fmi2Status)pg_inst_no_such_type(&INST->inst, vr, nvr, "String");
+    return (fmi2Status)pgb_no_such_type(INST->b, vr, nvr, "String");
 }
 
-/* ---- FMU states (adapter/pg_handles.c) ------------------------------------------------------ */
+/* ---- FMU states (the backend's handles) ------------------------------------------------------ */
 fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
 {
     CHECK(c && FMUstate);
     REQUIRE(fmi2FMUstate, "fmi2GetFMUstate");
-    return (fmi2Status)pg_handle_get(&INST->inst, INST->mode, FMUstate);
+    return (fmi2Status)pgb_state_get(INST->b, INST->mode, FMUstate);
 }
 
 fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate)
@@ -270,8 +270,8 @@ fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate)
     CHECK(c);
     REQUIRE(fmi2FMUstate, "fmi2SetFMUstate");
     unsigned mode = 0;
-    int st = pg_handle_set(&INST->inst, FMUstate, &mode);
-    if (!st && mode) INST->mode = mode;
+    int st = pgb_state_set(INST->b, FMUstate, &mode);
+    if (st <= fmi2Warning && mode) INST->mode = mode; /* back in the call state it was taken in */
     return (fmi2Status)st;
 }
 
@@ -279,28 +279,28 @@ fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
 {
     CHECK(c);
     REQUIRE(fmi2FMUstate, "fmi2FreeFMUstate");
-    return (fmi2Status)pg_handle_free(&INST->inst, FMUstate);
+    return (fmi2Status)pgb_state_free(INST->b, FMUstate);
 }
 
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate, size_t *size)
 {
     CHECK(c && size);
     REQUIRE(fmi2FMUstate, "fmi2SerializedFMUstateSize");
-    return (fmi2Status)pg_handle_size(&INST->inst, FMUstate, size);
+    return (fmi2Status)pgb_state_size(INST->b, FMUstate, size);
 }
 
 fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate, fmi2Byte serializedState[], size_t size)
 {
     CHECK(c && serializedState);
     REQUIRE(fmi2FMUstate, "fmi2SerializeFMUstate");
-    return (fmi2Status)pg_handle_serialize(&INST->inst, FMUstate, (unsigned char *)serializedState, size);
+    return (fmi2Status)pgb_state_serialize(INST->b, FMUstate, (unsigned char *)serializedState, size);
 }
 
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedState[], size_t size, fmi2FMUstate *FMUstate)
 {
     CHECK(c && serializedState && FMUstate);
     REQUIRE(fmi2FMUstate, "fmi2DeSerializeFMUstate");
-    return (fmi2Status)pg_handle_deserialize(&INST->inst, (const unsigned char *)serializedState, size, FMUstate,
+    return (fmi2Status)pgb_state_deserialize(INST->b, (const unsigned char *)serializedState, size, FMUstate,
                                              MODE_STEP, MODE_INSTANTIATED);
 }
 
@@ -312,7 +312,7 @@ fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReferenc
     CHECK(c);
     REQUIRE(fmi2GetDirectionalDerivative, "fmi2GetDirectionalDerivative");
     if ((nUnknown && (!vUnknown_ref || !dvUnknown)) || (nKnown && (!vKnown_ref || !dvKnown))) return fmi2Error;
-    return (fmi2Status)pg_inst_directional(&INST->inst, vUnknown_ref, nUnknown, vKnown_ref, nKnown, dvKnown, dvUnknown,
+    return (fmi2Status)pgb_directional(INST->b, vUnknown_ref, nUnknown, vKnown_ref, nKnown, dvKnown, dvUnknown,
                                            "fmi2GetDirectionalDerivative");
 }
 
@@ -340,7 +340,9 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
     (void)noSetFMUStatePriorToCurrentPoint;
     CHECK(c);
     REQUIRE(fmi2DoStep, "fmi2DoStep");
-    return (fmi2Status)pg_inst_do_step(&INST->inst, currentCommunicationPoint, communicationStepSize);
+    fmi2Status st = (fmi2Status)pgb_do_step(INST->b, currentCommunicationPoint, communicationStepSize);
+    if (st == fmi2Discard) INST->mode = MODE_STEP_FAILED; /* the standard's stepFailed */
+    return st;
 }
 
 fmi2Status fmi2CancelStep(fmi2Component c)
@@ -363,8 +365,7 @@ fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real *
     CHECK(c && value);
     REQUIRE(fmi2GetStatus, "fmi2GetRealStatus");
     if (s != fmi2LastSuccessfulTime) return unsupported(INST, "fmi2GetRealStatus for this status kind");
-    *value = pg_inst_last_successful_time(&INST->inst);
-    return fmi2OK;
+    return (fmi2Status)pgb_last_successful_time(INST->b, value);
 }
 
 fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Integer *value)
@@ -380,8 +381,10 @@ fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boo
     CHECK(c && value);
     REQUIRE(fmi2GetStatus, "fmi2GetBooleanStatus");
     if (s != fmi2Terminated) return unsupported(INST, "fmi2GetBooleanStatus for this status kind");
-    *value = fmi2False;
-    return fmi2OK;
+    int terminated = 0;
+    fmi2Status st = (fmi2Status)pgb_terminated(INST->b, &terminated);
+    if (st <= fmi2Warning) *value = terminated ? fmi2True : fmi2False;
+    return st;
 }
 
 fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2String *value)
@@ -392,68 +395,3 @@ fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2Stri
     return unsupported(INST, "fmi2GetStringStatus");
 }
 
-/* ---- pogofmu extension (not part of FMI) ----------------------------------------------------- */
-/* fmpy's co-simulation loop (fmpy.simulation.simulateCS, FMI 2.0, no inputs) in C, over this FMU's
- * own fmi2DoStep, fmi2GetReal and fmi2GetInteger — so the call-state checks and every status are
- * the standard entry points' — for hosts that run many short simulations (`pogofmu sweep`): on an
- * initialized instance, from `start` to `stop` at the grid start + k h (the last step shortened to
- * stop), recording after each step a row of the time, the reals `rvr` and the integers `ivr` (as
- * doubles) into `out` (at most `max_rows` rows). The same time arithmetic as fmpy's Python loop,
- * hence the same rows to the bit. Returns the status of the last call; `*rows` the rows recorded. */
-static int close_to(double a, double b) /* Python's math.isclose(a, b) with its defaults */
-{
-    if (a == b) return 1;
-    if (isinf(a) || isinf(b)) return 0;
-    double d = fabs(a - b), m = fabs(a) > fabs(b) ? fabs(a) : fabs(b);
-    return d <= 1e-9 * m;
-}
-
-static fmi2Status record_row(fmi2Component c, double t, const fmi2ValueReference *rvr, size_t nr,
-                             const fmi2ValueReference *ivr, size_t ni, double *row, int *ints)
-{
-    row[0] = t;
-    fmi2Status st = nr ? fmi2GetReal(c, rvr, nr, row + 1) : fmi2OK;
-    if (st > fmi2Warning) return st;
-    fmi2Status st2 = ni ? fmi2GetInteger(c, ivr, ni, ints) : fmi2OK;
-    for (size_t i = 0; i < ni; ++i) row[1 + nr + i] = (double)ints[i];
-    return st2 > st ? st2 : st;
-}
-
-FMI2_Export int pogofmu_fmi2_run_grid(fmi2Component c, double start, double stop, double h,
-                                      const fmi2ValueReference *rvr, size_t nr, const fmi2ValueReference *ivr,
-                                      size_t ni, double *out, size_t max_rows, size_t *rows)
-{
-    *rows = 0;
-    if (!c || !out || max_rows == 0 || !(h > 0) || (ni && !ivr) || (nr && !rvr)) return fmi2Error;
-    int *ints = ni ? malloc(ni * sizeof *ints) : NULL;
-    if (ni && !ints) return fmi2Error;
-    size_t width = 1 + nr + ni;
-    double t = start;
-    long n_steps = 0;
-    fmi2Status st = record_row(c, t, rvr, nr, ivr, ni, out, ints);
-    if (st <= fmi2Warning) *rows = 1;
-    while (st <= fmi2Warning && !(t > stop || close_to(t, stop))) {
-        if (*rows >= max_rows) {
-            st = fmi2Error;
-            break;
-        }
-        double next_regular = start + (double)(n_steps + 1) * h;
-        double next = next_regular;
-        if (next > stop && !close_to(next, stop)) next = stop;
-        fmi2Status s = fmi2DoStep(c, t, next - t, fmi2True);
-        if (s > fmi2Warning) {
-            st = s;
-            break;
-        }
-        t = next;
-        s = record_row(c, t, rvr, nr, ivr, ni, out + *rows * width, ints);
-        if (s > fmi2Warning) {
-            st = s;
-            break;
-        }
-        *rows += 1;
-        if (close_to(t, next_regular)) n_steps += 1;
-    }
-    free(ints);
-    return st;
-}

@@ -1,21 +1,19 @@
-/* FMI 3.0 entry points of the native FMUs, model exchange and co-simulation (event mode, early
- * return): every function of the standard exists once here, checks the instance's call state
- * against the one table of call_states.h, and hands the work to the adapter
- * (fmu_src/native/adapter/pg_instance.c and its FMI 3.0 part pg_instance3.c). No Python: the FMU
- * needs only the C library and libm. Built with the generated files of one model (`PG_FMU`). */
+/* The FMI 3.0 entry points of every pogofmu FMU, of both backends, model exchange and
+ * co-simulation (event mode, early return): every function of the standard exists once here,
+ * checks the instance's call state against the one table of call_states.h and its arguments,
+ * filters the log (pg_logging.h), and hands the work to the backend the binary is linked with
+ * (pg_backend.h): the native engine (adapter/pg_backend.c, no Python) or the bridge to the FMU's
+ * Python code (python/pg_bridge.c). */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "fmi3Functions.h"
-#include "pg_handles.h"
-#include "pg_instance.h"
+#include "pg_backend.h"
 #include "pg_logging.h"
 
 #include "call_states.h"
-
-extern const PgFmu PG_FMU;
 
 #define ST_OK fmi3OK
 #define ST_WARNING fmi3Warning
@@ -27,8 +25,10 @@ typedef struct {
     fmi3LogMessageCallback log;
     PgLogFilter filter; /* fmi3SetDebugLogging */
     unsigned mode;
-    int me; /* a model-exchange instance */
-    PgInstance inst;
+    int me;              /* a model-exchange instance */
+    int event_mode_used; /* co-simulation: fixed at instantiation */
+    size_t nx, nz;       /* continuous states, event indicators */
+    PgBackend *b;
 } Inst;
 
 static void emit(Inst *in, int status, const char *category, const char *message)
@@ -36,7 +36,7 @@ static void emit(Inst *in, int status, const char *category, const char *message
     if (in->log) in->log(in->env, (fmi3Status)status, category, message);
 }
 
-static void log_from_adapter(void *env, int status, const char *category, const char *message)
+static void log_from_backend(void *env, int status, const char *category, const char *message)
 {
     Inst *in = env;
     if (pg_log_wanted(&in->filter, status, category)) emit(in, status, category, message);
@@ -89,16 +89,19 @@ fmi3Status fmi3SetDebugLogging(fmi3Instance c, fmi3Boolean loggingOn, size_t nCa
 {
     CHECK(c);
     REQUIRE(fmi3SetDebugLogging, "fmi3SetDebugLogging");
+    if (nCategories && !categories) return fmi3Error;
     char text[1200];
-    int rc = pg_log_set(&INST->filter, &PG_FMU, loggingOn, nCategories, categories, "fmi3SetDebugLogging", text,
-                        sizeof text);
+    size_t n_known = 0;
+    const char *const *known = pgb_log_categories(INST->b, &n_known);
+    int rc = pg_log_set(&INST->filter, known, n_known, loggingOn, nCategories, categories, "fmi3SetDebugLogging",
+                        text, sizeof text);
     if (rc > 0) emit(INST, ST_ERROR, "logStatusError", text);
     return rc ? fmi3Error : fmi3OK;
 }
 
-static Inst *instantiate(fmi3String instanceName, fmi3String token, fmi3Boolean loggingOn,
-                         fmi3InstanceEnvironment env, fmi3LogMessageCallback log, int me, int event_mode_used,
-                         int early_return_allowed, size_t n_required)
+static Inst *instantiate(fmi3String instanceName, fmi3String token, fmi3String resources, int visible,
+                         fmi3Boolean loggingOn, fmi3InstanceEnvironment env, fmi3LogMessageCallback log, int me,
+                         int event_mode_used, int early_return_allowed, size_t n_required)
 {
     Inst *in = calloc(1, sizeof *in);
     if (!in) return NULL;
@@ -107,20 +110,19 @@ static Inst *instantiate(fmi3String instanceName, fmi3String token, fmi3Boolean 
         free(in);
         return NULL;
     }
-    in->env = env, in->log = log, in->filter.on = loggingOn, in->me = me;
-    char text[600];
+    in->env = env, in->log = log, in->filter.on = loggingOn, in->me = me, in->event_mode_used = event_mode_used != 0;
     if (n_required > 0) {
         emit(in, fmi3Error, "logStatusError", "fmi3InstantiateCoSimulation: intermediate variable access is not "
              "supported (nRequiredIntermediateVariables must be 0)");
-    } else if (!token || strcmp(token, PG_FMU.token) != 0) {
-        snprintf(text, sizeof text, "instantiation token %s does not match this FMU's (%s): the model description "
-                 "read by the importer belongs to another FMU or build", token ? token : "(null)", PG_FMU.token);
-        emit(in, fmi3Error, "logStatusError", text);
     } else {
-        pg_inst_init(&in->inst, &PG_FMU, log_from_adapter, in);
-        pg3_attach(&in->inst, me ? 'm' : 'c', event_mode_used, early_return_allowed);
-        in->mode = MODE_INSTANTIATED;
-        return in;
+        PgSetup setup = {in->name, token, resources, visible, 3, me ? 'm' : 'c', event_mode_used != 0,
+                         early_return_allowed != 0, log_from_backend, in};
+        in->b = pgb_new(&setup);
+        if (in->b) {
+            pgb_counts(in->b, &in->nx, &in->nz);
+            in->mode = MODE_INSTANTIATED;
+            return in;
+        }
     }
     free(in->name);
     free(in);
@@ -132,8 +134,8 @@ fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String in
                                           fmi3InstanceEnvironment instanceEnvironment,
                                           fmi3LogMessageCallback logMessage)
 {
-    UNUSED(resourcePath), UNUSED(visible); /* a native FMU needs no resources */
-    return instantiate(instanceName, instantiationToken, loggingOn, instanceEnvironment, logMessage, 1, 0, 0, 0);
+    return instantiate(instanceName, instantiationToken, resourcePath, visible, loggingOn, instanceEnvironment,
+                       logMessage, 1, 0, 0, 0);
 }
 
 fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String instantiationToken,
@@ -145,9 +147,9 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
                                          fmi3LogMessageCallback logMessage,
                                          fmi3IntermediateUpdateCallback intermediateUpdate)
 {
-    UNUSED(resourcePath), UNUSED(visible), UNUSED(requiredIntermediateVariables), UNUSED(intermediateUpdate);
-    return instantiate(instanceName, instantiationToken, loggingOn, instanceEnvironment, logMessage, 0, eventModeUsed,
-                       earlyReturnAllowed, nRequiredIntermediateVariables);
+    UNUSED(requiredIntermediateVariables), UNUSED(intermediateUpdate);
+    return instantiate(instanceName, instantiationToken, resourcePath, visible, loggingOn, instanceEnvironment,
+                       logMessage, 0, eventModeUsed, earlyReturnAllowed, nRequiredIntermediateVariables);
 }
 
 fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3String instantiationToken,
@@ -169,6 +171,7 @@ fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3Stri
 void fmi3FreeInstance(fmi3Instance c)
 {
     if (!c) return;
+    pgb_free(INST->b);
     pg_log_free(&INST->filter);
     free(INST->name);
     free(INST);
@@ -186,7 +189,11 @@ fmi3Status fmi3EnterInitializationMode(fmi3Instance c, fmi3Boolean toleranceDefi
         emit(INST, ST_ERROR, "logStatusError", text);
         return fmi3Error;
     }
-    int st = pg_inst_setup_experiment(&INST->inst, startTime, stopTimeDefined, stopTime);
+    int st = pgb_setup_experiment(INST->b, toleranceDefined, tolerance, startTime, stopTimeDefined, stopTime);
+    if (st <= ST_WARNING) {
+        int st2 = pgb_enter_initialization(INST->b);
+        st = st2 > st ? st2 : st;
+    }
     LEADS_TO(st, MODE_INITIALIZATION);
     return (fmi3Status)st;
 }
@@ -195,9 +202,9 @@ fmi3Status fmi3ExitInitializationMode(fmi3Instance c)
 {
     CHECK(c);
     REQUIRE(fmi3ExitInitializationMode, "fmi3ExitInitializationMode");
-    int st = pg_inst_exit_initialization(&INST->inst);
+    int st = pgb_exit_initialization(INST->b);
     /* model exchange, and co-simulation with eventModeUsed, go on in Event Mode */
-    LEADS_TO(st, (INST->me || INST->inst.event_mode_used) ? MODE_EVENT : MODE_STEP);
+    LEADS_TO(st, (INST->me || INST->event_mode_used) ? MODE_EVENT : MODE_STEP);
     return (fmi3Status)st;
 }
 
@@ -205,31 +212,32 @@ fmi3Status fmi3EnterEventMode(fmi3Instance c)
 {
     CHECK(c);
     REQUIRE(fmi3EnterEventMode, "fmi3EnterEventMode");
-    if (!INST->me && !INST->inst.event_mode_used) {
+    if (!INST->me && !INST->event_mode_used) {
         emit(INST, ST_ERROR, "logStatusError", "fmi3EnterEventMode refused: this co-simulation instance was "
              "instantiated with eventModeUsed = false (it handles its events inside fmi3DoStep)");
         return fmi3Error;
     }
-    pg3_set_event_mode(&INST->inst, 1);
-    LEADS_TO(fmi3OK, MODE_EVENT);
-    return fmi3OK;
+    int st = pgb_enter_event_mode(INST->b);
+    LEADS_TO(st, MODE_EVENT);
+    return (fmi3Status)st;
 }
 
 fmi3Status fmi3Terminate(fmi3Instance c)
 {
     CHECK(c);
     REQUIRE(fmi3Terminate, "fmi3Terminate");
-    LEADS_TO(fmi3OK, MODE_TERMINATED);
-    return fmi3OK;
+    int st = pgb_terminate(INST->b);
+    LEADS_TO(st, MODE_TERMINATED);
+    return (fmi3Status)st;
 }
 
 fmi3Status fmi3Reset(fmi3Instance c)
 {
     CHECK(c);
     REQUIRE(fmi3Reset, "fmi3Reset");
-    pg_inst_reset(&INST->inst);
-    LEADS_TO(fmi3OK, MODE_INSTANTIATED);
-    return fmi3OK;
+    int st = pgb_reset(INST->b);
+    LEADS_TO(st, MODE_INSTANTIATED);
+    return (fmi3Status)st;
 }
 
 /* ---- variables ------------------------------------------------------------------------------ */
@@ -249,7 +257,7 @@ fmi3Status fmi3GetFloat64(fmi3Instance c, const fmi3ValueReference vr[], size_t 
     REQUIRE(fmi3GetValues, "fmi3GetFloat64");
     if (nValues != nvr) return unsupported(INST, "fmi3GetFloat64 with nValues != nValueReferences (arrays)");
     if (nvr && (!vr || !values)) return fmi3Error;
-    return (fmi3Status)pg_inst_get_real(&INST->inst, vr, nvr, values);
+    return (fmi3Status)pgb_get_real(INST->b, vr, nvr, values);
 }
 
 fmi3Status fmi3GetInt32(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, fmi3Int32 values[], size_t nValues)
@@ -258,7 +266,7 @@ fmi3Status fmi3GetInt32(fmi3Instance c, const fmi3ValueReference vr[], size_t nv
     REQUIRE(fmi3GetValues, "fmi3GetInt32");
     if (nValues != nvr) return unsupported(INST, "fmi3GetInt32 with nValues != nValueReferences (arrays)");
     if (nvr && (!vr || !values)) return fmi3Error;
-    return (fmi3Status)pg_inst_get_integer(&INST->inst, vr, nvr, values);
+    return (fmi3Status)pgb_get_integer(INST->b, vr, nvr, values);
 }
 
 fmi3Status fmi3GetBoolean(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, fmi3Boolean values[], size_t nValues)
@@ -267,7 +275,7 @@ fmi3Status fmi3GetBoolean(fmi3Instance c, const fmi3ValueReference vr[], size_t 
     CHECK(c);
     REQUIRE(fmi3GetValues, "fmi3GetBoolean");
     if (nvr && !vr) return fmi3Error;
-    return (fmi3Status)pg_inst_no_such_type(&INST->inst, vr, nvr, "Boolean");
+    return (fmi3Status)pgb_no_such_type(INST->b, vr, nvr, "Boolean");
 }
 
 fmi3Status fmi3GetString(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, fmi3String values[], size_t nValues)
@@ -276,7 +284,7 @@ fmi3Status fmi3GetString(fmi3Instance c, const fmi3ValueReference vr[], size_t n
     CHECK(c);
     REQUIRE(fmi3GetValues, "fmi3GetString");
     if (nvr && !vr) return fmi3Error;
-    return (fmi3Status)pg_inst_no_such_type(&INST->inst, vr, nvr, "String");
+    return (fmi3Status)pgb_no_such_type(INST->b, vr, nvr, "String");
 }
 
 fmi3Status fmi3SetFloat64(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, const fmi3Float64 values[],
@@ -286,7 +294,7 @@ fmi3Status fmi3SetFloat64(fmi3Instance c, const fmi3ValueReference vr[], size_t 
     REQUIRE(fmi3SetFloat, "fmi3SetFloat64");
     if (nValues != nvr) return unsupported(INST, "fmi3SetFloat64 with nValues != nValueReferences (arrays)");
     if (nvr && (!vr || !values)) return fmi3Error;
-    return (fmi3Status)pg_inst_set_real(&INST->inst, vr, nvr, values);
+    return (fmi3Status)pgb_set_real(INST->b, vr, nvr, values);
 }
 
 fmi3Status fmi3SetInt32(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, const fmi3Int32 values[], size_t nValues)
@@ -295,7 +303,7 @@ fmi3Status fmi3SetInt32(fmi3Instance c, const fmi3ValueReference vr[], size_t nv
     REQUIRE(fmi3SetDiscrete, "fmi3SetInt32");
     if (nValues != nvr) return unsupported(INST, "fmi3SetInt32 with nValues != nValueReferences (arrays)");
     if (nvr && (!vr || !values)) return fmi3Error;
-    return (fmi3Status)pg_inst_set_integer(&INST->inst, vr, nvr, values);
+    return (fmi3Status)pgb_set_integer(INST->b, vr, nvr, values);
 }
 
 fmi3Status fmi3SetBoolean(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, const fmi3Boolean values[],
@@ -305,7 +313,7 @@ fmi3Status fmi3SetBoolean(fmi3Instance c, const fmi3ValueReference vr[], size_t 
     CHECK(c);
     REQUIRE(fmi3SetDiscrete, "fmi3SetBoolean");
     if (nvr && !vr) return fmi3Error;
-    return (fmi3Status)pg_inst_no_such_type(&INST->inst, vr, nvr, "Boolean");
+    return (fmi3Status)pgb_no_such_type(INST->b, vr, nvr, "Boolean");
 }
 
 fmi3Status fmi3SetString(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, const fmi3String values[],
@@ -315,7 +323,7 @@ fmi3Status fmi3SetString(fmi3Instance c, const fmi3ValueReference vr[], size_t n
     CHECK(c);
     REQUIRE(fmi3SetDiscrete, "fmi3SetString");
     if (nvr && !vr) return fmi3Error;
-    return (fmi3Status)pg_inst_no_such_type(&INST->inst, vr, nvr, "String");
+    return (fmi3Status)pgb_no_such_type(INST->b, vr, nvr, "String");
 }
 
 /* types this FMU has no variables of: an error naming the function and the value reference */
@@ -383,12 +391,12 @@ fmi3Status fmi3GetVariableDependencies(fmi3Instance c, fmi3ValueReference depend
     return unsupported(INST, "fmi3GetVariableDependencies (the model description lists the dependencies)");
 }
 
-/* ---- FMU states (adapter/pg_handles.c) ------------------------------------------------------ */
+/* ---- FMU states (the backend's handles) ------------------------------------------------------ */
 fmi3Status fmi3GetFMUState(fmi3Instance c, fmi3FMUState *FMUState)
 {
     CHECK(c && FMUState);
     REQUIRE(fmi3FMUState, "fmi3GetFMUState");
-    return (fmi3Status)pg_handle_get(&INST->inst, INST->mode, FMUState);
+    return (fmi3Status)pgb_state_get(INST->b, INST->mode, FMUState);
 }
 
 fmi3Status fmi3SetFMUState(fmi3Instance c, fmi3FMUState FMUState)
@@ -396,8 +404,8 @@ fmi3Status fmi3SetFMUState(fmi3Instance c, fmi3FMUState FMUState)
     CHECK(c);
     REQUIRE(fmi3FMUState, "fmi3SetFMUState");
     unsigned mode = 0;
-    int st = pg_handle_set(&INST->inst, FMUState, &mode);
-    if (!st && mode) INST->mode = mode;
+    int st = pgb_state_set(INST->b, FMUState, &mode);
+    if (st <= ST_WARNING && mode) INST->mode = mode; /* back in the call state it was taken in */
     return (fmi3Status)st;
 }
 
@@ -405,21 +413,21 @@ fmi3Status fmi3FreeFMUState(fmi3Instance c, fmi3FMUState *FMUState)
 {
     CHECK(c);
     REQUIRE(fmi3FMUState, "fmi3FreeFMUState");
-    return (fmi3Status)pg_handle_free(&INST->inst, FMUState);
+    return (fmi3Status)pgb_state_free(INST->b, FMUState);
 }
 
 fmi3Status fmi3SerializedFMUStateSize(fmi3Instance c, fmi3FMUState FMUState, size_t *size)
 {
     CHECK(c && size);
     REQUIRE(fmi3FMUState, "fmi3SerializedFMUStateSize");
-    return (fmi3Status)pg_handle_size(&INST->inst, FMUState, size);
+    return (fmi3Status)pgb_state_size(INST->b, FMUState, size);
 }
 
 fmi3Status fmi3SerializeFMUState(fmi3Instance c, fmi3FMUState FMUState, fmi3Byte serializedState[], size_t size)
 {
     CHECK(c && serializedState);
     REQUIRE(fmi3FMUState, "fmi3SerializeFMUState");
-    return (fmi3Status)pg_handle_serialize(&INST->inst, FMUState, (unsigned char *)serializedState, size);
+    return (fmi3Status)pgb_state_serialize(INST->b, FMUState, (unsigned char *)serializedState, size);
 }
 
 fmi3Status fmi3DeserializeFMUState(fmi3Instance c, const fmi3Byte serializedState[], size_t size, fmi3FMUState *FMUState)
@@ -427,7 +435,7 @@ fmi3Status fmi3DeserializeFMUState(fmi3Instance c, const fmi3Byte serializedStat
     CHECK(c && serializedState && FMUState);
     REQUIRE(fmi3FMUState, "fmi3DeserializeFMUState");
     /* the state's call state: past initialization, Step Mode (co-simulation) or Event Mode (model exchange) */
-    return (fmi3Status)pg_handle_deserialize(&INST->inst, (const unsigned char *)serializedState, size, FMUState,
+    return (fmi3Status)pgb_state_deserialize(INST->b, (const unsigned char *)serializedState, size, FMUState,
                                              INST->me ? MODE_EVENT : MODE_STEP, MODE_INSTANTIATED);
 }
 
@@ -448,7 +456,7 @@ fmi3Status fmi3GetDirectionalDerivative(fmi3Instance c, const fmi3ValueReference
         return fmi3Error;
     }
     if ((nUnknowns && (!unknowns || !sensitivity)) || (nKnowns && (!knowns || !seed))) return fmi3Error;
-    return (fmi3Status)pg_inst_directional(&INST->inst, unknowns, nUnknowns, knowns, nKnowns, seed, sensitivity,
+    return (fmi3Status)pgb_directional(INST->b, unknowns, nUnknowns, knowns, nKnowns, seed, sensitivity,
                                            "fmi3GetDirectionalDerivative");
 }
 
@@ -548,12 +556,14 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance c, fmi3Boolean *discreteStatesN
 {
     CHECK(c);
     REQUIRE(fmi3UpdateDiscreteStates, "fmi3UpdateDiscreteStates");
-    int changed = 0;
-    int st = pg3_update_discrete_states(&INST->inst, &changed);
+    PgEventFlags f;
+    memset(&f, 0, sizeof f);
+    int st = pgb_update_discrete_states(INST->b, &f);
     if (st > ST_WARNING) return (fmi3Status)st;
-    put(discreteStatesNeedUpdate, 0), put(terminateSimulation, 0), put(nominalsOfContinuousStatesChanged, 0);
-    put(valuesOfContinuousStatesChanged, changed), put(nextEventTimeDefined, 0);
-    if (nextEventTime) *nextEventTime = 0.0;
+    put(discreteStatesNeedUpdate, f.discrete_states_need_update), put(terminateSimulation, f.terminate_simulation);
+    put(nominalsOfContinuousStatesChanged, f.nominals_changed), put(valuesOfContinuousStatesChanged, f.values_changed);
+    put(nextEventTimeDefined, f.next_event_time_defined);
+    if (nextEventTime) *nextEventTime = f.next_event_time;
     return (fmi3Status)st;
 }
 
@@ -562,9 +572,9 @@ fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance c)
 {
     CHECK(c);
     REQUIRE(fmi3EnterContinuousTimeMode, "fmi3EnterContinuousTimeMode");
-    pg3_set_event_mode(&INST->inst, 0);
-    LEADS_TO(fmi3OK, MODE_CONTINUOUS);
-    return fmi3OK;
+    int st = pgb_enter_continuous_time_mode(INST->b);
+    LEADS_TO(st, MODE_CONTINUOUS);
+    return (fmi3Status)st;
 }
 
 /* A count an importer passes must be the FMU's: the message names both. */
@@ -577,8 +587,8 @@ static int right_count(Inst *in, const char *function, const char *arg, size_t g
     return 0;
 }
 
-#define NX ((size_t)PG_FMU.model->nx)
-#define NZ ((size_t)PG_FMU.model->ne)
+#define NX (INST->nx)
+#define NZ (INST->nz)
 
 fmi3Status fmi3CompletedIntegratorStep(fmi3Instance c, fmi3Boolean noSetFMUStatePriorToCurrentPoint,
                                        fmi3Boolean *enterEventMode, fmi3Boolean *terminateSimulation)
@@ -586,10 +596,10 @@ fmi3Status fmi3CompletedIntegratorStep(fmi3Instance c, fmi3Boolean noSetFMUState
     UNUSED(noSetFMUStatePriorToCurrentPoint);
     CHECK(c);
     REQUIRE(fmi3CompletedIntegratorStep, "fmi3CompletedIntegratorStep");
-    int enter = 0;
-    int st = pg3_completed_integrator_step(&INST->inst, &enter);
+    int enter = 0, terminate = 0;
+    int st = pgb_completed_integrator_step(INST->b, &enter, &terminate);
     if (st > ST_WARNING) return (fmi3Status)st;
-    put(enterEventMode, enter), put(terminateSimulation, 0);
+    put(enterEventMode, enter), put(terminateSimulation, terminate);
     return (fmi3Status)st;
 }
 
@@ -597,7 +607,7 @@ fmi3Status fmi3SetTime(fmi3Instance c, fmi3Float64 time)
 {
     CHECK(c);
     REQUIRE(fmi3SetTime, "fmi3SetTime");
-    return (fmi3Status)pg3_set_time(&INST->inst, time);
+    return (fmi3Status)pgb_set_time(INST->b, time);
 }
 
 fmi3Status fmi3SetContinuousStates(fmi3Instance c, const fmi3Float64 continuousStates[], size_t nContinuousStates)
@@ -606,7 +616,7 @@ fmi3Status fmi3SetContinuousStates(fmi3Instance c, const fmi3Float64 continuousS
     REQUIRE(fmi3SetContinuousStates, "fmi3SetContinuousStates");
     if (!right_count(INST, "fmi3SetContinuousStates", "nContinuousStates", nContinuousStates, NX, "nx")) return fmi3Error;
     if (nContinuousStates && !continuousStates) return fmi3Error;
-    return (fmi3Status)pg3_set_continuous_states(&INST->inst, continuousStates, nContinuousStates);
+    return (fmi3Status)pgb_set_continuous_states(INST->b, continuousStates, nContinuousStates);
 }
 
 fmi3Status fmi3GetContinuousStateDerivatives(fmi3Instance c, fmi3Float64 derivatives[], size_t nContinuousStates)
@@ -616,7 +626,7 @@ fmi3Status fmi3GetContinuousStateDerivatives(fmi3Instance c, fmi3Float64 derivat
     if (!right_count(INST, "fmi3GetContinuousStateDerivatives", "nContinuousStates", nContinuousStates, NX, "nx"))
         return fmi3Error;
     if (nContinuousStates && !derivatives) return fmi3Error;
-    return (fmi3Status)pg3_get_derivatives(&INST->inst, derivatives);
+    return (fmi3Status)pgb_get_derivatives(INST->b, derivatives, nContinuousStates);
 }
 
 fmi3Status fmi3GetEventIndicators(fmi3Instance c, fmi3Float64 eventIndicators[], size_t nEventIndicators)
@@ -625,7 +635,7 @@ fmi3Status fmi3GetEventIndicators(fmi3Instance c, fmi3Float64 eventIndicators[],
     REQUIRE(fmi3GetContinuous, "fmi3GetEventIndicators");
     if (!right_count(INST, "fmi3GetEventIndicators", "nEventIndicators", nEventIndicators, NZ, "nz")) return fmi3Error;
     if (nEventIndicators && !eventIndicators) return fmi3Error;
-    return (fmi3Status)pg3_get_event_indicators(&INST->inst, eventIndicators);
+    return (fmi3Status)pgb_get_event_indicators(INST->b, eventIndicators, nEventIndicators);
 }
 
 fmi3Status fmi3GetContinuousStates(fmi3Instance c, fmi3Float64 continuousStates[], size_t nContinuousStates)
@@ -634,7 +644,7 @@ fmi3Status fmi3GetContinuousStates(fmi3Instance c, fmi3Float64 continuousStates[
     REQUIRE(fmi3GetContinuous, "fmi3GetContinuousStates");
     if (!right_count(INST, "fmi3GetContinuousStates", "nContinuousStates", nContinuousStates, NX, "nx")) return fmi3Error;
     if (nContinuousStates && !continuousStates) return fmi3Error;
-    return (fmi3Status)pg3_get_continuous_states(&INST->inst, continuousStates);
+    return (fmi3Status)pgb_get_continuous_states(INST->b, continuousStates, nContinuousStates);
 }
 
 fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance c, fmi3Float64 nominals[], size_t nContinuousStates)
@@ -644,8 +654,7 @@ fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance c, fmi3Float64 nominal
     if (!right_count(INST, "fmi3GetNominalsOfContinuousStates", "nContinuousStates", nContinuousStates, NX, "nx"))
         return fmi3Error;
     if (nContinuousStates && !nominals) return fmi3Error;
-    for (size_t i = 0; i < nContinuousStates; ++i) nominals[i] = 1.0;
-    return fmi3OK;
+    return (fmi3Status)pgb_get_nominals(INST->b, nominals, nContinuousStates);
 }
 
 fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance c, size_t *nEventIndicators)
@@ -669,9 +678,9 @@ fmi3Status fmi3EnterStepMode(fmi3Instance c)
 {
     CHECK(c);
     REQUIRE(fmi3EnterStepMode, "fmi3EnterStepMode");
-    pg3_set_event_mode(&INST->inst, 0);
-    LEADS_TO(fmi3OK, MODE_STEP);
-    return fmi3OK;
+    int st = pgb_enter_step_mode(INST->b);
+    LEADS_TO(st, MODE_STEP);
+    return (fmi3Status)st;
 }
 
 fmi3Status fmi3DoStep(fmi3Instance c, fmi3Float64 currentCommunicationPoint, fmi3Float64 communicationStepSize,
@@ -681,11 +690,11 @@ fmi3Status fmi3DoStep(fmi3Instance c, fmi3Float64 currentCommunicationPoint, fmi
     UNUSED(noSetFMUStatePriorToCurrentPoint);
     CHECK(c);
     REQUIRE(fmi3DoStep, "fmi3DoStep");
-    int event = 0, early = 0;
+    int event = 0, terminate = 0, early = 0;
     double last = 0.0;
-    int st = pg3_do_step(&INST->inst, currentCommunicationPoint, communicationStepSize, &event, &early, &last);
+    int st = pgb_do_step3(INST->b, currentCommunicationPoint, communicationStepSize, &event, &terminate, &early, &last);
     if (st > ST_WARNING) return (fmi3Status)st;
-    put(eventHandlingNeeded, event), put(terminateSimulation, 0), put(earlyReturn, early);
+    put(eventHandlingNeeded, event), put(terminateSimulation, terminate), put(earlyReturn, early);
     if (lastSuccessfulTime) *lastSuccessfulTime = last;
     return (fmi3Status)st;
 }

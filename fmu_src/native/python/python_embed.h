@@ -3,8 +3,8 @@
  * python3 on $PATH, the usual places), resolves the stable-ABI functions it needs by dlsym (no
  * link-time dependency on libpython), starts one isolated interpreter per process, however many
  * copies of the launcher are loaded and from however many threads, and loads the FMU's boot code
- * (resources/pogofmu_boot.py). The FMI entry points and the bridge to Python are
- * fmu_src/native/pogofmu_fmi.c. */
+ * (resources/pogofmu_boot.py). The FMI entry points are fmu_src/native/fmi2/pg_fmi2.c and
+ * fmi3/pg_fmi3.c; the bridge to Python is pg_bridge.c beside this file. */
 #ifndef POGOFMU_PYTHON_EMBED_H
 #define POGOFMU_PYTHON_EMBED_H
 

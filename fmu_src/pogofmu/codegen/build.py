@@ -90,9 +90,12 @@ def engine_library(model_name: str, folder: Path, cc: Optional[str] = None) -> P
 
 
 ADAPTER = NATIVE / "adapter"
-ADAPTER_SOURCES = ("pg_instance.c", "pg_instance3.c", "pg_derivatives.c", "pg_handles.c", "pg_logging.c",
+ADAPTER_SOURCES = ("pg_backend.c", "pg_instance.c", "pg_instance3.c", "pg_derivatives.c", "pg_handles.c",
                    "pg_sha256.c")
-FMI_ENTRY = {2: NATIVE / "fmi2" / "pg_fmi2.c", 3: NATIVE / "fmi3" / "pg_fmi3.c"}
+# the entry files (shared with the Python-hosted FMUs' launcher) and what they share; FMI 2.0 adds
+# the sweep's stepping loop
+FMI_ENTRY = {2: (NATIVE / "fmi2" / "pg_fmi2.c", NATIVE / "fmi2" / "pg_run_grid.c"), 3: (NATIVE / "fmi3" / "pg_fmi3.c",)}
+ENTRY_SHARED = tuple(NATIVE / f for f in ("call_states.h", "pg_backend.h", "pg_logging.h", "pg_logging.c"))
 FMI_HEADERS = {2: ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"),
                3: ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")}
 MINGW = "x86_64-w64-mingw32-gcc"
@@ -103,8 +106,8 @@ WINDOWS_FLAGS = ("-D__USE_MINGW_ANSI_STDIO=1", "-static-libgcc", "-s", "-Wl,--no
 
 def stage_sources(model_name: str, fmi: int, folder: Path, fmi_headers: Path):
     """Write every file of the native FMU's ``sources/`` into ``folder`` (flat: the generated model
-    and tableaux, the engine, the adapter, the FMI entry file, the call-state table and the FMI
-    headers), without the description file, which needs the token: ``(files, digest)``, the digest
+    and tableaux, the engine, the adapter and its backend functions, the FMI entry file, the
+    call-state table, the log filter and the FMI headers), without the description file, which needs the token: ``(files, digest)``, the digest
     covering their names and bytes (the FMU's build name and token derive from it).  The binaries
     are compiled from this folder alone, as an importer compiles a source FMU."""
     import hashlib
@@ -113,7 +116,7 @@ def stage_sources(model_name: str, fmi: int, folder: Path, fmi_headers: Path):
     write_model_source(model_name, folder)
     write_pairs_source(folder)
     copied = [*(ENGINE / s for s in ENGINE_SOURCES), *ENGINE.glob("*.h"), *(ADAPTER / s for s in ADAPTER_SOURCES),
-              *ADAPTER.glob("*.h"), FMI_ENTRY[fmi], NATIVE / "call_states.h",
+              *ADAPTER.glob("*.h"), *FMI_ENTRY[fmi], *ENTRY_SHARED,
               *(fmi_headers / h for h in FMI_HEADERS[fmi])]
     for path in copied:
         shutil.copyfile(path, folder / path.name)

@@ -16,8 +16,9 @@ The adapter needs the standard library only and imports nothing from pythonfmu: 
 the calling convention of pythonfmu's binaries (constructor keywords, ``set_real``/``get_real``,
 ``do_step`` returning a bool, ``log_queue``, ``_get_fmu_state`` ...), so the same code runs under
 
-* the project's native launcher (``fmu_src/native/pogofmu_fmi.c``, the Linux binary of every
-  FMU): it calls :meth:`HybridSlave._native_attach` first, and then
+* the project's native launcher (the FMI entry files ``fmu_src/native/fmi2/pg_fmi2.c`` /
+  ``fmi3/pg_fmi3.c`` with the bridge ``fmu_src/native/python/pg_bridge.c``: the Linux binary of
+  every Python-hosted FMU): it calls :meth:`HybridSlave._native_attach` first, and then
 
   - serves outputs from buffers filled once per step (no Python call per ``fmi2GetReal``),
   - maps an :class:`FMUError` to its ``fmi_status``: a refused call (bad input, a parameter

@@ -5,7 +5,8 @@ Nothing here is specific to a model, and no equation is written twice: flows, gu
 outputs, parameter rules and the engine are the model's and :mod:`pogofmu.runtime.engine`'s.  The same
 slave files (``fmu_src/slave_*.py``) make both generations: for an FMI 3.0 FMU the boot code
 (``pogofmu_boot.py``, ``fmi=3`` in ``resources/pogofmu_launch.txt``) wraps the slave class with
-:func:`fmi3_class`.  The C side is ``fmu_src/native/pogofmu_fmi.c`` built with ``-DPOGOFMU_FMI=3``.
+:func:`fmi3_class`.  The C side is the FMI 3.0 entry file ``fmu_src/native/fmi3/pg_fmi3.c`` with the bridge to
+Python ``fmu_src/native/python/pg_bridge.c``.
 
 Variables (:func:`fmi3_variables`): those of the FMI 2.0 FMU (same names, units, descriptions,
 value references), then

@@ -23,19 +23,18 @@ void pg_log_free(PgLogFilter *f)
     f->n = 0;
 }
 
-int pg_log_set(PgLogFilter *f, const PgFmu *fmu, int on, size_t n, const char *const categories[],
-               const char *function, char *text, size_t size)
+int pg_log_set(PgLogFilter *f, const char *const *known, size_t n_known, int on, size_t n,
+               const char *const categories[], const char *function, char *text, size_t size)
 {
-    for (size_t i = 0; i < n; ++i) {
-        int known = 0;
-        for (int k = 0; k < fmu->n_log_categories && !known; ++k)
-            known = categories[i] && strcmp(categories[i], fmu->log_categories[k]) == 0;
-        if (!known) {
+    for (size_t i = 0; i < n && n_known; ++i) {
+        int found = 0;
+        for (size_t k = 0; k < n_known && !found; ++k) found = categories[i] && strcmp(categories[i], known[k]) == 0;
+        if (!found) {
             size_t used = (size_t)snprintf(text, size, "%s refused: %s%s%s is not a log category of this FMU (the "
                                            "categories are", function, categories[i] ? "'" : "",
                                            categories[i] ? categories[i] : "NULL", categories[i] ? "'" : "");
-            for (int k = 0; k < fmu->n_log_categories && used < size; ++k)
-                used += (size_t)snprintf(text + used, size - used, "%s%s", k ? ", " : " ", fmu->log_categories[k]);
+            for (size_t k = 0; k < n_known && used < size; ++k)
+                used += (size_t)snprintf(text + used, size - used, "%s%s", k ? ", " : " ", known[k]);
             if (used < size) snprintf(text + used, size - used, ")");
             return 1;
         }
@@ -46,8 +45,9 @@ int pg_log_set(PgLogFilter *f, const PgFmu *fmu, int on, size_t n, const char *c
         f->categories = calloc(n, sizeof(char *));
         if (!f->categories) return -1;
         for (size_t i = 0; i < n; ++i) {
-            f->categories[i] = malloc(strlen(categories[i]) + 1);
-            if (f->categories[i]) strcpy(f->categories[i], categories[i]);
+            const char *name = categories[i] ? categories[i] : "";
+            f->categories[i] = malloc(strlen(name) + 1);
+            if (f->categories[i]) strcpy(f->categories[i], name);
             f->n = i + 1;
         }
     }
