@@ -261,6 +261,42 @@ BROKEN = {
                             '<ssd:ParameterBinding source="resources/mars.ssv"/>\n        </ssd:ParameterBindings>\n'
                             '      </ssd:Component>\n      <ssd:Component name="HopController"'),
         ["Component PogoStick", "resources/mars.ssv", "missing"]),
+    # the limits the docs name (docs/ssp-master.md, "Limits"): each refused with a message, never ignored
+    "input fed twice": (
+        lambda t: t.replace('</ssd:Connections>', '  <ssd:Connection startElement="PogoStick" startConnector="y" '
+                            'endElement="HopController" endConnector="y"/>\n    </ssd:Connections>'),
+        ["Connection 5 (PogoStick.y -> HopController.y)", "input HopController.y is already fed by Connection 1"]),
+    "kind mismatch": (
+        lambda t: t.replace('<ssd:Connector name="F_ext" kind="input"><ssc:Real unit="N"/>',
+                            '<ssd:Connector name="F_ext" kind="output"><ssc:Real unit="N"/>'),
+        ["PogoStick.F_ext", "kind output but the FMU's variable has causality input"]),
+    "type mismatch": (
+        lambda t: t.replace('<ssd:Connector name="s" kind="output"><ssc:Integer/>',
+                            '<ssd:Connector name="s" kind="output"><ssc:Real/>'),
+        ["PogoStick.s", "type Real but the FMU's variable is Integer"]),
+    "nested system": (
+        lambda t: t.replace('    </ssd:Elements>', '      <ssd:System name="Inner"/>\n    </ssd:Elements>'),
+        ["element System 'Inner' is not supported", "no nested systems"]),
+    "LinearTransformation": (
+        lambda t: t.replace('<ssd:Connection startElement="PogoStick" startConnector="y" endElement="HopController" '
+                            'endConnector="y"/>',
+                            '<ssd:Connection startElement="PogoStick" startConnector="y" endElement="HopController" '
+                            'endConnector="y"><ssc:LinearTransformation factor="2"/></ssd:Connection>'),
+        ["Connection 1 (PogoStick.y -> HopController.y)", "ssc:LinearTransformation is not supported"]),
+    "inline ParameterValues": (
+        lambda t: t.replace('<ssd:ParameterBinding source="resources/earth.ssv"/>\n        </ssd:ParameterBindings>\n'
+                            '      </ssd:Component>\n      <ssd:Component name="HopController"',
+                            '<ssd:ParameterBinding><ssd:ParameterValues/></ssd:ParameterBinding>\n'
+                            '        </ssd:ParameterBindings>\n      </ssd:Component>\n'
+                            '      <ssd:Component name="HopController"'),
+        ["Component PogoStick", "inline values (ssd:ParameterValues, no source): not supported"]),
+    "ssm parameter mapping": (
+        lambda t: t.replace('<ssd:ParameterBinding source="resources/earth.ssv"/>\n        </ssd:ParameterBindings>\n'
+                            '      </ssd:Component>\n      <ssd:Component name="HopController"',
+                            '<ssd:ParameterBinding source="resources/earth.ssv"><ssd:ParameterMapping '
+                            'source="resources/map.ssm"/></ssd:ParameterBinding>\n        </ssd:ParameterBindings>\n'
+                            '      </ssd:Component>\n      <ssd:Component name="HopController"'),
+        ["Component PogoStick", "ssd:ParameterMapping (.ssm) is not supported"]),
 }
 
 
@@ -277,6 +313,14 @@ def test_broken_ssd_is_rejected_naming_the_element(case, tmp_path):
                            "--out", str(tmp_path / "out")], capture_output=True, text=True)
     assert proc.returncode == 1 and words[0] in proc.stderr, proc.stderr
     assert not (tmp_path / "out").exists()
+
+
+def test_a_stop_time_that_is_not_a_whole_number_of_steps_is_refused(tmp_path):
+    """The fixed-step algorithms end on the stop time exactly: 1 s at 0.3 s steps is refused, 0.9 s runs."""
+    pkg = variant(tmp_path)
+    with pytest.raises(master.SSPError, match=r"stop time 1.0 - start time 0.0 is not a whole number of steps 0.3"):
+        master.simulate(pkg, stop_time=1.0, step=0.3)
+    assert master.simulate(pkg, stop_time=0.9, step=0.3)["time"][-1] == pytest.approx(0.9)
 
 
 def test_unknown_parameter_set_and_stray_parameter_are_rejected(tmp_path):
@@ -337,6 +381,9 @@ BAD_INPUT = {
     "Integer 2.5": (_ssv_edit("<ssv:Parameters>", '<ssv:Parameters><ssv:Parameter name="method">'
                                                   '<ssv:Integer value="2.5"/></ssv:Parameter>'), [],
                     ["resources/moon.ssv", "parameter 'method'", "Integer value '2.5'", "whole number"]),
+    "Integer overflow": (_ssv_edit("<ssv:Parameters>", '<ssv:Parameters><ssv:Parameter name="method">'
+                                                       '<ssv:Integer value="2147483648"/></ssv:Parameter>'), [],
+                         ["resources/moon.ssv", "parameter 'method'", "'2147483648'", "32-bit range"]),
     "stop time nan": (None, ["--stop-time", "nan"], ["stop time", "--stop-time", "nan", "finite"]),
     "stop time inf": (None, ["--stop-time", "inf"], ["stop time", "--stop-time", "inf", "finite"]),
     "step nan": (None, ["--step", "nan"], ["communication step", "--step", "nan", "finite"]),

@@ -173,9 +173,14 @@ def read_ssd(root: Path) -> System:
             connectors[cel.get("name")] = Connector(cel.get("name"), cel.get("kind"), t, unit)
         bindings = []
         for bel in el.findall("ssd:ParameterBindings/ssd:ParameterBinding", NS):
-            if bel.get("source") is None:
-                problems.append(f"Component {name}: a ParameterBinding without source (inline values "
-                                f"are not supported)")
+            children = {child.tag.split("}")[-1] for child in bel}
+            if "ParameterValues" in children or bel.get("source") is None:
+                problems.append(f"Component {name}: a ParameterBinding with inline values (ssd:ParameterValues"
+                                f"{'' if bel.get('source') else ', no source'}): not supported, give the "
+                                f"values in an .ssv file named by source")
+            elif "ParameterMapping" in children:
+                problems.append(f"Component {name}: ParameterBinding {bel.get('source')}: an ssd:ParameterMapping "
+                                f"(.ssm) is not supported: name the FMU's variables in the .ssv itself")
             else:
                 bindings.append(bel.get("source"))
         if name in components:
@@ -187,6 +192,12 @@ def read_ssd(root: Path) -> System:
         if missing:  # (a missing startElement/endElement is a connector of the system: refused later)
             problems.append(f"Connection {i}: no {' and no '.join(missing)} attribute (every connection joins two "
                             f"named connectors)")
+            continue
+        transforms = [child.tag.split("}")[-1] for child in cel if child.tag.endswith("Transformation")]
+        if transforms:
+            problems.append(f"Connection {i} ({cel.get('startElement')}.{cel.get('startConnector')} -> "
+                            f"{cel.get('endElement')}.{cel.get('endConnector')}): ssc:{transforms[0]} is not "
+                            f"supported (the master passes values unchanged; scale them in a component)")
             continue
         connections.append(Connection(i, cel.get("startElement"), cel.get("startConnector"),
                                       cel.get("endElement"), cel.get("endConnector")))
