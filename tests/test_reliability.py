@@ -4,6 +4,8 @@ Sweeps that write only what they were told to; bad sweep inputs refused in one l
 worker starts; FMU states that carry their model, build and integrity; the standard's call
 sequence enforced; concurrency; messages that name the real cause.
 """
+import contextlib
+import io
 import os
 import stat
 import subprocess
@@ -44,6 +46,23 @@ def test_overwrite_never_replaces_a_device_a_pipe_a_folder_or_a_link(tmp_path):
     assert (folder / "keep").read_text() == "mine"
     now = os.stat("/dev/null")
     assert stat.S_ISCHR(now.st_mode) and (now.st_ino, now.st_rdev) == (null_before.st_ino, null_before.st_rdev)
+
+
+def test_an_existing_output_is_replaced_only_with_overwrite(tmp_path):
+    """Without --overwrite an existing table is refused (one line, exit 2) and left byte for byte;
+    with --overwrite the sweep replaces it by its own table."""
+    import pyarrow.parquet as pq
+
+    out = tmp_path / "table.parquet"
+    out.write_bytes(b"a table from yesterday")
+    proc = sweep(fmu_path("PogoStick"), "--grid", "k=90,100", "--stop-time", "0.1", "--workers", "1", "--out", out)
+    assert proc.returncode == 2 and proc.stderr.count("\n") == 1, proc.stderr
+    assert "exists: give --resume or --overwrite" in proc.stderr and str(out) in proc.stderr, proc.stderr
+    assert out.read_bytes() == b"a table from yesterday"
+    proc = sweep(fmu_path("PogoStick"), "--grid", "k=90,100", "--stop-time", "0.1", "--workers", "1", "--overwrite",
+                 "--out", out)
+    assert proc.returncode == 0, proc.stderr
+    assert sorted(r["k"] for r in pq.read_table(out).to_pylist()) == [90.0, 100.0]
 
 
 def _not_an_fmu(tmp_path):
@@ -134,6 +153,46 @@ def test_another_models_state_is_refused_with_error_naming_both(own, foreign):
     finally:
         for inst in (a, b, ref):
             inst.close()
+
+
+def test_another_builds_serialized_state_is_refused_naming_the_build(tmp_path):
+    """Two builds of one model and FMI version (here: the session's and one with another token
+    seed, as a rebuilt FMU would be) share names and variables but not their states: a state
+    serialized by one is refused by the other with Error naming the build, and the instance runs on."""
+    from fmpy import extract, read_model_description
+    from fmpy.fmi1 import FMICallException
+    from fmpy.fmi2 import FMU2Slave
+
+    import build_fmu
+
+    with contextlib.redirect_stdout(io.StringIO()):
+        other = build_fmu.build_one("PogoStick", tmp_path, token_seed="another build")
+    md = read_model_description(str(other))
+    assert md.guid != read_model_description(str(fmu_path("PogoStick"))).guid
+    messages = []
+    fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(str(other)), modelIdentifier=md.coSimulation.modelIdentifier,
+                    instanceName="other", fmiCallLogger=None)
+    fmu.instantiate(loggingOn=True, callbacks=None)
+    own = Instance("PogoStick", "own").init()
+    try:
+        fmu.setupExperiment(startTime=0.0)
+        fmu.enterInitializationMode()
+        fmu.exitInitializationMode()
+        own.run_to(0.3, 1e-3)
+        blob = bytes(own.fmu.serializeFMUstate(own.fmu.getFMUstate()))
+        with pytest.raises(FMICallException) as exc:
+            fmu.deSerializeFMUstate(blob)
+        assert "(error)" in str(exc.value)
+        fmu.doStep(currentCommunicationPoint=0.0, communicationStepSize=0.1)  # still usable
+        own_blob = bytes(fmu.serializeFMUstate(fmu.getFMUstate()))
+        with pytest.raises(FMICallException):
+            own.fmu.deSerializeFMUstate(own_blob)
+        text = own.messages[-1][2]
+        assert "build" in text and "refused" in text, text
+    finally:
+        own.close()
+        fmu.terminate()
+        fmu.freeInstance()
 
 
 def test_fmi3_refuses_the_fmi2_builds_state_and_every_flipped_bit():
