@@ -173,3 +173,30 @@ def test_steps_unrolled_for_the_state_count_give_the_same_bits(method, monkeypat
         assert generic[4] is engine.METHODS[method]
         assert fast[:3] == generic[:3], model.name
         assert fast[1] > 0
+
+
+@pytest.mark.parametrize("order", [("impact", "floor"), ("floor", "impact")])
+def test_of_two_events_at_one_instant_the_first_listed_wins(order):
+    """Two guards crossing zero at the same instant (both the ball's height): the event listed first
+    fires, its jump moves the ball off both guards, the other does not fire at all — the priority
+    rule of runtime/model.py, by which the sticks' touchdown wins over a simultaneous liftoff."""
+    def jump(name):
+        def apply(x, q, u, p):
+            return [0.0, -p.e * x[1]], dict(q, n=q["n"] + 1, last=name)
+        return apply
+
+    events = {name: Event(name, FALLING, lambda x, q, u, p: x[0], jump(name)) for name in order}
+    model = ball(events=tuple(events[n] for n in order))
+    sim = Simulator(model, dict(e=0.5, rel_tol=1e-12), keep_history=True)
+    sim.advance(0.6)  # one impact, at sqrt(2 h0 / g) = 0.4515 s
+    assert [e.name for e in sim.events] == [order[0]] and sim.q["last"] == order[0]
+    assert sim.events[0].time == pytest.approx(impact_times(0.5, 1.0, 1)[0], abs=1e-12)
+
+
+@pytest.mark.parametrize("name", ["PogoStick", "PogoStickMem", "PogoStickSMA", "Penetrator"])
+def test_touchdown_is_listed_first(name):
+    """docs/fmus.md: touchdown has priority over a liftoff at the same instant — it is the model's
+    first event, which the rule above makes the winner."""
+    from pogofmu.runtime.models import get
+
+    assert get(name).events[0].name == "touchdown", [e.name for e in get(name).events]
