@@ -169,7 +169,6 @@ def test_another_builds_serialized_state_is_refused_naming_the_build(tmp_path):
         other = build_fmu.build_one("PogoStick", tmp_path, token_seed="another build")
     md = read_model_description(str(other))
     assert md.guid != read_model_description(str(fmu_path("PogoStick"))).guid
-    messages = []
     fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(str(other)), modelIdentifier=md.coSimulation.modelIdentifier,
                     instanceName="other", fmiCallLogger=None)
     fmu.instantiate(loggingOn=True, callbacks=None)
@@ -271,6 +270,20 @@ def test_first_instantiations_from_threads_in_fmpy(names):
         got = json.loads(proc.stdout.strip().splitlines()[-1])
         for n, r in zip(names, got):
             assert r == ["ok", *expected[n]], (n, r, proc.stderr[-1000:])
+
+
+def test_a_build_instantiated_a_thousand_times_imports_its_code_once():
+    """docs/using-fmus.md: "the same build instantiated a thousand times imports its code once" —
+    in a fresh process, after 1 000 instances (one after the other, each stepped and freed) the
+    FMU's private modules are the very module objects the first instance imported, and the boot
+    code created each of its modules once."""
+    proc = subprocess.run([sys.executable, str(ROOT / "tests" / "_thousand_instances.py"), str(DIST / "PogoStick.fmu"),
+                           "1000"], capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    got = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert got["first"] and got["last"] == got["first"], (len(got["first"]), len(got["last"]))
+    assert any(name.endswith("_slave") for name in got["first"]), sorted(got["first"])
+    assert got["created"] and len(got["created"]) == len(set(got["created"])), got["created"]
 
 
 def _unzipped(tmp_path, name):
