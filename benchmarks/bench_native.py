@@ -9,7 +9,8 @@ Every model's default experiment at a 1 ms communication grid, every output reco
   ``-DRECORD_IN_MEMORY``, as benchmark (b) runs it), a fresh process with an empty environment;
 * ``python C``: the Python-hosted FMU (dist/<Model>.fmu) in the same C host;
 * ``native fmpy`` and ``floor-io``: the native FMU through ``fmpy.simulate_fmu`` and benchmark
-  (b)'s do-nothing pythonfmu FMU with the same outputs, simulated the same way.
+  (b)'s FMI floor (the Python-hosted FMU with its ``do_step`` emptied: the project's launcher, the
+  same outputs), simulated the same way.
 
 The C programs time their own stepping loop (``CLOCK_PROCESS_CPUTIME_ID`` from the first step to
 the last read: loading, instantiation and an interpreter's start-up are not in it) and the C
@@ -109,7 +110,7 @@ def main(argv=None):
             limit = Limit(name, dest)
             c_native = bench_fmu.CHost(host, native, dest / "native")
             c_python = bench_fmu.CHost(host, python, dest)
-            floor = bench_fmu.build_wide_floor(dest, native)
+            floor = bench_fmu.floor_of(python, dest)
             runs = {
                 "limit": lambda t: limit.run(t), "native C": lambda t: host_run(c_native, t),
                 "python C": lambda t: host_run(c_python, t),

@@ -31,9 +31,9 @@ How to add a case (e.g. ``pogostick_mem.py`` for PogoStickMem)
      ``reference_label``.  The "event error" is then the distance to that much tighter solution
      (meaningful down to ~1e-11 s).
 
-5. Targets: issue 2's targets (>= 2x faster than scipy with an event error no larger; FMU <= 3x
-   the FMI floor) are judged on cases with ``targets=True`` (PogoStick); other rows are printed
-   for information.  ``compare_to``/``max_ratio`` set a relative target on the engine time
+5. Targets: benchmark (a)'s (>= 2x faster than scipy with an event error no larger) are judged
+   on cases with ``targets=True`` (PogoStick); other rows are printed for information.
+   Benchmark (b) judges its targets (the FMU against its own FMI floor) on every case.  ``compare_to``/``max_ratio`` set a relative target on the engine time
    (PogoStickMem with a linear law against PogoStick: composing elements costs <= 1.3x).
 
 The event error of a run is the largest ``|t_i - t_ref_i|`` over the events; a run whose event
@@ -67,7 +67,7 @@ class Case:
     reference_label: str  # where the reference comes from (printed with the results)
     params: Dict[str, float] = field(default_factory=dict)  # overrides of the model's defaults
     stop_time: float = 10.0
-    targets: bool = False  # judge this row against issue 2's targets (else: a row for information)
+    targets: bool = False  # judge this row against benchmark (a)'s targets (else: a row for information)
     compare_to: str = ""  # another case's name: the engine time of this case relative to it ...
     max_ratio: float = 0.0  # ... must stay at or below this (issue 3: linear PogoStickMem <= 1.3x)
 
