@@ -118,15 +118,17 @@ def test_apex_settles_at_h_target_on_each_body(body, stop):
     tops = [h for _, h in apexes(res, p["g"])]
     h_t = p["h_target"]
     assert p["y_0"] < 0.98 * h_t  # dropped from below the band: the controller must lift it
-    settled = tops[3:]  # transient: at most three hops (F_max limits the energy per hop)
+    settled = tops[4:]  # transient: at most four hops (F_max limits the energy per hop)
     assert len(settled) >= 3, tops
-    assert all(abs(h - h_t) <= 0.02 * h_t for h in settled), (body, tops)
+    # docs/ssp-master.md: the fixed point lies within 1e-4 m of h_target (measured 2026-12-02 at a
+    # 1e-3 s step: 1.1e-5, 4.3e-5, 9e-5 m on Earth, Moon, Ceres); the test allows 3e-4 m
+    assert all(abs(h - h_t) <= 3e-4 for h in settled), (body, tops)
     # the controller keeps doing work against the dashpot (no passive decay)
     assert res["PogoStick.W_ext"][-1] > 0
 
 
 def test_without_thrust_the_apex_decays(tmp_path):
-    """Control: F_max -> tiny, the same system loses height every hop (the 2 % test can fail)."""
+    """Control: F_max -> tiny, the same system loses height every hop (the settling test can fail)."""
     text = (ROOT / "ssp" / "SpaceHopper" / "moon.ssv").read_text()
     pkg = variant(tmp_path, files={"resources/moon.ssv": text.replace('name="F_max"><ssv:Real value="4"',
                                                                       'name="F_max"><ssv:Real value="1e-9"')})
