@@ -142,9 +142,10 @@ def _libpythons():
 @pytest.mark.parametrize("lib", _libpythons() or [None])
 def test_c_host_with_each_cpython_gives_the_same_result(lib, c_host, unzipped):
     """One binary for CPython 3.10-3.13: each library on the machine, chosen with
-    POGOFMU_PYTHON_LIB, gives outputs identical to fmpy's."""
-    if lib is None:
-        pytest.skip("no shared CPython library found on this machine")
+    POGOFMU_PYTHON_LIB, gives outputs identical to fmpy's. A machine with no shared CPython
+    library cannot run the Python-hosted FMUs in a C importer at all: that fails, not skips."""
+    assert lib is not None, ("no shared CPython >= 3.10 library on this machine: the Python-hosted FMUs "
+                             "need one in a C importer (a python3 built with --enable-shared, or libpython3.X)")
     outputs = ["y", "ydot", "n_events", "t_last_event"]
     rc, rows, err = run_c_host(c_host, unzipped("PogoStick"), "PogoStick", 3.0, 1e-2, outputs,
                                env=dict(BARE_ENV, POGOFMU_PYTHON_LIB=lib))
@@ -166,11 +167,44 @@ def test_c_host_without_a_usable_python_is_told_what_was_tried(c_host, unzipped,
     rc, _, err = run_c_host(c_host, unzipped("PogoStick"), "PogoStick", 1.0, 0.1, ["y"],
                             env=dict(BARE_ENV, POGOFMU_PYTHON_LIB=not_python))
     assert rc == 3 and "libm.so.6: lacks Py_IsInitialized" in err, err
-    old = [lib for lib in (Path.home() / ".pyenv/versions").glob("3.9*/lib/libpython3.9.so.1.0")]
-    if old:
-        rc, _, err = run_c_host(c_host, unzipped("PogoStick"), "PogoStick", 1.0, 0.1, ["y"],
-                                env=dict(BARE_ENV, POGOFMU_PYTHON_LIB=str(old[0])))
-        assert rc == 3 and "need >= 3.10" in err, err
+
+
+FAKE_PYTHON = r"""/* a library that exports every symbol the launcher resolves, and says it is CPython 3.9 */
+#include <stdarg.h>
+#include <stddef.h>
+#include <wchar.h>
+#include "python_embed.h"
+#define Py_GetVersion Py_GetVersion_unused /* defined below with its real signature */
+#define FAKE(ret, name, args) void name(void) {}
+PY_FUNCTIONS(FAKE)
+#undef Py_GetVersion
+#define FAKE_FLAG(name) int name;
+PY_FLAGS(FAKE_FLAG)
+int _Py_NoneStruct;
+const char *Py_GetVersion(void) { return "3.9.18 (main, fake) [GCC]"; }
+"""
+
+
+def test_c_host_with_a_cpython_older_than_3_10_is_told_which_it_found(c_host, unzipped, tmp_path):
+    """A CPython 3.9 (a stand-in compiled here: every symbol the launcher resolves, version
+    3.9.18; and the real one too where pyenv has it): instantiation fails naming the library, its
+    version and the need, before calling anything in it."""
+    import shutil
+
+    import build_fmu
+
+    source = tmp_path / "fake_python.c"
+    source.write_text(FAKE_PYTHON)
+    fake = tmp_path / "libpython3.9.so.1.0"
+    cc = shutil.which("cc") or shutil.which("gcc")
+    subprocess.run([cc, "-shared", "-fPIC", f"-I{build_fmu.NATIVE / 'python'}", str(source), "-o", str(fake)],
+                   check=True, capture_output=True)
+    real = sorted((Path.home() / ".pyenv/versions").glob("3.9*/lib/libpython3.9.so.1.0"))
+    for lib in [fake, *real[:1]]:
+        rc, rows, err = run_c_host(c_host, unzipped("PogoStick"), "PogoStick", 1.0, 0.1, ["y"],
+                                   env=dict(BARE_ENV, POGOFMU_PYTHON_LIB=str(lib)))
+        assert rc == 3 and not rows, err
+        assert f"{lib}: CPython 3.9" in err and "need >= 3.10" in err, err
 
 
 def test_c_host_refuses_a_foreign_model_description(c_host, unzipped):
@@ -259,6 +293,7 @@ def test_one_hundred_processes_load_run_free_and_exit_cleanly(c_host, unzipped):
     libcosimpy, the C host — each load, run and free FMUs and exit with status 0 (the old binary
     corrupted the heap when an instance that had failed was freed; the test session used to end
     with os._exit to hide it)."""
+    assert TEARDOWN_PROCESSES >= 1, f"POGOFMU_TEARDOWN_PROCESSES = {TEARDOWN_PROCESSES}: nothing would be tested"
     d = unzipped("PogoStick")
     md = model_description("PogoStick")
     y = next(v.valueReference for v in md.modelVariables if v.name == "y")
