@@ -26,10 +26,12 @@ How to add a case (e.g. ``pogostick_mem.py`` for PogoStickMem)
    * a closed form: :func:`closed_form_reference` (the basic stick's events computed by
      ``pogofmu.closed_form``), or :func:`csv_reference` for a CSV with ``event`` and ``time_s``
      columns;
-   * no closed form: ``reference=tight_scipy_reference()`` runs the case's own ``scipy_loop``
-     with DOP853 at ``rtol=1e-13``, ``atol=1e-15`` (once per run); say so in
-     ``reference_label``.  The "event error" is then the distance to that much tighter solution
-     (meaningful down to ~1e-11 s).
+   * no closed form: an independent model, not the peer's own loop (a mistake in the peer would
+     otherwise make it look exact): :func:`tests_reference` takes the scipy model of the test
+     suite (``tests/test_mem.py``, ``test_sma.py``, ``test_penetrator.py``, DOP853 at rtol 1e-13);
+     ``tight_scipy_reference()`` (the case's own ``scipy_loop`` at ``rtol=1e-13``) is left for a
+     new model until it has one; say which in ``reference_label``.  The "event error" is then
+     the distance to that much tighter solution (meaningful down to ~1e-11 s).
 
 5. Targets: benchmark (a)'s (>= 2x faster than scipy with an event error no larger) are judged
    on cases with ``targets=True`` (PogoStick); other rows are printed for information.
@@ -105,6 +107,40 @@ def closed_form_reference(case: Case) -> Events:
     from pogofmu.closed_form import events_as_floats
 
     return [(e["time"], e["name"]) for e in events_as_floats(case.params, case.stop_time)]
+
+
+def tests_reference(kind: str) -> Callable[[Case], Events]:
+    """Reference events from the independent scipy model in the test suite (``tests/test_mem.py``,
+    ``test_sma.py``, ``test_penetrator.py``: the equations written there from docs/models.md, with
+    DOP853 at rtol 1e-13), not the benchmark's own peer: a mistake in the peer's loop cannot make
+    the peer look exact.  ``kind``: ``"mem"``, ``"sma"`` (the default drop only) or ``"penetrator"``."""
+
+    def load(case: Case) -> Events:
+        import sys
+
+        tests = str(Path(__file__).resolve().parents[2] / "tests")
+        if tests not in sys.path:
+            sys.path.insert(0, tests)
+        p = case.full_params()
+        if kind == "mem":
+            from test_mem import scipy_mem
+
+            base = {k: p[k] for k in ("m", "k", "x_i", "g", "y_0", "ydot_0")}
+            if base != dict(m=1.0, k=100.0, x_i=1.0, g=9.81, y_0=1.5, ydot_0=0.0):
+                raise ValueError(f"case {case.name}: the tests' mem-stick model drops the default stick only")
+            return [(t, n) for n, t, _ in scipy_mem(p["spring_law"], p["beta"], p["gamma"], case.stop_time,
+                                                    c=p["c"], a0=p["a_0"])]
+        if kind == "sma":
+            from test_sma import scipy_sma
+
+            if case.params:
+                raise ValueError(f"case {case.name}: the tests' SMA model drops the default stick only")
+            return [(t, n) for n, t in scipy_sma(case.stop_time)]
+        from test_penetrator import reference
+
+        return [(t, n) for n, t, _ in reference(case.stop_time, **case.params)[0]]
+
+    return load
 
 
 _TIGHT_CACHE: Dict[str, Events] = {}

@@ -5,8 +5,9 @@ The scipy peer integrates the same 7 states as ``pogofmu.runtime.models.penetrat
 contact), the guards as terminal events with a direction (touchdown: the foot height
 ``y - x_i - x_lift exp(-(k/c) tau)`` falling; liftoff: ``delta`` falling; max_penetration: a new
 record of the penetration, ``max(delta', delta_max - delta)`` falling), and a restart loop that
-applies the jumps.  No closed form: the reference is the same loop at DOP853, rtol 1e-13
-(19 touchdown/liftoff events and one penetration record in 10 s).
+applies the jumps.  No closed form: the reference is the independent scipy model of
+tests/test_penetrator.py (DOP853, rtol 1e-13; 19 touchdown/liftoff events and one penetration
+record in 10 s), not this peer.
 """
 from __future__ import annotations
 
@@ -14,7 +15,7 @@ import math
 
 from scipy.integrate import solve_ivp
 
-from . import Case, tight_scipy_reference
+from . import Case, tests_reference
 
 
 def scipy_loop(p, stop_time, method, rtol, atol, max_step):
@@ -86,6 +87,6 @@ CASE = Case(
     model="pogofmu.runtime.models.penetrator:MODEL",
     params={},  # default drop into K = 1e4 N/m^1.5, n = 1.5 soil: 19 contact events + 1 record
     scipy_loop=scipy_loop,
-    reference=tight_scipy_reference(),
-    reference_label="scipy DOP853 at rtol 1e-13 (no closed form)",
+    reference=tests_reference("penetrator"),
+    reference_label="the independent scipy model of tests/test_penetrator.py (DOP853, rtol 1e-13)",
 )

@@ -3,13 +3,14 @@
 The scipy peer integrates the same 8 states as ``pogofmu.runtime.models.pogo_stick_mem.MODEL`` --
 ``[xbar, xdot, y, ydot, z, a, W_leg, W_ext]`` (absement ``a' = x``) -- with one right-hand side
 per mode, terminal events and a restart loop (``F_ext = 0``, so ``W_ext`` stays 0).
-No closed form: the reference is the same loop at DOP853, rtol 1e-13.
+No closed form: the reference is the independent scipy model of tests/test_mem.py (DOP853, rtol 1e-13),
+not this peer.
 """
 from __future__ import annotations
 
 from scipy.integrate import solve_ivp
 
-from . import Case, tight_scipy_reference
+from . import Case, tests_reference
 
 
 def scipy_loop(p, stop_time, method, rtol, atol, max_step):
@@ -72,6 +73,6 @@ CASE = Case(
     model="pogofmu.runtime.models.pogo_stick_mem:MODEL",
     params={},  # default: softening mem-spring, beta = 1; 11 events, then drifts down in contact
     scipy_loop=scipy_loop,
-    reference=tight_scipy_reference(),
-    reference_label="scipy DOP853 at rtol 1e-13 (no closed form)",
+    reference=tests_reference("mem"),
+    reference_label="the independent scipy model of tests/test_mem.py (DOP853, rtol 1e-13)",
 )

@@ -3,14 +3,14 @@
 The scipy peer integrates the same 7 states as ``pogofmu.runtime.models.pogo_stick_sma.MODEL`` --
 ``[xbar, xdot, y, ydot, z, W_leg, W_ext]`` -- with one right-hand side per (mode, SMA branch),
 the contact and branch guards as terminal events with a direction, and a restart loop that applies
-the jump (branch, anchor).  No closed form for the event times: the reference is the same loop at
-DOP853, rtol 1e-13 (23 events in 10 s).
+the jump (branch, anchor).  No closed form for the event times: the reference is the independent
+scipy model of tests/test_sma.py (DOP853, rtol 1e-13; 23 events in 10 s), not this peer.
 """
 from __future__ import annotations
 
 from scipy.integrate import solve_ivp
 
-from . import Case, tight_scipy_reference
+from . import Case, tests_reference
 
 
 def scipy_loop(p, stop_time, method, rtol, atol, max_step):
@@ -100,6 +100,6 @@ CASE = Case(
     model="pogofmu.runtime.models.pogo_stick_sma:MODEL",
     params={},  # default drop: 3 full flags and a small one, 23 events, settles in contact
     scipy_loop=scipy_loop,
-    reference=tight_scipy_reference(),
-    reference_label="scipy DOP853 at rtol 1e-13 (no closed form)",
+    reference=tests_reference("sma"),
+    reference_label="the independent scipy model of tests/test_sma.py (DOP853, rtol 1e-13)",
 )
