@@ -359,3 +359,44 @@ def test_penetration_dipping_below_zero_inside_a_step_is_a_liftoff():
     finally:
         inst.close()
     assert worst <= 1e-5 * E0
+
+
+def test_an_event_storm_inside_an_fmu_step_is_an_error_and_the_instance_is_restorable():
+    """docs/errors.md: an event storm ends fmi2DoStep with fmi2Error naming it and the time, never a
+    hang or Fatal; later steps are refused naming the cause; a state saved before restores. The
+    adapter (runtime/fmi2.py) driven as the launcher drives it, on a ball with restitution 0.5,
+    which bounces infinitely often before t = 3 sqrt(2 h0/g) (Zeno)."""
+    from pogofmu.runtime.fmi2 import FMUError, HybridSlave
+    from pogofmu.runtime.model import FALLING, Event, HybridModel, Parameter, Variable
+    from pogofmu.runtime.status import ERROR
+
+    ball = HybridModel(
+        name="Ball", description="bouncing ball", states=(Variable("y", "m"), Variable("v", "m/s")),
+        parameters=(Parameter("e", 0.5), Parameter("h0", 1.0)), inputs=(), outputs=(Variable("y", "m"),),
+        flow=lambda t, x, q, u, p: [x[1], -G],
+        events=(Event("impact", FALLING, lambda x, q, u, p: x[0],
+                      lambda x, q, u, p: ([0.0, -p.e * x[1]], dict(q, n=q["n"] + 1))),),
+        initial=lambda p: ([p.h0, 0.0], {"n": 0}), output_fn=lambda t, x, q, u, p: {"y": x[0]})
+
+    class BallSlave(HybridSlave):
+        model = ball
+
+    slave = BallSlave(instance_name="ball")
+    slave._native_attach()  # as the launcher: errors become statuses
+    slave.setup_experiment(0.0, None, None)
+    slave.enter_initialization_mode()
+    slave.exit_initialization_mode()
+    t_zeno = 3 * math.sqrt(2 * 1.0 / G)
+    assert slave.do_step(0.0, 1.0) is True
+    saved = slave._get_fmu_state()
+    with pytest.raises(FMUError) as exc:
+        slave.do_step(1.0, 1.0)
+    assert exc.value.fmi_status == ERROR, exc.value.fmi_status
+    text = str(exc.value)
+    assert "event storm" in text and "impact" in text, text
+    assert float(re.search(r"t = ([0-9.eE+-]+) s", text).group(1)) == pytest.approx(t_zeno, abs=1e-3), text
+    with pytest.raises(FMUError) as again:
+        slave.do_step(2.0, 0.1)
+    assert "refused" in str(again.value) and "event storm" in str(again.value), str(again.value)
+    slave._set_fmu_state(saved)  # back before the storm: the instance steps again
+    assert slave.do_step(1.0, 0.1) is True
