@@ -12,7 +12,7 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from pogofmu.sweep import parse_event_log  # noqa: F401  (the tests read the FMUs' event log with it)
+from pogofmu.runtime.eventlog import parse_event_log  # noqa: F401  (the tests read the FMUs' event log with it)
 
 ROOT = Path(__file__).resolve().parents[1]
 DIST = Path(os.environ.get("POGOFMU_DIST", ROOT / "dist")).resolve()  # build target of the session

@@ -200,3 +200,15 @@ def test_touchdown_is_listed_first(name):
     from pogofmu.runtime.models import get
 
     assert get(name).events[0].name == "touchdown", [e.name for e in get(name).events]
+
+
+def test_the_event_record_reads_back_what_was_written():
+    """runtime/eventlog.py: the log line of an event and its reading are one format; the time and
+    the state come back to the bit (repr), odd values included."""
+    from pogofmu.runtime.eventlog import CATEGORY, event_message, parse_event_log
+
+    x = [0.1 + 0.2, -0.0, 1e-300, -2.5e17]
+    text = event_message(7, "touchdown", 1 / 3, ["xbar", "xdot", "y", "ydot"], x)
+    (record,) = parse_event_log([(0, CATEGORY, text), (0, "logAll", text), (1, CATEGORY, "event storm")])
+    assert record["index"] == 7 and record["name"] == "touchdown" and record["time"] == 1 / 3
+    assert list(record["state"].values()) == x and list(record["state"]) == ["xbar", "xdot", "y", "ydot"]

@@ -38,6 +38,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Dict, List, Optional, Sequence
 
+from pogofmu.runtime.eventlog import parse_event_log  # the FMU's event records, as data
+
 SUMMARY_OUTPUTS = ("n_events", "t_last_event")  # FMU outputs that get a column of their own
 DISTRIBUTIONS = {  # name -> (numpy Generator method, argument names, rule on the arguments)
     "uniform": ("uniform", ("low", "high"), lambda a, b: a < b, "low < high"),
@@ -176,22 +178,6 @@ class Settings:
     events: bool = False  # record the event log (needs the FMU parameter log_events)
     timeseries: bool = False  # return the recorded outputs on the grid too
     fixed: Dict[str, float] = field(default_factory=dict)  # start values common to every run
-
-
-_EVENT = re.compile(r"^event (\d+) (\S+) at t = (\S+) s(?:; state before jump: (.*))?$")
-
-
-def parse_event_log(messages):
-    """Events in the FMU's logEvents messages [(status, category, text)] (needs log_events = 1):
-    dicts with index, name, time and the state before the jump."""
-    out = []
-    for _, category, text in messages:
-        m = _EVENT.match(text) if category == "logEvents" else None
-        if m:
-            state = dict(kv.split("=") for kv in m.group(4).split(", ")) if m.group(4) else {}
-            out.append({"index": int(m.group(1)), "name": m.group(2), "time": float(m.group(3)),
-                        "state": {k: float(v) for k, v in state.items()}})
-    return out
 
 
 def recorded_outputs(md, outputs=None):

@@ -306,6 +306,7 @@ static void on_warning(void *ctx, const char *text)
     note(nt, PG_ST_WARNING, "logStatusWarning", m.text, 1);
 }
 
+/* the event record of runtime/eventlog.py (event_message), byte for byte: the host reads both */
 static void on_event(void *ctx, const PgEngine *e, const PgEvent *ev, long number)
 {
     Notes *nt = ctx;

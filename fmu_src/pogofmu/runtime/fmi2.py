@@ -54,6 +54,7 @@ from typing import NamedTuple, Optional, Tuple
 
 from .engine import SOLVER_PARAMETERS, Simulator, snapshot_from_data, snapshot_to_data, solver_defaults, \
     split_parameters
+from .eventlog import CATEGORY as EVENT_CATEGORY, event_message
 from .model import HybridModel, ModelError, Params
 from .status import ERROR, FATAL, OK, WARNING, log_category
 
@@ -459,9 +460,7 @@ class HybridSlave:
         if new:
             names = [v.name for v in type(self).model.states]
             for k, ev in enumerate(new, start=first):
-                state = ", ".join(f"{n}={v!r}" for n, v in zip(names, ev.x_before))
-                self.log(f"event {k} {ev.name} at t = {ev.time!r} s; state before jump: {state}",
-                         OK, "logEvents")
+                self.log(event_message(k, ev.name, ev.time, names, ev.x_before), OK, EVENT_CATEGORY)
 
     def _step_problem(self, current_time, step_size):
         sim = self._sim
