@@ -1,14 +1,14 @@
 """PogoStickSMA.fmu (docs/models.md "PogoStickSMA"): shape-memory-alloy flag leg, through the built FMU.
 
 References are independent of the code under test: the flag's geometry (plateau lines, the
-closed-form meeting point and area of a cycle), a solve_ivp model written here with guards in
-``x`` instead of the FMU's force differences, and the energy balance.
+closed-form meeting point and area of a cycle), a solve_ivp model (the property suite's
+``reference_stick``) with guards in ``x`` instead of the FMU's force differences, and the energy
+balance.
 """
 import math
 
 import numpy as np
 import pytest
-from scipy.integrate import solve_ivp
 
 from support import Instance, assert_parameter_rejected, parse_event_log, simulate
 
@@ -48,62 +48,17 @@ def energy(e):
     return M * G * e["state"]["y"] + 0.5 * M * e["state"]["ydot"] ** 2
 
 
-# ---- an independent SMA stick: solve_ivp, one mode per branch, guards written in x ---------------
+# ---- an independent SMA stick: the property suite's solve_ivp reference (one mode per branch,
+# guards written in x instead of the FMU's force differences) at this file's defaults -------------
 
 def scipy_sma(t_end, c=C):
-    """Events [(name, t)] of free drops (no forcing); branch transitions as guards on x."""
+    """Events [(name, t)] of a free drop from y = 1.5 m (no forcing)."""
+    from test_properties import reference_stick
 
-    def rhs(force):
-        def f(t, X):
-            xbar, xdot, y, ydot, z = X
-            acc = -(force(xbar - X_I) + c * xdot) / M - G
-            return [xdot, acc, ydot, acc, 0.0]
-        return f
-
-    def flight(t, X):
-        return [0.0, 0.0, X[3], -G, X[3]]
-
-    def ev(fun, direction, name):
-        fun.terminal, fun.direction, fun.__name__ = True, direction, name
-        return fun
-
-    X, mode, H, t, out = [X_I, 0.0, 1.5, 0.0, 0.5], "flight", None, 0.0, []
-    while t < t_end:
-        if mode == "flight":
-            f, evs = flight, [ev(lambda t, X: X[4], -1, "touchdown")]
-        elif mode == "virgin":
-            f = rhs(lambda x: K1 * x)
-            evs = [ev(lambda t, X: X[0] - X_I, 1, "liftoff"), ev(lambda t, X: X[0] - X_I - X1, -1, "upper_plateau")]
-        elif mode == "upper":
-            f, evs = rhs(r_upper), [ev(lambda t, X: X[1], 1, "reversal")]
-        elif mode == "unload":  # elastic line from the reversal at H: meets r_L at H + x3 - x1
-            f = rhs(lambda x, H=H: r_upper(H) + K1 * (x - H))
-            evs = [ev(lambda t, X, H=H: X[0] - X_I - (H + X3 - X1), 1, "lower_plateau"),
-                   ev(lambda t, X, H=H: X[0] - X_I - H, -1, "upper_plateau")]
-        else:  # lower plateau
-            f = rhs(r_lower)
-            evs = [ev(lambda t, X: X[0] - X_I - X3, 1, "virgin_line"), ev(lambda t, X: X[1], -1, "reload")]
-        sol = solve_ivp(f, (t, t_end), X, method="DOP853", events=evs, rtol=1e-13, atol=1e-15, max_step=0.01)
-        assert sol.status >= 0, sol.message
-        if sol.status == 0:
-            break
-        j = next(i for i, te in enumerate(sol.t_events) if len(te))
-        t, X, name = sol.t_events[j][0], list(sol.y_events[j][0]), evs[j].__name__
-        out.append((name, t))
-        if name == "touchdown":
-            X[1], X[4], mode = X[3], 0.0, "virgin"
-        elif name == "liftoff":
-            X[0], X[1], X[4], mode = X_I, 0.0, 0.0, "flight"
-        elif name == "upper_plateau":
-            mode = "upper"
-        elif name == "reversal":
-            H, mode = X[0] - X_I, "unload"
-        elif name == "lower_plateau":
-            mode = "lower"
-        elif name == "virgin_line":
-            mode = "virgin"
-        else:
-            raise AssertionError("no reload in a free drop")
+    p = dict(m=M, g=G, x_i=X_I, c=c, k1=K1, k2=K2, x1=X1, x3=X3,
+             xbar_0=X_I, xdot_0=0.0, y_0=1.5, ydot_0=0.0, z_0=0.5)
+    out = reference_stick(NAME, p, t_end)
+    assert out is not None, "the reference met a reload, which a free drop has not"
     return out
 
 
