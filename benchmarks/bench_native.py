@@ -21,12 +21,20 @@ Targets (PogoStick, issue 18): native C at most 2x the limit per step; python C 
 least 20x per step; native fmpy at most 1.05x floor-io. The other models are rows for
 information. Exit status 1 if a target is missed. Builds into a temporary folder, never dist/.
 
-    python benchmarks/bench_native.py [--repeat 7] [--model PogoStick ...]
+With ``--fmusim PATH`` (or ``$POGOFMU_FMUSIM``: the Reference-FMUs' C fmusim, docs/native.md "In
+fmusim") a second table, for information: each FMI 2.0 FMU in fmusim writing its CSV, CPU seconds
+of the fmusim process (a run of the default experiment less a run of 10 steps, per step), every
+output recorded and only ``n_events`` — fmusim's own work per step (reading the variables,
+writing the line) is in every column.
+
+    python benchmarks/bench_native.py [--repeat 7] [--model PogoStick ...] [--fmusim PATH]
 """
 from __future__ import annotations
 
 import argparse
+import os
 import re
+import resource
 import subprocess
 import sys
 import tempfile
@@ -58,6 +66,53 @@ def host_run(host, stop: float) -> float:
     return loop_cpu([str(host.exe), str(host.dir), *host.args, repr(stop), repr(STEP), host.reals, host.ints])
 
 
+def child_cpu(cmd) -> float:
+    """CPU seconds (user + system) of one child process run to its end."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=ENV)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if proc.returncode:
+        raise SystemExit(f"{' '.join(cmd)} failed ({proc.returncode}): {(proc.stdout + proc.stderr)[-2000:]}")
+    return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+
+
+def fmusim_table(fmusim: str, dest: Path, names, repeat: int):
+    """us per communication step of each FMI 2.0 FMU in fmusim (module docstring)."""
+    from fmpy import read_model_description
+
+    print(f"\n(g, fmusim) {fmusim}: us of CPU per communication step, fmusim writing its CSV "
+          f"(default experiment less 10 steps); best of {repeat} rotated runs")
+    head = f"{'model':<14} {'native all':>10} {'python all':>10} {'py/nat all':>10} {'native 1':>9} {'python 1':>9} {'py/nat 1':>9}"
+    print(head)
+    print("-" * len(head))
+    out = dest / "fmusim.csv"
+    for name in names:
+        native, python = dest / "native" / f"{name}.fmu", dest / f"{name}.fmu"
+        stop = float(read_model_description(str(native)).defaultExperiment.stopTime)
+        n = round(stop / STEP)
+
+        def run(fmu, t, extra):
+            return child_cpu([fmusim, "--stop-time", repr(t), "--output-interval", repr(STEP), *extra,
+                              "--output-file", str(out), str(fmu)])
+
+        cases = {(w, k): (fmu, extra) for w, fmu in (("native", native), ("python", python))
+                 for k, extra in (("all", []), ("1", ["--output-variable", "n_events"]))}
+        best = {}
+        keys = list(cases)
+        for key in keys:  # warm-up
+            run(*cases[key][:1], stop, cases[key][1])
+        for length in (stop, 10 * STEP):
+            times = {k: [] for k in keys}
+            for i in range(repeat):
+                for key in keys[i % len(keys):] + keys[:i % len(keys)]:
+                    times[key].append(run(cases[key][0], length, cases[key][1]))
+            best[length] = {k: min(v) for k, v in times.items()}
+        us = {k: (best[stop][k] - best[10 * STEP][k]) / (n - 10) * 1e6 for k in keys}
+        print(f"{name:<14} {us['native', 'all']:>10.2f} {us['python', 'all']:>10.2f} "
+              f"{us['python', 'all'] / us['native', 'all']:>9.1f}x {us['native', '1']:>9.2f} "
+              f"{us['python', '1']:>9.2f} {us['python', '1'] / us['native', '1']:>8.1f}x", flush=True)
+
+
 class Limit:
     """The engine loop of one model, compiled from the generated C and the engine's files."""
 
@@ -87,6 +142,8 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--repeat", type=int, default=7)
     ap.add_argument("--model", action="append", help="only this model (repeatable)")
+    ap.add_argument("--fmusim", default=os.environ.get("POGOFMU_FMUSIM"),
+                    help="the C fmusim of Reference-FMUs <= v0.0.39: also time the FMUs in it")
     args = ap.parse_args(argv)
     names = args.model or build_fmu.model_names()
     failed = []
@@ -139,6 +196,8 @@ def main(argv=None):
                     if not ok:
                         failed.append(f"{what} {ratios[what]:.2f}x (target {'>=' if what.startswith('python') else '<='} "
                                       f"{target:g}x)")
+        if args.fmusim:
+            fmusim_table(args.fmusim, dest, names, args.repeat)
     if failed:
         print("PogoStick target MISSED: " + "; ".join(failed))
         return 1
