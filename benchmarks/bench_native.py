@@ -66,6 +66,18 @@ def host_run(host, stop: float) -> float:
     return loop_cpu([str(host.exe), str(host.dir), *host.args, repr(stop), repr(STEP), host.reals, host.ints])
 
 
+def best_rotated(runs, repeat: int) -> dict:
+    """Each run once untimed (imports, caches), then ``repeat`` rounds in an order rotated from
+    round to round; the best time of each run."""
+    for run in runs.values():
+        run()
+    keys, times = list(runs), {key: [] for key in runs}
+    for i in range(repeat):
+        for key in keys[i % len(keys):] + keys[:i % len(keys)]:
+            times[key].append(runs[key]())
+    return {key: min(v) for key, v in times.items()}
+
+
 def child_cpu(cmd) -> float:
     """CPU seconds (user + system) of one child process run to its end."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -95,19 +107,13 @@ def fmusim_table(fmusim: str, dest: Path, names, repeat: int):
             return child_cpu([fmusim, "--stop-time", repr(t), "--output-interval", repr(STEP), *extra,
                               "--output-file", str(out), str(fmu)])
 
-        cases = {(w, k): (fmu, extra) for w, fmu in (("native", native), ("python", python))
-                 for k, extra in (("all", []), ("1", ["--output-variable", "n_events"]))}
-        best = {}
-        keys = list(cases)
-        for key in keys:  # warm-up
-            run(*cases[key][:1], stop, cases[key][1])
-        for length in (stop, 10 * STEP):
-            times = {k: [] for k in keys}
-            for i in range(repeat):
-                for key in keys[i % len(keys):] + keys[:i % len(keys)]:
-                    times[key].append(run(cases[key][0], length, cases[key][1]))
-            best[length] = {k: min(v) for k, v in times.items()}
-        us = {k: (best[stop][k] - best[10 * STEP][k]) / (n - 10) * 1e6 for k in keys}
+        cases = {(w, k, t): (lambda fmu=fmu, extra=extra, t=t: run(fmu, t, extra))
+                 for w, fmu in (("native", native), ("python", python))
+                 for k, extra in (("all", []), ("1", ["--output-variable", "n_events"]))
+                 for t in (stop, 10 * STEP)}
+        best = best_rotated(cases, repeat)
+        us = {(w, k): (best[w, k, stop] - best[w, k, 10 * STEP]) / (n - 10) * 1e6
+              for w in ("native", "python") for k in ("all", "1")}
         print(f"{name:<14} {us['native', 'all']:>10.2f} {us['python', 'all']:>10.2f} "
               f"{us['python', 'all'] / us['native', 'all']:>9.1f}x {us['native', '1']:>9.2f} "
               f"{us['python', '1']:>9.2f} {us['python', '1'] / us['native', '1']:>8.1f}x", flush=True)
@@ -168,20 +174,12 @@ def main(argv=None):
             c_native = bench_fmu.CHost(host, native, dest / "native")
             c_python = bench_fmu.CHost(host, python, dest)
             floor = bench_fmu.floor_of(python, dest)
-            runs = {
-                "limit": lambda t: limit.run(t), "native C": lambda t: host_run(c_native, t),
-                "python C": lambda t: host_run(c_python, t),
-                "native fmpy": lambda t: bench_fmu.simulate(native, t, {})[0],
-                "floor-io": lambda t: bench_fmu.simulate(floor, t, {})[0],
-            }
-            times = {k: [] for k in runs}
-            for run in runs.values():  # warm-up: imports, extraction caches
-                run(stop)
-            keys = list(times)
-            for i in range(args.repeat):
-                for key in keys[i % len(keys):] + keys[:i % len(keys)]:
-                    times[key].append(runs[key](stop))
-            best = {k: min(v) for k, v in times.items()}
+            best = best_rotated({
+                "limit": lambda: limit.run(stop), "native C": lambda: host_run(c_native, stop),
+                "python C": lambda: host_run(c_python, stop),
+                "native fmpy": lambda: bench_fmu.simulate(native, stop, {})[0],
+                "floor-io": lambda: bench_fmu.simulate(floor, stop, {})[0],
+            }, args.repeat)
             us = {k: best[k] / n * 1e6 for k in ("limit", "native C", "python C")}
             ratios = {"native C / limit": us["native C"] / us["limit"],
                       "python C / native C": us["python C"] / us["native C"],

@@ -12,9 +12,10 @@ CVODE):
 
 * the native FMU's table is the Python-hosted FMU's, byte for byte (the same importer, the same
   calls: the two backends give the same bits);
-* its events — count, kind, time — are those of the Python-hosted FMU under fmpy, the times within
-  1e-12 s (fmusim computes its communication times as ``start + n * h``, fmpy by its own rule, so
-  the states between events differ at the solver's tolerance, not the events).
+* its events — count, kind, time — are those of the Python-hosted FMU under fmpy: in co-simulation
+  within 1e-12 s (fmusim computes its communication times as ``start + n * h``, fmpy by its own
+  rule, so the states between events differ at the solver's tolerance, not the events), in model
+  exchange within 1e-6 s (each importer's CVODE locates them, at a relative tolerance of 1e-10).
 """
 import math
 import os
