@@ -717,9 +717,9 @@ static int locate_from_zero(PgEngine *e, PgSeg *seg, int i, double g1, int at_st
     return PG_OK;
 }
 
-/* _hidden_crossing */
-static int hidden_crossing(PgEngine *e, PgSeg *seg, int i, double sgn, double g0, double g1, const double *f1,
-                           double *out, int *found)
+/* _turning_point: *found = 0 for "None" */
+static int turning_point(PgEngine *e, PgSeg *seg, int i, double sgn, double g0, double g1, const double *f1,
+                         double *tp_out, double *gp_out, int *found)
 {
     double t0 = seg->t0, h = seg->t1 - seg->t0;
     double eps = 1e-6 * h, y[PG_MAX_X], ga, gb;
@@ -745,12 +745,52 @@ static int hidden_crossing(PgEngine *e, PgSeg *seg, int i, double sgn, double g0
     (void)hi;
     double tp = t0 + lo * h;
     if (!(t0 < tp && tp < seg->t1)) return PG_OK;
-    double gp;
     TRY(seg_at(e, seg, tp, y));
-    TRY(guard_at(e, i, y, &gp));
-    if (sgn * gp < 0.0) return PG_OK;
+    TRY(guard_at(e, i, y, gp_out));
+    *tp_out = tp;
     *found = 1;
-    return locate(e, seg, i, t0, g0, gp, &tp, out);
+    return PG_OK;
+}
+
+/* _hidden_crossing */
+static int hidden_crossing(PgEngine *e, PgSeg *seg, int i, double sgn, double g0, double g1, const double *f1,
+                           double *out, int *found)
+{
+    double tp = 0, gp = 0;
+    TRY(turning_point(e, seg, i, sgn, g0, g1, f1, &tp, &gp, found));
+    if (!*found) return PG_OK;
+    if (sgn * gp < 0.0) {
+        *found = 0;
+        return PG_OK;
+    }
+    return locate(e, seg, i, seg->t0, g0, gp, &tp, out);
+}
+
+/* _hidden_return */
+static int hidden_return(PgEngine *e, PgSeg *seg, int i, double sgn, double g0, double g1, const double *f1,
+                         int own, double *out, int *found)
+{
+    double tp = 0, gp = 0;
+    TRY(turning_point(e, seg, i, -sgn, g0, g1, f1, &tp, &gp, found));
+    if (!*found) return PG_OK;
+    if (sgn * gp < 0.0) return locate(e, seg, i, tp, gp, g1, NULL, out);
+    *found = 0;
+    if (own && sgn * g1 > sgn * g0) {
+        PgMsg *m = &e->msg;
+        pg_msg_clear(m);
+        pg_msg_printf(m, "event storm: %s happens again within the rounding of its own location at t = ",
+                      event_name(e, i));
+        pg_msg_value(m, seg->t0, 'f', ".15g");
+        pg_msg_str(m, " s (its guard heads back to zero after the jump and is past it again at t = ");
+        pg_msg_value(m, seg->t1, 'f', ".15g");
+        pg_msg_str(m, " s, guard = ");
+        pg_msg_value(m, g1, 'f', "r");
+        pg_msg_str(m, "): the events accumulate faster than the steps resolve them (Zeno behaviour, e.g. a "
+                      "bouncing ball coming to rest). Model the rest (a mode without this event once the motion is "
+                      "small), or stop before this time");
+        return PG_RAISE;
+    }
+    return PG_OK;
 }
 
 /* _land_on_event: redo the step exactly up to the event, secant on exact steps */
@@ -886,7 +926,8 @@ static int step(PgEngine *e, double t_target)
             TRY(locate_from_zero(e, &seg, i, g1, at_start && i != disarmed, &te, &found));
             if (!found) continue;
         } else {
-            continue;
+            TRY(hidden_return(e, &seg, i, sgn, g0, g1, f_new, at_start && i == disarmed, &te, &found));
+            if (!found) continue;
         }
         if (hit < 0 || te < hit_t) hit = k, hit_t = te;
     }

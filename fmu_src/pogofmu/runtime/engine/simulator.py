@@ -473,7 +473,9 @@ class Simulator:
                 if te is None:
                     continue
             else:
-                continue
+                te = self._hidden_return(seg, ev, sgn, g0, g1, f_new, at_start and i == disarmed)
+                if te is None:
+                    continue
             if hit is None or te < hit[0]:
                 hit = (te, k)
         if hit is None:
@@ -613,15 +615,11 @@ class Simulator:
                 return seg.t0 if at_start else None
         return seg.t0 if at_start and g1 != 0.0 else None
 
-    def _hidden_crossing(self, seg, ev, sgn, g0, g1, f1):
-        """Both ends of the step on the guard's before side: did the guard cross zero and come back
-        inside the step?  (A flight parabola is integrated exactly, so the error control lets a
-        step hold a foot that dips below the ground and rises again, e.g. under a switching
-        thrust; in contact a Penetrator's penetration may dip below 0 and back: found by the
-        property suite and scans of such runs.)  Only when the guard approaches zero at the start
-        and recedes at the end (slopes by a difference along the flow): the maximum of the cubic
-        Hermite interpolant of the guard is probed on the dense output; if the guard is on its
-        after side there, the crossing is located between the start and that probe."""
+    def _turning_point(self, seg, ev, sgn, g0, g1, f1):
+        """``(tp, g(tp))`` where ``sgn * g`` turns from rising to falling inside the step (slopes by a
+        difference along the flow at both ends: ``sgn * g`` rises at the start and falls at the end),
+        the maximum of the cubic Hermite interpolant of ``sgn * g`` probed on the dense output; or
+        None when it does not turn so."""
         q, u, p, guard = self.q, self.u, self.p, ev.guard
         t0, h = seg.t0, seg.t1 - seg.t0
         eps = 1e-6 * h
@@ -645,10 +643,44 @@ class Simulator:
         tp = t0 + lo * h
         if not t0 < tp < seg.t1:
             return None
-        gp = guard(seg(tp), q, u, p)
-        if sgn * gp < 0.0:
+        return tp, guard(seg(tp), q, u, p)
+
+    def _hidden_crossing(self, seg, ev, sgn, g0, g1, f1):
+        """Both ends of the step on the guard's before side: did the guard cross zero and come back
+        inside the step?  (A flight parabola is integrated exactly, so the error control lets a
+        step hold a foot that dips below the ground and rises again, e.g. under a switching
+        thrust; in contact a Penetrator's penetration may dip below 0 and back: found by the
+        property suite and scans of such runs.)  Only when the guard approaches zero at the start
+        and recedes at the end: if the guard is on its after side at its turning point, the
+        crossing is located between the start and that point."""
+        turn = self._turning_point(seg, ev, sgn, g0, g1, f1)
+        if turn is None or sgn * turn[1] < 0.0:
             return None
-        return self._locate(seg, ev, t0, g0, gp, b=tp)
+        return self._locate(seg, ev, seg.t0, g0, turn[1], b=turn[0])
+
+    def _hidden_return(self, seg, ev, sgn, g0, g1, f1, own):
+        """Both ends of the step on the guard's after side: did the guard visit its before side and
+        come back, an event inside the step?  (A bouncing ball near its accumulation point hops for
+        less than a step.)  Only when the guard heads for zero at the start and away from it at the
+        end: if it is on its before side at its turning point, the event is located between that
+        point and the end of the step.  If not, and this is the first step after this event's own
+        jump (``own``) ending further past zero than it began, the guard went back past zero within
+        the rounding of the event's location: the events accumulate faster than the steps resolve
+        them, an event storm — never a result on the wrong side of an active guard."""
+        turn = self._turning_point(seg, ev, -sgn, g0, g1, f1)
+        if turn is None:
+            return None
+        tp, gp = turn
+        if sgn * gp < 0.0:
+            return self._locate(seg, ev, tp, gp, g1)
+        if own and sgn * g1 > sgn * g0:
+            raise ZenoError(
+                f"event storm: {ev.name} happens again within the rounding of its own location at t = "
+                f"{seg.t0:.15g} s (its guard heads back to zero after the jump and is past it again at t = "
+                f"{seg.t1:.15g} s, guard = {g1!r}): the events accumulate faster than the steps resolve them "
+                f"(Zeno behaviour, e.g. a bouncing ball coming to rest). Model the rest (a mode without this event "
+                f"once the motion is small), or stop before this time")
+        return None
 
     def _locate(self, seg, ev, a, ga, gb, b=None):
         """Earliest time in ``[a, b]`` (``b`` the end of the step unless given) where ``ev``'s guard
