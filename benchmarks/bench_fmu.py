@@ -6,7 +6,7 @@ project's launcher, the same variables, the same output buffers, the same FMI tr
 slave's ``do_step`` returns at once (:func:`floor_of` rewrites the slave module inside a copy of
 the built ``.fmu``; the outputs stay those of the start).  It measures what fmpy and the
 project's launcher cost per communication step before any model code runs.  The FMUs are built
-into a temporary folder (``build_fmu.main(["--dest", tmp, ...])``, never into dist/), then run
+into a temporary folder (``pogofmu.build.build_project(tmp, names)``, never into dist/), then run
 alternately through ``fmpy.simulate_fmu`` with fmpy's defaults (validation, extraction to a
 temporary folder), ``stop_time`` = the case's, ``output_interval = 1e-3``; the best CPU time
 (``time.process_time``) of ``--repeat`` runs of each counts (the median is printed too).  The FMU
@@ -83,10 +83,10 @@ FLOOR_STEP = """
 
 def build(dest: Path, names):
     """Build the cases' FMUs (FMI 2.0) into ``dest``; return {name: path}."""
-    import build_fmu
+    from pogofmu.build import build_project
 
     with quiet():
-        built = build_fmu.main(["--dest", str(dest), *sorted(set(names))])
+        built = build_project(dest, sorted(set(names)), cache=ROOT / "build" / "native")
     fmus = {Path(p).stem: Path(p) for p in built if Path(p).parent == dest}  # FMI 2.0 (FMI 3.0: dest/fmi3/)
     fmus.update({f"native/{Path(p).stem}": Path(p) for p in built if Path(p).parent == dest / "native"})
     return fmus
@@ -136,11 +136,11 @@ def compile_c_host(dest: Path) -> Path:
     import shutil
     import subprocess
 
-    import build_fmu
+    from pogofmu.build import fmi_headers
 
     exe = dest / "fmi2_record"
     cc = shutil.which("cc") or shutil.which("gcc")
-    subprocess.run([cc, "-O2", "-DRECORD_IN_MEMORY", f"-I{build_fmu.fmi_headers()}",
+    subprocess.run([cc, "-O2", "-DRECORD_IN_MEMORY", f"-I{fmi_headers()}",
                     str(ROOT / "tests" / "c_host" / "fmi2_host.c"), "-o", str(exe), "-ldl"], check=True)
     return exe
 

@@ -143,7 +143,7 @@ class Limit:
 def main(argv=None):
     from fmpy import read_model_description
 
-    import build_fmu
+    from pogofmu import build
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--repeat", type=int, default=7)
@@ -151,13 +151,13 @@ def main(argv=None):
     ap.add_argument("--fmusim", default=os.environ.get("POGOFMU_FMUSIM"),
                     help="the C fmusim of Reference-FMUs <= v0.0.39: also time the FMUs in it")
     args = ap.parse_args(argv)
-    names = args.model or build_fmu.model_names()
+    names = args.model or build.model_names()
     failed = []
     with tempfile.TemporaryDirectory(prefix="pogofmu-bench-native-") as tmp:
         dest = Path(tmp)
         with bench_fmu.quiet():
             for name in names:
-                build_fmu.main(["--dest", str(dest), name])
+                build.build_project(dest, [name], cache=ROOT / "build" / "native")
         host = bench_fmu.compile_c_host(dest)
         print(f"(g) native FMUs, default experiments at {STEP:g} s, every output recorded; best of {args.repeat} "
               f"rotated runs; C columns: us per communication step of the stepping loop")

@@ -62,7 +62,7 @@ def main(argv=None):
     ap.add_argument("--sizes", type=int, nargs="+", default=[10_000, 100_000, 1_000_000])
     ap.add_argument("--no-fmpy", action="store_true", help="skip the fmpy simulate_ssp peer")
     args = ap.parse_args(argv)
-    import build_fmu
+    from pogofmu.build import build_project
 
     with tempfile.TemporaryDirectory(prefix="pogofmu_soak_") as tmp:
         tmp = Path(tmp)
@@ -70,7 +70,7 @@ def main(argv=None):
         import io
 
         with contextlib.redirect_stdout(io.StringIO()):
-            build_fmu.main(["--dest", str(tmp / "dist")])
+            build_project(tmp / "dist", ssp_dir=ROOT / "ssp", cache=ROOT / "build" / "native")
         ssp = tmp / "dist" / "SpaceHopper.ssp"
 
         def master(n):

@@ -17,7 +17,7 @@ def pytest_configure(config):
 
 @pytest.fixture(scope="session", autouse=True)
 def built_fmus():
-    import build_fmu
+    from pogofmu.build import build_project
     from support import DIST
 
-    return build_fmu.main(["--dest", str(DIST)])
+    return build_project(DIST, ssp_dir=ROOT / "ssp", cache=ROOT / "build" / "native")

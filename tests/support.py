@@ -206,10 +206,10 @@ def compile_c_host(source, exe):
     assert it links no libpython (it must bring nothing but dlopen)."""
     import shutil
 
-    import build_fmu
+    from pogofmu import build
 
     cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
-    subprocess.run([cc, "-O1", "-Wall", f"-I{build_fmu.fmi_headers()}", str(source), "-o", str(exe), "-ldl"],
+    subprocess.run([cc, "-O1", "-Wall", f"-I{build.fmi_headers()}", str(source), "-o", str(exe), "-ldl"],
                    check=True)
     needed = subprocess.run(["readelf", "-d", str(exe)], capture_output=True, text=True, check=True).stdout
     assert "libpython" not in needed

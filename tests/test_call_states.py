@@ -334,7 +334,7 @@ def test_every_fmi_function_is_defined_once_for_both_backends():
     the native FMUs' (with the native backend) alike."""
     import re
 
-    import build_fmu
+    from pogofmu import build
     from pogofmu.codegen.build import FMI_ENTRY
     from support import ROOT
 
@@ -356,7 +356,7 @@ def test_every_fmi_function_is_defined_once_for_both_backends():
         n = sum(1 for fs in where.values() if fs == [f"fmi{fmi}/pg_fmi{fmi}.c"])
         assert n >= (33 if fmi == 2 else 75), (fmi, n)  # the standard's (FMI 2.0 CS: 33; FMI 3.0: 75)
         entry = native / f"fmi{fmi}" / f"pg_fmi{fmi}.c"
-        assert entry in build_fmu.launcher_sources(fmi) and entry == FMI_ENTRY[fmi][0]
+        assert entry in build.launcher_sources(fmi) and entry == FMI_ENTRY[fmi][0]
         body = entry.read_text()
         assert '#include "call_states.h"' in body and "pg_backend.h" in body and "Py" not in re.sub(
             r"/\*.*?\*/", "", body, flags=re.S)

@@ -14,11 +14,11 @@ import zipfile
 
 import pytest
 
-import build_fmu
+from pogofmu import build
 from pogofmu.runtime.engine import SOLVER_PARAMETERS
 from support import DIST, Instance, fmu_path, init_failure_text, run_libcosim, simulate
 
-FMUS = build_fmu.model_names()
+FMUS = build.model_names()
 BOTH = FMUS + [f"native/{n}" for n in FMUS]  # the Python-hosted and the native FMU of every model
 
 
@@ -28,7 +28,7 @@ def model_description(name):
 
 
 def slave_model(name):
-    return build_fmu.slave_class(name.rpartition("/")[2]).model
+    return build.slave_class(name.rpartition("/")[2]).model
 
 
 def native(name):

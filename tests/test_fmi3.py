@@ -20,10 +20,10 @@ from functools import lru_cache
 import numpy as np
 import pytest
 
-import build_fmu
+from pogofmu import build
 from support import DIST, ROOT, compile_c_host, fmu_path, parse_event_log, reference_events, simulate
 
-MODELS = {name: build_fmu.slave_class(name).model for name in build_fmu.model_names()}
+MODELS = {name: build.slave_class(name).model for name in build.model_names()}
 FMUS = sorted(MODELS)
 # the models whose co-simulation steps hold events (a model without states switches only with its inputs)
 WITH_EVENTS = sorted(name for name, model in MODELS.items() if model.events and model.states)
@@ -112,7 +112,7 @@ def test_fmi3_validates_and_offers_both_interfaces(name, backend):
     with zipfile.ZipFile(fmu3_path(name)) as z:
         binaries = [n for n in z.namelist() if n.startswith("binaries/")]
     expected = [f"binaries/x86_64-linux/{name}.so"]
-    if backend == "native" and build_fmu.mingw_available():  # (and no Windows binary of the Python FMU)
+    if backend == "native" and build.mingw_available():  # (and no Windows binary of the Python FMU)
         expected.append(f"binaries/x86_64-windows/{name}.dll")
     assert binaries == expected
 

@@ -25,11 +25,11 @@ import subprocess
 import numpy as np
 import pytest
 
-import build_fmu
+from pogofmu import build
 from support import fmu_path, simulate
 from test_portability import BARE_ENV
 
-FMUS = build_fmu.model_names()
+FMUS = build.model_names()
 
 
 def _fmusim():

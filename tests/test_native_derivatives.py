@@ -15,10 +15,10 @@ import ctypes
 
 import pytest
 
-import build_fmu
+from pogofmu import build
 from support import fmu_path
 
-MODELS = {name: build_fmu.slave_class(name).model for name in build_fmu.model_names()}
+MODELS = {name: build.slave_class(name).model for name in build.model_names()}
 WITH_STATES = sorted(n for n, m in MODELS.items() if m.states)
 D = ctypes.c_double
 

@@ -19,11 +19,11 @@ import zipfile
 import numpy as np
 import pytest
 
-import build_fmu
+from pogofmu import build
 from support import DIST, Instance, clean_venv, compile_c_host, fmu_path, simulate
 from test_portability import BARE_ENV, C_HOST_SOURCE, outputs_of, run_c_host
 
-FMUS = build_fmu.model_names()
+FMUS = build.model_names()
 
 
 @pytest.fixture(scope="module")
@@ -168,7 +168,7 @@ def test_refused_calls_and_failures_are_the_python_fmus(name):
     initialization, bad steps, a NaN input, a leg that bottoms out and the step after it."""
     from fmpy.fmi1 import FMICallException
 
-    model = build_fmu.slave_class(name).model
+    model = build.slave_class(name).model
 
     def script(inst):
         for call in (lambda: inst.fmu.doStep(currentCommunicationPoint=0.0, communicationStepSize=1e-3),
@@ -232,9 +232,9 @@ def test_the_fmi3_model_description_is_the_python_hosted_fmus(name):
     assert ET.tostring(a) == ET.tostring(b)
     with zipfile.ZipFile(fmu_path(f"native/fmi3/{name}")) as z:
         units = sorted(n[len("sources/"):] for n in z.namelist() if n.startswith("sources/") and n.endswith(".c"))
-        build = ET.fromstring(z.read("sources/buildDescription.xml"))
-    listed = sorted(f.get("name") for f in build.iter("SourceFile"))
-    assert listed == units and build.find("BuildConfiguration").get("modelIdentifier") == name
+        described = ET.fromstring(z.read("sources/buildDescription.xml"))
+    listed = sorted(f.get("name") for f in described.iter("SourceFile"))
+    assert listed == units and described.find("BuildConfiguration").get("modelIdentifier") == name
 
 
 FMI3_RUNS = {  # fmpy simulate_fmu keywords: each way of running an FMI 3.0 FMU

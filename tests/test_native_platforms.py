@@ -1,7 +1,7 @@
 """The native FMUs beyond the Linux binary (issue 18): Windows under wine, and the source FMU.
 
 * Windows: ``binaries/win64/<Model>.dll`` (FMI 2.0) and ``binaries/x86_64-windows/<Model>.dll``
-  (FMI 3.0), cross-compiled by build_fmu.py with mingw-w64, need nothing but Windows' own
+  (FMI 3.0), cross-compiled by the build with mingw-w64, need nothing but Windows' own
   KERNEL32 and msvcrt and export the FMI functions only (and the FMI 2.0 FMU its C stepping loop
   for the sweeps, ``pogofmu_fmi2_run_grid``); the tests' C hosts
   (tests/c_host/fmi2_host.c, fmi3_host.c), cross-compiled as well, run every default experiment
@@ -26,11 +26,11 @@ from pathlib import Path
 
 import pytest
 
-import build_fmu
+from pogofmu import build
 from support import compile_c_host, fmu_path
 from test_portability import BARE_ENV, C_HOST_SOURCE, outputs_of, run_c_host
 
-FMUS = build_fmu.model_names()
+FMUS = build.model_names()
 MINGW = shutil.which(os.environ.get("POGOFMU_MINGW") or "x86_64-w64-mingw32-gcc")
 WINE = next((w for w in (shutil.which("wine64"), "/usr/lib/wine/wine64", shutil.which("wine"))
              if w and os.access(w, os.X_OK)), None)
@@ -99,7 +99,7 @@ def test_the_windows_binary_needs_only_windows_own_libraries(name, fmi, tmp_path
     platform_dir = "win64" if fmi == 2 else "x86_64-windows"
     folder = _extract(name, tmp_path, lambda m: m.startswith(f"binaries/{platform_dir}/"), fmi=fmi)
     dll = folder / "binaries" / platform_dir / f"{name}.dll"
-    assert dll.exists(), "mingw-w64 is installed, so build_fmu.py must have built the Windows binary"
+    assert dll.exists(), "mingw-w64 is installed, so the build must have built the Windows binary"
     objdump = shutil.which("x86_64-w64-mingw32-objdump") or "objdump"
     text = subprocess.run([objdump, "-p", str(dll)], capture_output=True, text=True, check=True).stdout
     imported = {line.split(":", 1)[1].strip() for line in text.splitlines() if "DLL Name:" in line}
@@ -112,7 +112,7 @@ def test_the_windows_binary_needs_only_windows_own_libraries(name, fmi, tmp_path
 
 
 def _cross_compile(source, exe):
-    subprocess.run([MINGW, "-O1", "-Wall", "-D__USE_MINGW_ANSI_STDIO=1", f"-I{build_fmu.fmi_headers()}",
+    subprocess.run([MINGW, "-O1", "-Wall", "-D__USE_MINGW_ANSI_STDIO=1", f"-I{build.fmi_headers()}",
                     str(source), "-o", str(exe)], check=True)
     return exe
 

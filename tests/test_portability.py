@@ -14,11 +14,11 @@ from pathlib import Path
 
 import pytest
 
-import build_fmu
+from pogofmu import build
 from support import clean_venv as _clean_venv
 from support import DIST, ROOT, compile_c_host, fmu_path, simulate
 
-FMUS = build_fmu.model_names()
+FMUS = build.model_names()
 C_HOST_SOURCE = ROOT / "tests" / "c_host" / "fmi2_host.c"
 CLEAN_SCRIPT = ROOT / "tests" / "_clean_venv_script.py"
 TEARDOWN_PROCESSES = int(os.environ.get("POGOFMU_TEARDOWN_PROCESSES", "100"))  # per host
@@ -191,13 +191,13 @@ def test_c_host_with_a_cpython_older_than_3_10_is_told_which_it_found(c_host, un
     version and the need, before calling anything in it."""
     import shutil
 
-    import build_fmu
+    from pogofmu import build
 
     source = tmp_path / "fake_python.c"
     source.write_text(FAKE_PYTHON)
     fake = tmp_path / "libpython3.9.so.1.0"
     cc = shutil.which("cc") or shutil.which("gcc")
-    subprocess.run([cc, "-shared", "-fPIC", f"-I{build_fmu.NATIVE / 'python'}", str(source), "-o", str(fake)],
+    subprocess.run([cc, "-shared", "-fPIC", f"-I{build.NATIVE / 'python'}", str(source), "-o", str(fake)],
                    check=True, capture_output=True)
     real = sorted((Path.home() / ".pyenv/versions").glob("3.9*/lib/libpython3.9.so.1.0"))
     for lib in [fake, *real[:1]]:

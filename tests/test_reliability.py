@@ -163,10 +163,10 @@ def test_another_builds_serialized_state_is_refused_naming_the_build(tmp_path):
     from fmpy.fmi1 import FMICallException
     from fmpy.fmi2 import FMU2Slave
 
-    import build_fmu
+    from pogofmu import build
 
     with contextlib.redirect_stdout(io.StringIO()):
-        other = build_fmu.build_one("PogoStick", tmp_path, token_seed="another build")
+        other = build.build_one("PogoStick", tmp_path, token_seed="another build")
     md = read_model_description(str(other))
     assert md.guid != read_model_description(str(fmu_path("PogoStick"))).guid
     fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(str(other)), modelIdentifier=md.coSimulation.modelIdentifier,

@@ -6,6 +6,7 @@ import sys
 
 # command: (module, function, one line for --help); each gets the rest of the line and its own prog
 COMMANDS = {
+    "export": ("pogofmu.build.export", "main", "export model files (HybridModels) as FMUs: FMI 2.0/3.0, Python-hosted/native"),
     "run": ("pogofmu.master", "main", "simulate each FMU's default experiment: CSV, event table, figures"),
     "ssp": ("pogofmu.ssp.cli", "main", "run or check an SSP system (events synchronized, or model exchange)"),
     "sweep": ("pogofmu.sweep", "sweep_main", "grids and Monte Carlo of one FMU on Dask, to Parquet"),
@@ -15,7 +16,7 @@ COMMANDS = {
 
 def usage() -> str:
     lines = ["usage: pogofmu [--version] [--help] COMMAND [ARGS ...]", "",
-             "Hybrid pogo-stick FMUs (Pei, Quadrelli & Wright 2020): run, compose, sweep and study them.", "",
+             "FMUs of hybrid models with exact state events: export, run, compose, sweep and study them.", "",
              "commands:"]
     lines += [f"  {name:7s} {text}" for name, (_, _, text) in COMMANDS.items()]
     lines += ["", "pogofmu COMMAND --help tells each command's options. Errors are one line; --debug (where a",

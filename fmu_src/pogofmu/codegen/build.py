@@ -1,5 +1,6 @@
 """Compiling the native code: a model's generated C with the engine's C files, by the system C
-compiler (host-side; ``build_fmu.py`` and the tests use it).
+compiler (host-side; :mod:`pogofmu.build` and the tests use it).  Functions that take a model take
+a :class:`~pogofmu.runtime.model.HybridModel` or the name of one of the project's models.
 
 Flags: C99, ``-O2`` and ``-ffp-contract=off`` — no fused multiply-add, so that every operation is
 rounded as Python rounds it (the same bits as the Python engine).
@@ -44,25 +45,34 @@ def compile_c(sources: Sequence[Path], out: Path, *, shared: bool = True, includ
     return out
 
 
-def write_model_source(model_name: str, folder: Path) -> Path:
-    """``<folder>/<Model>_model.c``, generated from the Python model."""
-    from pogofmu.runtime.models import get
+def _model(model):
+    """A model given as itself or by the name of one of the project's models."""
+    if isinstance(model, str):
+        from pogofmu.runtime.models import get
 
+        return get(model)
+    return model
+
+
+def write_model_source(model, folder: Path) -> Path:
+    """``<folder>/<Model>_model.c``, generated from the Python model."""
     from .cmodel import generate
 
+    model = _model(model)
     folder.mkdir(parents=True, exist_ok=True)
-    path = folder / f"{model_name}_model.c"
-    text = generate(get(model_name))
+    path = folder / f"{model.name}_model.c"
+    text = generate(model)
     if not path.exists() or path.read_text() != text:
         path.write_text(text)
     return path
 
 
-def model_library(model_name: str, folder: Path, cc: Optional[str] = None) -> Path:
+def model_library(model, folder: Path, cc: Optional[str] = None) -> Path:
     """A shared library of the model's generated C and the engine's support code (``PG_MODEL``
     exported), for tests that call the generated functions directly."""
-    src = write_model_source(model_name, folder)
-    out = folder / f"lib{model_name}_model.so"
+    model = _model(model)
+    src = write_model_source(model, folder)
+    out = folder / f"lib{model.name}_model.so"
     return compile_c([src, ENGINE / "pg_support.c"], out, include=[ENGINE], cc=cc)
 
 
@@ -81,11 +91,12 @@ def write_pairs_source(folder: Path) -> Path:
 ENGINE_SOURCES = ("pg_engine.c", "pg_support.c")
 
 
-def engine_library(model_name: str, folder: Path, cc: Optional[str] = None) -> Path:
+def engine_library(model, folder: Path, cc: Optional[str] = None) -> Path:
     """A shared library of the native engine with the model's generated C (``PG_MODEL`` and the
     ``pg_engine_*`` functions exported), for tests that drive the engine directly."""
-    srcs = [write_model_source(model_name, folder), write_pairs_source(folder), *(ENGINE / s for s in ENGINE_SOURCES)]
-    out = folder / f"lib{model_name}_engine.so"
+    model = _model(model)
+    srcs = [write_model_source(model, folder), write_pairs_source(folder), *(ENGINE / s for s in ENGINE_SOURCES)]
+    out = folder / f"lib{model.name}_engine.so"
     return compile_c(srcs, out, include=[ENGINE], cc=cc)
 
 
@@ -104,7 +115,7 @@ MINGW = "x86_64-w64-mingw32-gcc"
 WINDOWS_FLAGS = ("-D__USE_MINGW_ANSI_STDIO=1", "-static-libgcc", "-s", "-Wl,--no-insert-timestamp")
 
 
-def stage_sources(model_name: str, fmi: int, folder: Path, fmi_headers: Path):
+def stage_sources(model, fmi: int, folder: Path, fmi_headers: Path):
     """Write every file of the native FMU's ``sources/`` into ``folder`` (flat: the generated model
     and tableaux, the engine, the adapter and its backend functions, the FMI entry file, the
     call-state table, the log filter and the FMI headers), without the description file, which needs the token: ``(files, digest)``, the digest
@@ -113,7 +124,7 @@ def stage_sources(model_name: str, fmi: int, folder: Path, fmi_headers: Path):
     import hashlib
 
     folder.mkdir(parents=True, exist_ok=True)
-    write_model_source(model_name, folder)
+    write_model_source(model, folder)
     write_pairs_source(folder)
     copied = [*(ENGINE / s for s in ENGINE_SOURCES), *ENGINE.glob("*.h"), *(ADAPTER / s for s in ADAPTER_SOURCES),
               *ADAPTER.glob("*.h"), *FMI_ENTRY[fmi], *ENTRY_SHARED,
@@ -127,13 +138,12 @@ def stage_sources(model_name: str, fmi: int, folder: Path, fmi_headers: Path):
     return files, digest.hexdigest()
 
 
-def write_fmu_source(model_name: str, fmi: int, folder: Path, token: str, build: str) -> Path:
-    from pogofmu.runtime.models import get
-
+def write_fmu_source(model, fmi: int, folder: Path, token: str, build: str) -> Path:
     from .cfmu import generate
 
-    path = folder / f"{model_name}_fmi{fmi}.c"
-    path.write_text(generate(get(model_name), fmi, token, build))
+    model = _model(model)
+    path = folder / f"{model.name}_fmi{fmi}.c"
+    path.write_text(generate(model, fmi, token, build))
     return path
 
 
@@ -152,27 +162,103 @@ class NativeBuild:
         self.sources, self.units, self.token, self.build, self.binaries = sources, units, token, build, binaries
 
 
-def native_fmu(model_name: str, fmi: int, folder: Path, fmi_headers: Path, cc: Optional[str] = None,
-               token: Optional[str] = None, windows: bool = False) -> NativeBuild:
+def _included(unit: Path, include: Sequence[Path]):
+    """``unit`` and the headers it includes (``#include "..."``, found in ``include``), transitively."""
+    import re
+
+    seen, todo = [], [unit]
+    while todo:
+        f = todo.pop()
+        if f in seen:
+            continue
+        seen.append(f)
+        for name in re.findall(r'#\s*include\s+"([^"]+)"', f.read_text(errors="replace")):
+            for folder in [f.parent, *include]:
+                cand = Path(folder) / name
+                if cand.is_file():
+                    todo.append(cand)
+                    break
+    return sorted(seen)
+
+
+def compile_units(units: Sequence[Path], out: Path, include: Sequence[Path], cc: Optional[str] = None,
+                  extra: Sequence[str] = (), pic: bool = True, cache: Optional[Path] = None,
+                  shared_units: Iterable[str] = ()) -> Path:
+    """A shared library of ``units`` compiled one object per unit, in parallel, then linked: the
+    objects of ``shared_units`` (the engine and adapter files, the same for every model) are kept in
+    ``cache`` by the hash of the compiler, the flags, the unit and every header of ``include``, so a
+    second model (or FMI version) compiles only its own two files."""
+    import hashlib
+    from concurrent.futures import ThreadPoolExecutor
+
+    compiler = c_compiler(cc)
+    if compiler is None:
+        raise CompileError("no C compiler found (cc, gcc or clang; or set CC)")
+    flags = [*CFLAGS, *(["-fPIC"] if pic else []), *extra, *(f"-I{p}" for p in include)]
+    shared_units = set(shared_units)
+    objdir = out.parent / f"{out.stem}.objects"
+    objdir.mkdir(parents=True, exist_ok=True)
+
+    def one(unit: Path) -> Path:
+        obj = objdir / (unit.stem + ".o")
+        cached = None
+        if cache is not None and unit.name in shared_units:
+            key = hashlib.sha256(" ".join([compiler, *flags]).encode())
+            for part in _included(unit, include):  # the unit and every header it includes, by content
+                key.update(part.name.encode() + b"\0" + part.read_bytes())
+            cached = Path(cache) / f"{unit.stem}-{key.hexdigest()[:20]}.o"
+            if cached.exists():
+                shutil.copyfile(cached, obj)
+                return obj
+        proc = subprocess.run([compiler, *flags, "-c", str(unit), "-o", str(obj)], capture_output=True, text=True)
+        if proc.returncode != 0:
+            lines = (proc.stderr or proc.stdout).strip().splitlines()
+            raise CompileError(f"{Path(compiler).name} failed ({proc.returncode}) on {unit.name}: " + " | ".join(lines[:6]))
+        if cached is not None:
+            cached.parent.mkdir(parents=True, exist_ok=True)
+            tmp = cached.with_suffix(f".{os.getpid()}.tmp")
+            shutil.copyfile(obj, tmp)
+            os.replace(tmp, cached)
+        return obj
+
+    with ThreadPoolExecutor(max_workers=max(1, min(len(units), os.cpu_count() or 1))) as pool:
+        objects = list(pool.map(one, units))
+    cmd = [compiler, "-shared", *extra, *(str(o) for o in objects), "-o", str(out), "-lm"]
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    if proc.returncode != 0:
+        lines = (proc.stderr or proc.stdout).strip().splitlines()
+        raise CompileError(f"{Path(compiler).name} failed ({proc.returncode}) linking: " + " | ".join(lines[:6]))
+    shutil.rmtree(objdir, ignore_errors=True)
+    return out
+
+
+def native_fmu(model, fmi: int, folder: Path, fmi_headers: Path, cc: Optional[str] = None,
+               token: Optional[str] = None, windows: bool = False, cache: Optional[Path] = None) -> NativeBuild:
     """Stage the native FMU's sources in ``folder/sources`` and compile them: the Linux library with
-    the system compiler and, with ``windows``, the Windows DLL with mingw-w64."""
+    the system compiler and, with ``windows``, the Windows DLL with mingw-w64 (objects of the
+    model-independent files kept in ``cache``, see :func:`compile_units`)."""
     import uuid
 
+    model = _model(model)
+    model_name = model.name
     src = folder / "sources"
-    files, digest = stage_sources(model_name, fmi, src, fmi_headers)
+    files, digest = stage_sources(model, fmi, src, fmi_headers)
     build = f"native_{model_name}_{digest[:12]}"
     token = token or "{" + str(uuid.uuid5(uuid.NAMESPACE_URL, f"pogofmu/{build}/fmi{fmi}")) + "}"
-    desc = write_fmu_source(model_name, fmi, src, token, build)
+    desc = write_fmu_source(model, fmi, src, token, build)
     units = sorted({*(f for f in files if f.endswith(".c")), desc.name})
     binaries = {}
-    out = folder / f"{model_name}.so"
-    compile_c([src / u for u in units], out, include=[src], cc=cc, extra=("-fvisibility=hidden",))
-    binaries["linux64" if fmi == 2 else "x86_64-linux"] = out
+    own = {desc.name, f"{model_name}_model.c"}
+    shared = [u for u in units if u not in own]
+    jobs = [("linux64" if fmi == 2 else "x86_64-linux", folder / f"{model_name}.so", cc, True, ("-fvisibility=hidden",))]
     if windows:
         compiler = mingw_compiler()
         if compiler is None:
             raise CompileError(f"no {MINGW} (Debian: gcc-mingw-w64-x86-64; or set POGOFMU_MINGW)")
-        dll = folder / f"{model_name}.dll"
-        compile_c([src / u for u in units], dll, include=[src], cc=compiler, pic=False, extra=WINDOWS_FLAGS)
-        binaries["win64" if fmi == 2 else "x86_64-windows"] = dll
+        jobs.append(("win64" if fmi == 2 else "x86_64-windows", folder / f"{model_name}.dll", compiler, False,
+                     WINDOWS_FLAGS))
+    for platform, out, compiler, pic, extra in jobs:
+        compile_units([src / u for u in units], out, include=[src], cc=compiler, extra=extra, pic=pic, cache=cache,
+                      shared_units=shared)
+        binaries[platform] = out
     return NativeBuild(src, units, token, build, binaries)

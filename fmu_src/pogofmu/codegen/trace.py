@@ -28,6 +28,8 @@ from pogofmu.runtime.model import ModelError
 
 FLOAT, INT, BOOL = "f", "i", "b"
 MAX_PATHS = 20000
+MAX_DECISIONS = 2000  # on one path: more is a loop whose trip count depends on a traced value
+_CODEGEN = __import__("os").path.dirname(__import__("os").path.abspath(__file__))
 
 
 class TraceError(Exception):
@@ -92,6 +94,11 @@ class Recorder:
         if implied is not None:
             return implied
         k = len(self.decisions)
+        if k >= MAX_DECISIONS:
+            raise TraceError(f"more than {MAX_DECISIONS} decisions on one path: a loop whose trip count depends on a "
+                             f"state, an input or a parameter (while x > ...: or a break on such a value); the C "
+                             f"code has one branch per decision. Rewrite: a loop of a fixed count (for i in "
+                             f"range(N), N a constant) with the condition inside it, or a closed form")
         value = self.prefix[k] if k < len(self.prefix) else True
         self.decisions.append((cond, value, len(self.nodes)))
         self._known[cond] = value
@@ -146,7 +153,8 @@ def _arg(v):
         return const(int(v))
     if isinstance(v, (int, float)):
         return const(v)
-    raise TraceError(f"an operation mixes a traced value with {type(v).__name__} {v!r}")
+    raise TraceError(f"an operation mixes a traced value with {type(v).__name__} {v!r}: a model's values are ints "
+                     f"and floats")
 
 
 def _kind(v):
@@ -228,13 +236,17 @@ class Sym:
 
     # ---- what cannot be traced ----
     def __float__(self):
-        raise TraceError("float() of a traced value (write v, or v * 1.0 for an int)")
+        raise TraceError("float() of a traced value, or a call into math or numpy that converts it (math.sqrt(v)): "
+                         "the generator follows pogofmu.fmath only. Rewrite: fmath.sqrt(v) (exp, log, sin, cos, "
+                         "atan2, hypot, isfinite) for math.*, and v (or v * 1.0 for an int) for float(v)")
 
     def __int__(self):
-        raise TraceError("int() of a traced value (write math.trunc(v))")
+        raise TraceError("int() of a traced value. Rewrite: math.trunc(v)")
 
     def __index__(self):
-        raise TraceError("a traced value used as an index")
+        raise TraceError("a traced value used as an index or a count (x[i], range(n) with i or n a state, an input "
+                         "or a parameter): the C code's loops and indices are fixed. Rewrite: index with constants, "
+                         "loop over range(N) with N a constant")
 
     # ---- formatting: placeholders in messages ----
     def __format__(self, spec):
@@ -366,10 +378,10 @@ def explore(fn: Callable[[], Any], what: str) -> List[Path]:
                 except ModelError as exc:
                     result = ("raise", type(exc).__name__, str(exc))
                 except TraceError as exc:
-                    raise TraceError(f"{what}: {exc}") from None
+                    raise TraceError(f"{_where(exc)}{what}: {exc}") from None
                 except Exception as exc:  # noqa: BLE001 - a path that cannot be traced
-                    raise TraceError(f"{what}: {type(exc).__name__}: {exc} (on the path "
-                                     f"{[v for _, v, _ in rec.decisions]})") from exc
+                    raise TraceError(f"{_where(exc)}{what}: {type(exc).__name__}: {exc}{_hint(exc)} (on the path "
+                                     f"{[v for _, v, _ in rec.decisions]})") from None
             finally:
                 _current[0] = None
             for k in range(len(prefix), len(rec.decisions)):
@@ -378,6 +390,33 @@ def explore(fn: Callable[[], Any], what: str) -> List[Path]:
             if len(paths) > MAX_PATHS:
                 raise TraceError(f"{what}: more than {MAX_PATHS} paths")
     return paths
+
+
+def _where(exc) -> str:
+    """``file:line: `` of the model's code where a trace failed (the innermost frame outside the
+    generator and the interpreter's own files), or nothing."""
+    import os
+    import traceback
+
+    found = None
+    for frame in traceback.extract_tb(exc.__traceback__):
+        if not frame.filename.startswith("<") and os.path.dirname(os.path.abspath(frame.filename)) != _CODEGEN \
+                and "site-packages" not in frame.filename and "/lib/python" not in frame.filename:
+            found = frame
+    return f"{found.filename}:{found.lineno}: " if found else ""
+
+
+def _hint(exc) -> str:
+    """What to write instead, for the usual constructs the generator cannot follow."""
+    text = str(exc)
+    if "ufunc" in text or "numpy" in text:
+        return ": a numpy call on a traced value. Rewrite: fmath.<name>(v), arithmetic, min/max"
+    if "unsupported operand" in text or "__round__" in text or "doesn't define" in text:
+        return (": an operation the generator does not follow (it follows + - * / ** abs, comparisons, min/max "
+                "and fmath). Rewrite: x % y as x - y * math.trunc(x / y), round(v) as math.trunc(v + 0.5) for v >= 0")
+    if isinstance(exc, TypeError):
+        return ": a builtin or a value the generator cannot follow (a model's values are ints and floats)"
+    return ""
 
 
 def is_sym(v) -> bool:

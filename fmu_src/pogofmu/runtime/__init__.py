@@ -8,7 +8,20 @@ that build of that model).
 * :mod:`.fmi2`, :mod:`.fmi3` — one adapter per FMI version from any model to an FMU;
   :mod:`.status` — the FMI status table; :mod:`.units` — the unit definitions.
 
-Nothing here imports anything outside this folder: the build stages the folder as it is.
+Nothing here imports anything outside this folder: the build stages the folder as it is, under a
+name private to each build (``_pogofmu_<Model>_<hash>``), and rewrites a user's model file's
+``from pogofmu import ...`` to that name: the names below are the public API a model file imports
+(``pogofmu/__init__.py`` gives the same ones on the host), and ``pogofmu.elements`` /
+``pogofmu.fmath`` are this folder's :mod:`.elements` and :mod:`.fmath`.
 """
 
-__version__ = "0.2.0"  # the project's version (pyproject.toml reads it; every FMU carries it)
+__version__ = "0.3.0"  # the project's version (pyproject.toml reads it; every FMU carries it)
+
+from . import fmath  # noqa: E402
+from .model import (FALLING, RISING, DomainError, Event, HybridModel, ModelError, Parameter,  # noqa: E402
+                    ParameterError, Params, Variable, ZenoError, require, require_finite, require_nonnegative,
+                    require_positive)
+
+__all__ = ["HybridModel", "Event", "Variable", "Parameter", "FALLING", "RISING", "Params", "ModelError",
+           "ParameterError", "DomainError", "ZenoError", "require", "require_finite", "require_positive",
+           "require_nonnegative", "fmath", "__version__"]

@@ -13,6 +13,10 @@ A leg element is plain data plus pure functions, like a model (it knows nothing 
 
 A leg is a tuple of elements; :func:`pogofmu.runtime.models.stick.make_stick_model` sums the forces,
 stacks the states and collects the events and checks: adding an element is adding a class here.
+
+This module is also the public ``pogofmu.elements`` of a user's model file: the elements, the
+soil law (:class:`HuntCrossley`, from :mod:`.soil`) and the parameter rules, which a model calls
+in its own flow, guards and checks (docs/writing-models.md).
 """
 from __future__ import annotations
 
@@ -21,6 +25,10 @@ from typing import Callable, Tuple
 
 from .plant import DAMPING, STIFFNESS
 from .model import FALLING, RISING, Parameter, Params, Variable, require, require_nonnegative
+from .soil import HuntCrossley, positive_power
+
+__all__ = ["Element", "LegEvent", "LinearSpring", "LinearDashpot", "MemSpring", "MemDashpot", "SMAFlag",
+           "SPRING_LAWS", "HuntCrossley", "positive_power"]
 
 
 @dataclass(frozen=True)

@@ -17,10 +17,28 @@ Conventions (docs/models.md):
 """
 from __future__ import annotations
 
+import os
+import sys
 from dataclasses import dataclass, field
 from typing import Callable, Mapping, Optional, Sequence, Tuple
 
 from . import fmath
+
+_HERE = os.path.dirname(os.path.abspath(__file__))
+_INTERNAL = (_HERE, os.path.join(_HERE, "engine"))
+
+
+def _site():
+    """``(file, line)`` where a declaration was written: the first caller outside this package's
+    own folder (a model file, or the helper that built the declaration), for the build's messages
+    about a model (``ball.py:12: ...``)."""
+    frame = sys._getframe(2)
+    while frame is not None:
+        name = frame.f_code.co_filename
+        if not name.startswith("<") and os.path.dirname(os.path.abspath(name)) not in _INTERNAL:
+            return name, frame.f_lineno
+        frame = frame.f_back
+    return None
 
 FALLING = -1
 RISING = 1
@@ -50,6 +68,11 @@ class Variable:
     unit: str = ""
     description: str = ""
     start: float = 0.0
+    site: Optional[tuple] = field(default=None, compare=False, repr=False)  # (file, line) of the declaration
+
+    def __post_init__(self):
+        if self.site is None:
+            object.__setattr__(self, "site", _site())
 
 
 @dataclass(frozen=True)
@@ -61,6 +84,11 @@ class Parameter:
     unit: str = ""
     description: str = ""
     integer: bool = False
+    site: Optional[tuple] = field(default=None, compare=False, repr=False)  # (file, line) of the declaration
+
+    def __post_init__(self):
+        if self.site is None:
+            object.__setattr__(self, "site", _site())
 
 
 @dataclass(frozen=True)
@@ -72,6 +100,11 @@ class Event:
     guard: Callable  # (x, q, u, p) -> float
     jump: Callable  # (x, q, u, p) -> (x_new, q_new)
     active: Callable = lambda q: True  # (q) -> bool
+    site: Optional[tuple] = field(default=None, compare=False, repr=False)  # (file, line) of the declaration
+
+    def __post_init__(self):
+        if self.site is None:
+            object.__setattr__(self, "site", _site())
 
 
 class Params:
@@ -149,6 +182,11 @@ class HybridModel:
     default_step: float = 1e-3
     time_scales: Optional[Callable] = None  # p -> ((label, parameter names, seconds), ...)
     error_scales: Optional[Callable] = None  # p -> ((label, parameter names, magnitude), ...)
+    site: Optional[tuple] = field(default=None, compare=False, repr=False)  # (file, line) of the declaration
+
+    def __post_init__(self):
+        if self.site is None:
+            object.__setattr__(self, "site", _site())
 
     def engine_outputs(self) -> Tuple[Variable, ...]:
         """Outputs every model has, kept by the engine: event counter, time and kind of the latest."""
