@@ -2,7 +2,8 @@
 """The project's two commands (and a few more), runnable on a machine with nothing but Python.
 
     python3 tasks.py run     # build + validate every FMU, simulate default experiments -> results/
-                             # (the native FMUs' -> results/native/),
+                             # (the native FMUs' -> results/native/), export examples/ -> dist/examples/
+                             # (pogofmu export) and run them -> results/examples/,
                              # run the SpaceHopper SSP on the Moon
     python3 tasks.py test    # the test suite (what CI runs)
     python3 tasks.py bench   # the benchmarks (benchmarks/)
@@ -65,6 +66,18 @@ def main(argv):
         if (ROOT / "dist" / "native").is_dir():  # the native FMUs (no Python inside): the same experiments
             rc = subprocess.call([sys.executable, "-m", "pogofmu.cli", "run", "--dist", str(ROOT / "dist" / "native"),
                                   "--out", str(ROOT / "results" / "native"), *rest], cwd=ROOT)
+            if rc:
+                return rc
+        # the user's side: the model files of examples/, exported by `pogofmu export` as a user does,
+        # and their default experiments
+        examples = sorted(str(p) for p in (ROOT / "examples").glob("*/*.py"))
+        if examples:
+            rc = subprocess.call([sys.executable, "-m", "pogofmu.cli", "export", *examples,
+                                  "--out", str(ROOT / "dist" / "examples")], cwd=ROOT)
+            if rc:
+                return rc
+            rc = subprocess.call([sys.executable, "-m", "pogofmu.cli", "run", "--dist", str(ROOT / "dist" / "examples"),
+                                  "--out", str(ROOT / "results" / "examples")], cwd=ROOT)
             if rc:
                 return rc
         # the system-level example: the SpaceHopper on the Moon, run by the project's SSP master

@@ -206,9 +206,16 @@ def plot_figures(res, model, out_dir: Path, title: str):
     return files
 
 
+_EXTRACTED = []  # folders of FMUs whose Python code this process has imported (kept while it runs)
+
+
 def model_of(fmu: Path):
-    """The HybridModel behind an FMU built by this project (its modelName in the registry), or
-    None for any other FMU."""
+    """The HybridModel behind an FMU exported by pogofmu: one of the project's models (its modelName
+    in the registry), else the model inside a Python-hosted FMU (its own code, loaded as the FMU's
+    launcher loads it: under the build's private names), or None for any other FMU."""
+    import tempfile
+    import zipfile
+
     from fmpy import read_model_description
 
     from pogofmu.runtime.models import all_models
@@ -217,7 +224,26 @@ def model_of(fmu: Path):
         name = read_model_description(str(fmu), validate=False).modelName
     except Exception:  # noqa: BLE001 - not an FMU of this project: no model
         return None
-    return all_models().get(name)
+    if name in all_models():
+        return all_models()[name]
+    try:
+        with zipfile.ZipFile(fmu) as z:
+            if "resources/pogofmu_launch.txt" not in z.namelist():
+                return None
+            tmp = tempfile.TemporaryDirectory(prefix="pogofmu_model_")
+            _EXTRACTED.append(tmp)
+            z.extractall(tmp.name, [n for n in z.namelist() if n.startswith("resources/")])
+        resources = str(Path(tmp.name) / "resources")
+        sys.path.insert(0, resources)
+        try:
+            import importlib
+
+            boot = importlib.import_module("pogofmu_boot")
+            return boot.load(resources).model
+        finally:
+            sys.path.remove(resources)
+    except Exception:  # noqa: BLE001 - an FMU whose code does not load here: outputs only
+        return None
 
 
 class RunError(Exception):

@@ -57,10 +57,11 @@ _RATE_UNITS = {"m": "m/s", "m/s": "m/s2", "m.s": "m", "s": "", "J": "W", "": ""}
 
 
 def rate_unit(unit: str) -> str:
-    try:
+    """The unit of the time derivative of a state in ``unit`` (the SI names of the common ones,
+    ``<unit>/s`` for any other: ``degC`` -> ``degC/s``, ``N.m`` -> ``(N.m)/s``)."""
+    if unit in _RATE_UNITS:
         return _RATE_UNITS[unit]
-    except KeyError:
-        raise ValueError(f"no unit for the rate of a state in {unit!r}: add it to pogofmu.runtime.fmi3._RATE_UNITS") from None
+    return f"{unit}/s" if unit.replace("_", "").isalnum() else f"({unit})/s"
 
 
 def indicator_name(event) -> str:
