@@ -81,8 +81,11 @@ def main(argv):
             if rc:
                 return rc
         # the system-level example: the SpaceHopper on the Moon, run by the project's SSP master
+        # (with the native FMUs where they were built: the same results, faster)
+        native_ssp = ROOT / "dist" / "native" / "SpaceHopper.ssp"
+        ssp = native_ssp if native_ssp.exists() else ROOT / "dist" / "SpaceHopper.ssp"
         for body in ("moon",):
-            rc |= subprocess.call([sys.executable, "-m", "pogofmu.cli", "ssp", "run", str(ROOT / "dist" / "SpaceHopper.ssp"),
+            rc |= subprocess.call([sys.executable, "-m", "pogofmu.cli", "ssp", "run", str(ssp),
                                    "--parameters", body, "--stop-time", "30", "--step", "1e-3",
                                    "--out", str(ROOT / "results" / f"SpaceHopper-{body}")], cwd=ROOT)
         return rc

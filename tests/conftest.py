@@ -17,7 +17,13 @@ def pytest_configure(config):
 
 @pytest.fixture(scope="session", autouse=True)
 def built_fmus():
-    from pogofmu.build import build_project
-    from support import DIST
+    from pogofmu.build import Exporter, build_project, load_model_file
+    from support import DIST, example_files
 
-    return build_project(DIST, ssp_dir=ROOT / "ssp", cache=ROOT / "build" / "native")
+    built = build_project(DIST, ssp_dir=ROOT / "ssp", cache=ROOT / "build" / "native")
+    # the example files, exported as any user's model is: the generic suites run on them too
+    with Exporter(DIST / "examples", cache=ROOT / "build" / "native") as ex:
+        for f in example_files():
+            for source in load_model_file(f):
+                built += ex.export(source)
+    return built

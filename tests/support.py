@@ -18,6 +18,56 @@ ROOT = Path(__file__).resolve().parents[1]
 DIST = Path(os.environ.get("POGOFMU_DIST", ROOT / "dist")).resolve()  # build target of the session
 
 
+IN_CI = os.environ.get("CI", "").lower() == "true"
+
+
+def needs(available: bool, what: str):
+    """A decorator for a test whose prerequisite a registry has (a Debian or PyPI package): skipped,
+    naming it, on a machine without it; under ``CI=true`` (where .ci/run installs it) a missing
+    prerequisite fails the test instead of hiding it."""
+    import functools
+
+    import pytest
+
+    def deco(fn):
+        if available:
+            return fn
+
+        @functools.wraps(fn)
+        def wrapper(*args, **kwargs):
+            if IN_CI:
+                pytest.fail(f"missing under CI=true: {what} (.ci/run installs it)")
+            pytest.skip(f"no {what}")
+        return wrapper
+    return deco
+
+
+EXAMPLES = ROOT / "examples"
+
+
+def example_files():
+    """The model files of examples/ (the files there that define a HybridModel)."""
+    return sorted(p for p in EXAMPLES.glob("*/*.py") if "HybridModel(" in p.read_text())
+
+
+def example_models():
+    """``{FMU name: model}`` of the example files, as the exporter loads them."""
+    from pogofmu.build import load_model_file
+
+    return {s.model.name: s.model for f in example_files() for s in load_model_file(f)}
+
+
+def model_of(name: str):
+    """The model behind an FMU name of the session's dist/: ``[native/][fmi3/]<Model>`` (the project's
+    five) or ``examples/[native/][fmi3/]<Model>`` (the example files, exported as a user does)."""
+    from pogofmu.runtime.models import all_models
+
+    model = name.rpartition("/")[2]
+    if name.startswith("examples/"):
+        return example_models()[model]
+    return all_models()[model]
+
+
 def fmu_path(name: str) -> Path:
     path = DIST / f"{name}.fmu"
     assert path.exists(), f"{path} missing: the session fixture builds every FMU first"

@@ -45,7 +45,7 @@ def test_each_command_usage_names_itself(args, prog):
 
 def test_unknown_names_list_what_there_is(tmp_path):
     proc = pogofmu("nosuch")
-    assert proc.returncode == 2 and "the commands are run, ssp, sweep, study" in proc.stderr
+    assert proc.returncode == 2 and "the commands are export, run, ssp, sweep, study" in proc.stderr
     run = pogofmu("run", "--dist", DIST, "--out", tmp_path / "r", "NoSuchModel")
     assert run.returncode == 1 and "no FMU named NoSuchModel" in run.stderr
     for name in ("PogoStick", "HopController", "Penetrator"):

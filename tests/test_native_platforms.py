@@ -15,7 +15,7 @@
   no fused multiply-add to contract into).
 
 The tests that need mingw-w64, wine or CMake are skipped, naming what is missing, without them;
-``.ci/run`` installs the Debian packages, so CI runs them.
+``.ci/run`` installs the Debian packages, and under ``CI=true`` a missing one fails the test.
 """
 import os
 import platform
@@ -27,7 +27,7 @@ from pathlib import Path
 import pytest
 
 from pogofmu import build
-from support import compile_c_host, fmu_path
+from support import compile_c_host, fmu_path, needs
 from test_portability import BARE_ENV, C_HOST_SOURCE, outputs_of, run_c_host
 
 FMUS = build.model_names()
@@ -36,8 +36,8 @@ WINE = next((w for w in (shutil.which("wine64"), "/usr/lib/wine/wine64", shutil.
              if w and os.access(w, os.X_OK)), None)
 EXACT = platform.machine() in ("x86_64", "AMD64")  # no FMA in the baseline instruction set
 
-needs_mingw = pytest.mark.skipif(MINGW is None, reason="no x86_64-w64-mingw32-gcc (Debian: gcc-mingw-w64-x86-64)")
-needs_wine = pytest.mark.skipif(WINE is None, reason="no wine64 (Debian: wine64)")
+needs_mingw = needs(MINGW is not None, "x86_64-w64-mingw32-gcc (Debian: gcc-mingw-w64-x86-64)")
+needs_wine = needs(WINE is not None, "wine64 (Debian: wine64)")
 
 
 def _description(path):
@@ -198,7 +198,7 @@ def test_the_source_fmu_builds_with_the_system_compiler_from_its_own_files(name,
     _assert_same_run(rows, linux_runs(name)[1], name, exact=EXACT)
 
 
-@pytest.mark.skipif(shutil.which("cmake") is None, reason="no cmake (fmpy builds source FMUs with CMake)")
+@needs(shutil.which("cmake") is not None, "cmake (Debian: cmake; fmpy builds source FMUs with CMake)")
 @pytest.mark.parametrize("fmi", [2, 3])
 def test_fmpy_builds_the_source_fmu_and_simulates_it(tmp_path, fmi):
     """fmpy.build.build_platform_binary (CMake, fmpy's own FMI headers and flags) on the sources

@@ -26,7 +26,7 @@ import pytest
 from hypothesis import HealthCheck, Phase, assume, given, settings
 from hypothesis import strategies as st
 
-from support import Instance, fmu_path
+from support import Instance, example_models, fmu_path, model_of
 
 LONG = os.environ.get("POGOFMU_FUZZ", "") == "long"
 FUZZ = settings(max_examples=200 if LONG else 20, deadline=None, derandomize=not LONG, database=None,
@@ -294,6 +294,36 @@ def test_each_parameter_rule_is_refused_naming_the_parameter(name, i):
     @given(values)
     def check(value):
         err, _ = _run(name, {param: value}, stop=0.02)
+        assert err is not None, f"{name}: {param} = {value!r} was accepted"
+        assert any(re.search(rf"\b{re.escape(n)} = ", err) for n in names), (param, value, err)
+        assert "violate" in err, err
+        assert not any(raw in err for raw in RAW), err
+
+    check()
+
+
+def generic_breakers(model):
+    """The rules every FMU has, whatever its model: the solver settings' (the model's rules aside),
+    and a finite value of every float parameter."""
+    floats = [p.name for p in model.parameters if not p.integer]
+    return BREAKERS["common"] + [(f, BAD_NUMBER, (f,)) for f in floats]
+
+
+EXAMPLE_RULES = [(f"examples/{n}", i) for n, m in sorted(example_models().items())
+                 for i in range(len(generic_breakers(m)))]
+
+
+@pytest.mark.parametrize("name,i", EXAMPLE_RULES,
+                         ids=[f"{n}-{generic_breakers(model_of(n))[i][0]}-{i}" for n, i in EXAMPLE_RULES])
+def test_the_rules_every_fmu_has_hold_for_a_users_model(name, i):
+    """The example files, exported as a user's model is: every rule that holds for any model (the
+    solver's settings, finite parameters) refused at initialization naming the parameter."""
+    param, values, names = generic_breakers(model_of(name))[i]
+
+    @settings(FUZZ, max_examples=3)
+    @given(values)
+    def check(value):
+        err, _ = _run(name, {param: value}, stop=0.02, outputs=())
         assert err is not None, f"{name}: {param} = {value!r} was accepted"
         assert any(re.search(rf"\b{re.escape(n)} = ", err) for n in names), (param, value, err)
         assert "violate" in err, err

@@ -564,3 +564,21 @@ def test_run_command_memory_is_flat_in_the_run_length(tmp_path):
     short, long = peak(2_000), peak(20_000)
     assert long - short < 5.0, (short, long)
     assert (tmp_path / "20000" / "default.csv").stat().st_size > 2_000_000  # the rows went to disk
+
+
+@pytest.mark.parametrize("package", ["SpaceHopper.ssp", "SpaceHopper-fmi3.ssp"])
+def test_the_native_package_runs_the_python_hosted_ones_bits(package):
+    """dist/native/<System>.ssp: the same system with the native FMUs, the master's rows to the bit
+    (events synchronized), and libcosim's run of the FMI 2.0 one the same as of the Python-hosted."""
+    a = master.simulate(DIST / package, parameters="moon", stop_time=2.0, step=1e-3)
+    b = master.simulate(DIST / "native" / package, parameters="moon", stop_time=2.0, step=1e-3)
+    assert a.dtype.names == b.dtype.names and len(a) == len(b)
+    for column in a.dtype.names:
+        assert np.array_equal(a[column], b[column]), column
+    if package == "SpaceHopper.ssp":
+        times = [round(k * 1e-3, 12) for k in range(1, 1001)]
+        variables = {"PogoStick": ["y", "s"], "HopController": ["F_ext"]}
+        lc_a = run_libcosim_ssp(DIST / package, 1e-3, times, variables)
+        lc_b = run_libcosim_ssp(DIST / "native" / package, 1e-3, times, variables)
+        for key in lc_a:
+            assert np.array_equal(lc_a[key], lc_b[key]), key

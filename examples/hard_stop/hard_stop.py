@@ -47,7 +47,7 @@ MODEL = HybridModel(
         Parameter("F0", 20.0, "N", "amplitude of the default experiment's drive"),
         Parameter("f", 1.5, "Hz", "frequency of the default experiment's drive"),
     ),
-    inputs=(Variable("F", "N", "driving force on the mass"),),
+    inputs=(Variable("F", "N", "driving force on the mass (start: a push of 30 N into the stop)", 30.0),),
     outputs=(Variable("z", "m", "position of the mass"), Variable("zdot", "m/s", "velocity of the mass"),
              Variable("F_stop", "N", "force of the hard stop on the mass"),
              Variable("s", "", "mode: 0 free, 1 on the stop")),

@@ -172,8 +172,21 @@ def _signed_loop(ax, x, y, rate, labels):
     ax.indicate_inset_zoom(ins, edgecolor="0.4")
 
 
+def default_plots(model):
+    """The figure of a model that names none: its outputs against time, one panel per unit (integer
+    outputs on a panel of their own)."""
+    integers = model.integer_outputs
+    by_unit = {}
+    for v in model.outputs:
+        by_unit.setdefault("" if v.name in integers else v.unit or "-", []).append(v.name)
+    panels = [tuple(names) for unit, names in by_unit.items() if unit != ""]
+    panels += [tuple(names) for unit, names in by_unit.items() if unit == ""]
+    return (tuple(panels[:6]),) if panels else ()
+
+
 def figures(res, model, title: str):
-    """The model's figures (matplotlib Figure objects, one per entry of ``model.plots``)."""
+    """The model's figures (matplotlib Figure objects, one per entry of ``model.plots``, or
+    :func:`default_plots`)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -182,7 +195,7 @@ def figures(res, model, title: str):
     units = {v.name: v.unit for v in model.all_outputs() + tuple(model.inputs)}
     integers = model.all_integer_outputs() | model.integer_inputs | {"s"}
     out = []
-    for panels in model.plots:
+    for panels in model.plots or default_plots(model):
         height = sum(4.5 if panel[0] == "vs" else 2.4 for panel in panels) + 0.6
         fig, axes = plt.subplots(len(panels), 1, figsize=(8, height), squeeze=False)
         for ax, panel in zip(axes[:, 0], panels):

@@ -172,7 +172,7 @@ class ModelWriter:
             "pg_check_settings", ARGS["check_settings"],
             lambda: check_solver_parameters(inp.s(), has_states=bool(model.states)),
             lambda v, ref: ["return PG_OK;"], "the solver's settings")
-        counts["check"] = self.function("pg_check", ARGS["check"], lambda: model.check(inp.p()),
+        counts["check"] = self.function("pg_check", ARGS["check"], lambda: model.check_parameters(inp.p()),
                                         lambda v, ref: ["return PG_OK;"], "the parameter rules")
         counts["initial"] = self.function(
             "pg_initial", ARGS["initial"], lambda: model.initial(inp.p()),

@@ -323,6 +323,7 @@ TRACED_MATH = {
     "sin": _unary_fn("sin", math.sin),
     "atan2": _binary_fn("atan2", math.atan2),
     "hypot": _binary_fn("hypot", math.hypot),
+    "trunc": math.trunc,  # on a traced value: Sym.__trunc__, an operation of the generated C
     "isfinite": _isfinite,
     "is_number": _is_number,
 }

@@ -274,10 +274,6 @@ class SMAFlag(Element):
     def r_lower(x, p):
         return p.k1 * p.x3 + p.k2 * (x - p.x3)
 
-    @staticmethod
-    def r_elastic(x, q, p):
-        return q["r_a"] + p.k1 * (x - q["x_a"])
-
     def force(self, x, xdot, xi, q, p):
         b = q["branch"]
         if b == ELASTIC:

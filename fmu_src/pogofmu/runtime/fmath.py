@@ -7,7 +7,7 @@ A model therefore calls ``fmath.<name>``, never ``math.<name>`` nor a name impor
 """
 import math
 
-__all__ = ["sqrt", "exp", "log", "cos", "sin", "atan2", "hypot", "isfinite", "is_number"]
+__all__ = ["sqrt", "exp", "log", "cos", "sin", "atan2", "hypot", "trunc", "isfinite", "is_number"]
 
 sqrt = math.sqrt
 exp = math.exp
@@ -16,6 +16,7 @@ cos = math.cos
 sin = math.sin
 atan2 = math.atan2
 hypot = math.hypot
+trunc = math.trunc  # (an int: the generated C truncates toward zero the same way)
 
 
 def isfinite(v) -> bool:

@@ -188,6 +188,12 @@ class HybridModel:
         if self.site is None:
             object.__setattr__(self, "site", _site())
 
+    def check_parameters(self, p: "Params") -> None:
+        """The rules of the parameters: each is a finite number (the rule every model has), then the
+        model's own ``check``.  Raises :class:`ParameterError` naming the parameter, its value and the rule."""
+        require_finite(p, [par.name for par in self.parameters])
+        self.check(p)
+
     def engine_outputs(self) -> Tuple[Variable, ...]:
         """Outputs every model has, kept by the engine: event counter, time and kind of the latest."""
         codes = ", ".join(f"{i} {ev.name}" for i, ev in enumerate(self.events, start=1))

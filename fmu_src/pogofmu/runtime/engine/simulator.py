@@ -817,7 +817,7 @@ def prepare(model: HybridModel, p, s, u):
     parameter, its value and the rule. A pure function of its arguments: the code generator
     traces it into the native FMUs' initialization (issue 18)."""
     check_solver_parameters(s, has_states=bool(model.states))
-    model.check(p)
+    model.check_parameters(p)
     check_inputs(model, u)
     _check_time_scales(model, p)
     x, q = model.initial(p)

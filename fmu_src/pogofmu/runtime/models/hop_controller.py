@@ -102,7 +102,7 @@ def _flow(t, x, q, u, p):
 
 
 def _outputs(t, x, q, u, p):
-    y, ydot, s = u[0], u[1], math.trunc(u[2])
+    y, ydot, s = u[0], u[1], fmath.trunc(u[2])
     F, E = thrust(y, ydot, s, p)
     return {"F_ext": F, "E_est": E, "E_err": p.m * p.g * p.h_target - E, "phase": phase(y, ydot, s)}
 

@@ -1,0 +1,229 @@
+"""The Python-hosted FMUs: the model's Python code staged under private names, behind the
+project's launcher (``fmu_src/native``: the FMI entry files with the bridge to CPython).
+
+1. The FMU's Python code is staged under names private to this build of this model: the folder
+   ``pogofmu/runtime/`` (the code that goes into FMUs, as it is) becomes
+   ``resources/_pogofmu_<Model>_<hash>/``, a user's model file and its local modules go into its
+   ``user/`` subpackage (their imports of ``pogofmu`` rewritten to the private name,
+   :mod:`.source`), and a slave module generated here, ``resources/_pogofmu_<Model>_<hash>_slave.py``,
+   names the model's class (pythonfmu's loader wants the line ``class <Model>(Fmi2Slave):``), so
+   that several FMUs — other models, other versions of the project — run side by side in one
+   process; the build checks that this code imports in an isolated interpreter.
+2. ``binaries/<platform>/<Model>.so`` is the launcher, compiled with the system C compiler: it
+   brings a CPython interpreter into any FMI importer and calls the staged code.  Without a C
+   compiler the build warns and uses pythonfmu's Linux binary instead (the adapter speaks its
+   calling convention too): such an FMU runs only inside a Python process.  The Python-hosted
+   FMUs have no Windows binary: on Windows, use the native FMUs.
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+import shutil
+import subprocess
+import sys
+import sysconfig
+import tempfile
+import uuid
+from pathlib import Path
+from typing import Optional
+
+from .errors import BuildError
+
+PACKAGE = Path(__file__).resolve().parents[1]  # fmu_src/pogofmu
+RUNTIME = PACKAGE / "runtime"  # the code that goes into every FMU, staged as a whole
+NATIVE = PACKAGE.parent / "native"  # the C layer
+
+
+def fmi_headers() -> Path:
+    import fmpy
+
+    return Path(fmpy.__file__).parent / "c-code"
+
+
+def c_compiler():
+    return os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc") or shutil.which("clang")
+
+
+def launcher_sources(fmi_version: int):
+    """The C files of the Python-hosted FMUs' binary: the entry file of that FMI version (the one the
+    native FMUs are built from, ``fmu_src/native/fmi2/pg_fmi2.c`` or ``fmi3/pg_fmi3.c``), the log
+    filter, and the Python backend (``native/python/``: the bridge, the embedding of CPython)."""
+    return [NATIVE / f"fmi{fmi_version}" / f"pg_fmi{fmi_version}.c", NATIVE / "pg_logging.c",
+            NATIVE / "python" / "pg_bridge.c", NATIVE / "python" / "python_embed.c"]
+
+
+_WARNED = set()
+
+
+def warn_once(text: str) -> None:
+    if text not in _WARNED:
+        _WARNED.add(text)
+        print(f"WARNING: {text}", file=sys.stderr)
+
+
+def compile_launcher(fmi_version: int, cache: Path):
+    """Compile the Python-hosted FMUs' binary for FMI 2 or 3 (:func:`launcher_sources`) into
+    ``cache``, keyed by the hash of sources, headers and flags.  Returns the library's path, or None
+    (with a warning) without a C compiler."""
+    cc = c_compiler()
+    sources = launcher_sources(fmi_version)
+    flags = ["-std=c11", "-O2", "-fPIC", "-shared", "-fvisibility=hidden", "-Wall", "-Wextra",
+             "-Wno-unused-parameter", f"-I{fmi_headers()}", f"-I{NATIVE}", f"-I{NATIVE / 'python'}"]
+    libs = ["-ldl", "-lpthread"]
+    if cc is None:
+        warn_once("no C compiler found (set CC): the FMUs get pythonfmu's Linux binary instead of the "
+                  "project's launcher and run only inside a Python process (fmpy, libcosimpy), not in a C "
+                  "importer")
+        return None
+    digest = hashlib.sha256(" ".join([cc] + flags + libs).encode())
+    for part in sorted({*sources, *NATIVE.glob("*.[ch]"), *(NATIVE / "python").glob("*.[ch]")}):  # sources, headers
+        digest.update(part.name.encode() + b"\0" + part.read_bytes())
+    for header in sorted(fmi_headers().glob(f"fmi{fmi_version}*.h")):
+        digest.update(header.read_bytes())
+    cache.mkdir(parents=True, exist_ok=True)
+    out = cache / f"pogofmu_fmi{fmi_version}_{digest.hexdigest()[:16]}.so"
+    if not out.exists():
+        tmp = out.with_suffix(f".{os.getpid()}.tmp")
+        proc = subprocess.run([cc, *flags, *map(str, sources), "-o", str(tmp), *libs], capture_output=True, text=True)
+        if proc.returncode:
+            raise BuildError(f"compiling the FMUs' launcher failed ({cc}):\n{proc.stderr}")
+        os.replace(tmp, out)
+    return out
+
+
+def pythonfmu_binaries():
+    """pythonfmu's binaries per platform folder (used for the platforms the launcher does not serve)."""
+    import pythonfmu
+
+    base = Path(pythonfmu.__file__).parent / "resources" / "binaries"
+    return {p.parent.name: p for ext in ("dll", "so", "dylib") for p in sorted(base.glob(f"*/*.{ext}"))}
+
+
+def python_libraries():
+    """libpython of the interpreter running the build: the launcher tries it first in a C host."""
+    libdir, soname = sysconfig.get_config_var("LIBDIR"), sysconfig.get_config_var("INSTSONAME")
+    if libdir and soname and sysconfig.get_config_var("Py_ENABLE_SHARED"):
+        lib = Path(libdir) / soname
+        if lib.exists():
+            return [str(lib)]
+    return []
+
+
+SLAVE_TEMPLATE = '''"""FMU slave of {name}, generated by pogofmu export."""
+from {package}.fmi2 import HybridSlave as Fmi2Slave
+from {package}.{module} import {attr} as MODEL
+
+
+class {name}(Fmi2Slave):
+    model = MODEL
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+'''
+
+
+def slave_source(package: str, module: str, attr: str, name: str) -> str:
+    """The slave module of one FMU (pythonfmu's loader looks for the literal class line, and a
+    second instance in one process crashes it if the class body holds no method: keep both)."""
+    return SLAVE_TEMPLATE.format(package=package, module=module, attr=attr, name=name)
+
+
+def runtime_files():
+    """(relative path, bytes) of the files of the runtime folder, in a stable order."""
+    return [(p.relative_to(RUNTIME).as_posix(), p.read_bytes()) for p in sorted(RUNTIME.rglob("*.py"))
+            if "__pycache__" not in p.parts]
+
+
+def stage(source, stage_dir: Path, fmi_version: int, token_seed: str = ""):
+    """Write resources/ of one FMU of ``source`` (a :class:`~.source.ModelSource`) into ``stage_dir``;
+    return (package, module, token)."""
+    from .description import project_version
+
+    name = source.model.name
+    files = runtime_files()
+    digest = hashlib.sha256(SLAVE_TEMPLATE.encode() + source.module.encode() + source.attr.encode())
+    for rel, data in files:
+        digest.update(rel.encode() + b"\0" + data)
+    for rel, text in source.staged_files("\0"):
+        digest.update(rel.encode() + b"\0" + text.encode())
+    digest.update(f"{name}:{project_version()}:{token_seed}".encode())
+    tag = digest.hexdigest()[:12]
+    package = f"_pogofmu_{name}_{tag}"
+    module = f"{package}_slave"
+    token = "{" + str(uuid.uuid5(uuid.NAMESPACE_URL, f"pogofmu/{name}/{tag}/fmi{fmi_version}")) + "}"
+    res = stage_dir / "resources"
+    for rel, data in files:
+        target = res / package / rel
+        target.parent.mkdir(parents=True, exist_ok=True)
+        target.write_bytes(data)
+    for rel, text in source.staged_files(package):
+        target = res / package / rel
+        target.parent.mkdir(parents=True, exist_ok=True)
+        target.write_text(text, encoding="utf-8")
+    (res / f"{module}.py").write_text(slave_source(package, source.module, source.attr, name))
+    shutil.copy2(NATIVE / "python" / "pogofmu_boot.py", res / "pogofmu_boot.py")
+    (res / "slavemodule.txt").write_text(module)  # pythonfmu's binaries read it
+    lines = ["# read by the launcher and resources/pogofmu_boot.py (written by pogofmu export)",
+             f"package={package}", f"module={module}", f"class={name}", f"token={token}",
+             f"fmi={fmi_version}"] + [f"python={lib}" for lib in python_libraries()]
+    (res / "pogofmu_launch.txt").write_text("\n".join(lines) + "\n")
+    return package, module, token
+
+
+def check_isolated_import(stage_dir: Path, source):
+    """The staged code must import in an isolated interpreter (no pogofmu on the path; no
+    site-packages unless the model declares third-party requirements): what the launcher does in a
+    C importer."""
+    res = stage_dir / "resources"
+    cls_name = source.model.name
+    code = ("import sys; sys.path.insert(0, sys.argv[1]); import pogofmu_boot; "
+            f"cls = pogofmu_boot.load(sys.argv[1]); assert cls.__name__ == {cls_name!r}; "
+            "bad = sorted(m for m in sys.modules if m.split('.')[0] in ('pogofmu', 'pythonfmu')); "
+            "assert not bad, bad")
+    flags = ["-I"] if source.requirements else ["-I", "-S"]
+    proc = subprocess.run([sys.executable, *flags, "-c", code, str(res)], capture_output=True, text=True,
+                          cwd=tempfile.gettempdir())
+    if proc.returncode:
+        last = (proc.stderr.strip().splitlines() or ["(no message)"])[-1]
+        raise BuildError(f"{source.where()}: the FMU's Python code does not import on its own "
+                         f"({'with its declared requirements' if source.requirements else 'standard library only'}): "
+                         f"{last}")
+
+
+def build_python_fmu(source, dest: Path, fmi_version: int, launcher: Optional[Path], token_seed: str = "") -> Path:
+    """Build and validate the Python-hosted FMU of ``source`` around ``launcher`` (:func:`compile_launcher`;
+    None: no C compiler): FMI 2.0 co-simulation into ``dest/<Model>.fmu``, FMI 3.0 (model exchange
+    and co-simulation) into ``dest/fmi3/<Model>.fmu``."""
+    from .description import model_description_fmi2, model_description_fmi3
+    from .package import documentation, validate, write_zip
+
+    name = source.model.name
+    cls = source.slave_class()
+    if launcher is None and fmi_version == 3:
+        raise BuildError(f"{name}: an FMI 3.0 FMU needs the launcher, and no C compiler was found (set CC)")
+    with tempfile.TemporaryDirectory(prefix="pogofmu_build_") as tmp:
+        stage_dir = Path(tmp)
+        package, module, token = stage(source, stage_dir, fmi_version, token_seed)
+        check_isolated_import(stage_dir, source)
+        members = [(p.relative_to(stage_dir).as_posix(), p.read_bytes(), False)
+                   for p in sorted(stage_dir.rglob("*")) if p.is_file() and "__pycache__" not in p.parts]
+    if fmi_version == 2:
+        members.append(("modelDescription.xml", model_description_fmi2(cls, token), False))
+        # the launcher for Linux; pythonfmu's Windows binaries are not shipped: they would need a
+        # Windows CPython that no test here can give them (Windows: the native FMUs)
+        binaries = {"linux64": launcher} if launcher is not None else \
+            {k: v for k, v in pythonfmu_binaries().items() if k == "linux64"}
+    else:
+        # the launcher only: pythonfmu's Windows binaries speak FMI 2.0 (no FMI 3.0 Windows binary)
+        members.append(("modelDescription.xml", model_description_fmi3(cls, token), False))
+        binaries = {"x86_64-linux": launcher}
+        dest = dest / "fmi3"
+    dest.mkdir(parents=True, exist_ok=True)
+    for platform, lib in binaries.items():
+        members.append((f"binaries/{platform}/{name}{lib.suffix}", lib.read_bytes(), True))
+    members += documentation(source, "python", fmi_version, sorted(binaries))
+    fmu = dest / f"{name}.fmu"
+    write_zip(fmu, members)
+    validate(fmu, f"FMI {fmi_version}")
+    return fmu
