@@ -15,7 +15,7 @@ from hypothesis import HealthCheck, settings
 from hypothesis import strategies as st
 from hypothesis.stateful import RuleBasedStateMachine, precondition, rule
 
-from support import DIST
+from support import BACKENDS, DIST, RawInstance
 
 EXAMPLES = int(os.environ.get("POGOFMU_STATEFUL_EXAMPLES", "10"))
 SETTINGS = settings(max_examples=EXAMPLES, stateful_step_count=30, derandomize=True, deadline=None,
@@ -360,3 +360,75 @@ def test_every_fmi_function_is_defined_once_for_both_backends():
         body = entry.read_text()
         assert '#include "call_states.h"' in body and "pg_backend.h" in body and "Py" not in re.sub(
             r"/\*.*?\*/", "", body, flags=re.S)
+
+
+# =============================================================================================
+# The call state is part of an FMU state, serialized or not
+# =============================================================================================
+
+# every state in which the standard allows getting an FMU state (and the FMUs can be: no Discard,
+# no Pending), per interface
+STATE_CASES = ([(2, "cs", False, m) for m in (I, INIT, STEP, TERM)]
+               + [(3, "cs", False, m) for m in (I, INIT, STEP, TERM)]
+               + [(3, "cs", True, m) for m in (I, INIT, EVENT, STEP, TERM)]
+               + [(3, "me", False, m) for m in (I, INIT, EVENT, CONT, TERM)])
+
+
+def _case_id(case):
+    fmi, interface, event_mode, mode = case
+    return f"fmi{fmi}-{interface}{'-event-mode' if event_mode else ''}-{mode}"
+
+
+@pytest.mark.parametrize("backend", BACKENDS, ids=["python", "native"])
+@pytest.mark.parametrize("case", STATE_CASES, ids=[_case_id(c) for c in STATE_CASES])
+def test_a_serialized_state_restores_the_call_state_it_was_taken_in(backend, case):
+    """Get a state in a call state, serialize and deserialize it, move on to another call state,
+    set the deserialized copy: the instance is back in the call state the state was taken in,
+    exactly as with the in-memory state."""
+    fmi, interface, event_mode, mode = case
+    inst = RawInstance(backend, fmi, interface, event_mode)
+    try:
+        inst.reach(mode)
+        t = inst.t
+        original = inst.get_state()
+        copy = inst.deserialize(inst.serialize(original))
+        for state in (copy, original):
+            assert inst.raw(f"fmi{fmi}Reset") == OK  # move on to another call state
+            if mode == I:
+                inst.reach(TERM if interface == "cs" else CONT)
+            assert inst.set_state(state) == OK, inst.last()
+            inst.t = t
+            inst.assert_in(mode)
+        inst.free(copy)
+        inst.free(original)
+    finally:
+        inst.close()
+
+
+@pytest.mark.parametrize("backend", BACKENDS, ids=["python", "native"])
+def test_a_state_is_restored_only_into_an_instance_that_can_be_in_its_call_state(backend):
+    """A state of one FMU taken in a call state another instance of it cannot be in (Continuous-Time
+    Mode of model exchange into a co-simulation instance; Event Mode into a co-simulation instance
+    without event mode) is refused with Error naming the call state, in memory or serialized, and
+    the instance goes on where it was."""
+    me = RawInstance(backend, 3, "me")  # (one extraction: one loaded binary, one FMU)
+    em = RawInstance(backend, 3, "cs", event_mode=True, unzip_dir=me.fmu.unzipDirectory)
+    cs = RawInstance(backend, 3, "cs", unzip_dir=me.fmu.unzipDirectory)
+    try:
+        me.reach(CONT)
+        em.reach(EVENT)
+        cs.reach(STEP)
+        for source, mode in ((me, "Continuous-Time Mode"), (em, "Event Mode")):
+            state = source.get_state()
+            blob = source.serialize(state)
+            assert cs.set_state(state) == ERROR
+            assert "refused" in cs.last() and mode in cs.last() and "co-simulation" in cs.last(), cs.last()
+            buf = (ctypes.c_ubyte * len(blob)).from_buffer_copy(blob)
+            assert cs.raw("fmi3DeserializeFMUState", buf, len(blob), ctypes.byref(ctypes.c_void_p())) == ERROR
+            assert "refused" in cs.last() and mode in cs.last(), cs.last()
+            source.free(state)
+        cs.assert_in(STEP)
+    finally:
+        for inst in (me, em, cs):
+            inst.close()
+

@@ -265,13 +265,25 @@ fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
     return (fmi2Status)pgb_state_get(INST->b, INST->mode, FMUstate);
 }
 
+/* The call state an FMU state was taken in (kept and serialized with it) is one this instance can
+ * be in: 1; else 0 with the reason logged. */
+static int state_fits(Inst *in, void *state, const char *function, unsigned *mode)
+{
+    if (pgb_state_mode(in->b, state, mode) > ST_WARNING) return 0;
+    char text[700];
+    if (state_call_state_fits(*mode, FMI2_STATE_MODES, 0, 0, function, "co-simulation", text, sizeof text)) return 1;
+    emit(in, ST_ERROR, "logStatusError", text);
+    return 0;
+}
+
 fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate)
 {
     CHECK(c);
     REQUIRE(fmi2FMUstate, "fmi2SetFMUstate");
     unsigned mode = 0;
+    if (!state_fits(INST, FMUstate, "fmi2SetFMUstate", &mode)) return fmi2Error;
     int st = pgb_state_set(INST->b, FMUstate, &mode);
-    if (st <= fmi2Warning && mode) INST->mode = mode; /* back in the call state it was taken in */
+    if (st <= fmi2Warning) INST->mode = mode; /* back in the call state it was taken in */
     return (fmi2Status)st;
 }
 
@@ -300,8 +312,13 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedSta
 {
     CHECK(c && serializedState && FMUstate);
     REQUIRE(fmi2FMUstate, "fmi2DeSerializeFMUstate");
-    return (fmi2Status)pgb_state_deserialize(INST->b, (const unsigned char *)serializedState, size, FMUstate,
-                                             MODE_STEP, MODE_INSTANTIATED);
+    int st = pgb_state_deserialize(INST->b, (const unsigned char *)serializedState, size, FMUstate);
+    unsigned mode = 0;
+    if (st <= fmi2Warning && !state_fits(INST, *FMUstate, "fmi2DeSerializeFMUstate", &mode)) {
+        pgb_state_free(INST->b, FMUstate);
+        return fmi2Error;
+    }
+    return (fmi2Status)st;
 }
 
 /* ---- the rest of co-simulation --------------------------------------------------------------- */

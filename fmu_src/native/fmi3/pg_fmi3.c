@@ -399,13 +399,30 @@ fmi3Status fmi3GetFMUState(fmi3Instance c, fmi3FMUState *FMUState)
     return (fmi3Status)pgb_state_get(INST->b, INST->mode, FMUState);
 }
 
+/* The call state an FMU state was taken in (kept and serialized with it) is one this instance can
+ * be in (an instance of the same FMU may be of the other interface, or without Event Mode): 1;
+ * else 0 with the reason logged. */
+static int state_fits(Inst *in, void *state, const char *function, unsigned *mode)
+{
+    if (pgb_state_mode(in->b, state, mode) > ST_WARNING) return 0;
+    unsigned modes = in->me ? FMI3_ME_STATE_MODES : FMI3_CS_STATE_MODES | (in->event_mode_used ? MODE_EVENT : 0u);
+    unsigned flags = !in->me && in->event_mode_used ? MODE_EVENT_PENDING : 0u;
+    const char *kind = in->me ? "model-exchange" : in->event_mode_used ? "co-simulation"
+                                                                       : "co-simulation (eventModeUsed = false)";
+    char text[700];
+    if (state_call_state_fits(*mode, modes, flags, 1, function, kind, text, sizeof text)) return 1;
+    emit(in, ST_ERROR, "logStatusError", text);
+    return 0;
+}
+
 fmi3Status fmi3SetFMUState(fmi3Instance c, fmi3FMUState FMUState)
 {
     CHECK(c);
     REQUIRE(fmi3FMUState, "fmi3SetFMUState");
     unsigned mode = 0;
+    if (!state_fits(INST, FMUState, "fmi3SetFMUState", &mode)) return fmi3Error;
     int st = pgb_state_set(INST->b, FMUState, &mode);
-    if (st <= ST_WARNING && mode) INST->mode = mode; /* back in the call state it was taken in */
+    if (st <= ST_WARNING) INST->mode = mode; /* back in the call state it was taken in */
     return (fmi3Status)st;
 }
 
@@ -434,9 +451,13 @@ fmi3Status fmi3DeserializeFMUState(fmi3Instance c, const fmi3Byte serializedStat
 {
     CHECK(c && serializedState && FMUState);
     REQUIRE(fmi3FMUState, "fmi3DeserializeFMUState");
-    /* the state's call state: past initialization, Step Mode (co-simulation) or Event Mode (model exchange) */
-    return (fmi3Status)pgb_state_deserialize(INST->b, (const unsigned char *)serializedState, size, FMUState,
-                                             INST->me ? MODE_EVENT : MODE_STEP, MODE_INSTANTIATED);
+    int st = pgb_state_deserialize(INST->b, (const unsigned char *)serializedState, size, FMUState);
+    unsigned mode = 0;
+    if (st <= ST_WARNING && !state_fits(INST, *FMUState, "fmi3DeserializeFMUState", &mode)) {
+        pgb_state_free(INST->b, FMUState);
+        return fmi3Error;
+    }
+    return (fmi3Status)st;
 }
 
 /* ---- not provided --------------------------------------------------------------------------- */
