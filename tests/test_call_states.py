@@ -432,3 +432,49 @@ def test_a_state_is_restored_only_into_an_instance_that_can_be_in_its_call_state
         for inst in (me, em, cs):
             inst.close()
 
+# =============================================================================================
+# FMI 3.0 getters and setters follow the one table
+# =============================================================================================
+
+FMI3_TYPES = ["Float32", "Float64", "Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64",
+              "Boolean", "String", "Binary"]
+
+
+def _get_or_set(inst, kind, type_):
+    """fmi3<kind><type_> of one value reference (the first variable of the FMU) and one value."""
+    vr = (ctypes.c_uint32 * 1)(inst.vars["F_ext"].valueReference if "F_ext" in inst.vars else 0)
+    fn = inst.fmu.dll[f"fmi3{kind}{type_}"]  # (a function object of its own: no argtypes of fmpy)
+    buf = (ctypes.c_uint64 * 4)()  # room for one value of any type (a pointer for String and Binary)
+    n = ctypes.c_size_t(1)
+    if type_ == "Binary":
+        sizes = (ctypes.c_size_t * 1)(1)
+        return fn(ctypes.c_void_p(inst.fmu.component), vr, n, sizes, buf, n)
+    return fn(ctypes.c_void_p(inst.fmu.component), vr, n, buf, n)
+
+
+@pytest.mark.parametrize("backend", BACKENDS, ids=["python", "native"])
+def test_fmi3_getters_and_setters_are_checked_against_the_call_state_table(backend):
+    """Every fmi3Get<T> is refused in Instantiated (the standard lists no getter there; start values
+    come from the model description) naming the state, and allowed from Initialization Mode on;
+    every discrete setter (integers, Boolean, String, Binary) is refused in Continuous-Time Mode,
+    Float32/Float64 setters are not refused by state there."""
+    cs = RawInstance(backend, 3, "cs")
+    me = RawInstance(backend, 3, "me")
+    try:
+        for type_ in FMI3_TYPES:
+            assert _get_or_set(cs, "Get", type_) == ERROR
+            assert f"fmi3Get{type_} refused: not allowed in Instantiated" in cs.last(), cs.last()
+        cs.reach(INIT)
+        assert _get_or_set(cs, "Get", "Float64") == OK, cs.last()
+        me.reach(CONT)
+        for type_ in FMI3_TYPES:
+            status = _get_or_set(me, "Set", type_)
+            if type_ in ("Float32", "Float64"):
+                assert "not allowed in" not in me.last() or status == OK, me.last()
+            else:
+                assert status == ERROR
+                assert f"fmi3Set{type_} refused: not allowed in Continuous-Time Mode" in me.last(), me.last()
+    finally:
+        cs.close()
+        me.close()
+

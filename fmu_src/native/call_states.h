@@ -52,9 +52,12 @@ typedef struct {
     X(fmi2CancelStep, MODE_STEP, 0)                                                                       \
     X(fmi2GetStatus, MODE_STEP | MODE_STEP_FAILED | MODE_TERMINATED, 0)
 
-/* FMI 3.0: the states follow the standard's state machines (and the Reference-FMUs' masks) */
-#define FMI3_GET (MODE_INSTANTIATED | MODE_INITIALIZATION | MODE_EVENT | MODE_CONTINUOUS | MODE_STEP | \
-                  MODE_STEP_FAILED | MODE_TERMINATED)
+/* FMI 3.0: the states follow the standard's state machines. Getters: the standard's "Allowed
+ * Function Calls" of Instantiated list fmi3Set{VariableType} and no getter (as FMI 2.0 has none
+ * there); the Reference-FMUs allow getters in Instantiated since v0.0.21, these FMUs do not
+ * (docs/fmi3.md). Every fmi3Get<T> / fmi3Set<T>, of a type the FMU has or not, is checked here. */
+#define FMI3_GET (MODE_INITIALIZATION | MODE_EVENT | MODE_CONTINUOUS | MODE_STEP | MODE_STEP_FAILED | \
+                  MODE_TERMINATED)
 #define FMI3_SET_CONTINUOUS (MODE_INSTANTIATED | MODE_INITIALIZATION | MODE_EVENT | MODE_CONTINUOUS | MODE_STEP | \
                              MODE_TERMINATED)
 #define FMI3_SET_DISCRETE (MODE_INSTANTIATED | MODE_INITIALIZATION | MODE_EVENT | MODE_STEP | MODE_TERMINATED)

@@ -326,34 +326,42 @@ fmi3Status fmi3SetString(fmi3Instance c, const fmi3ValueReference vr[], size_t n
     return (fmi3Status)pgb_no_such_type(INST->b, vr, nvr, "String");
 }
 
-/* types this FMU has no variables of: an error naming the function and the value reference */
+/* types this FMU has no variables of: checked against the call-state table like the others
+ * (`SET_RULE`: fmi3SetFloat for Float32, fmi3SetDiscrete for the rest), then an error naming the
+ * function and the value reference */
 #define NO_TYPE_GET(T, CT)                                                                                      \
     fmi3Status fmi3Get##T(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, CT values[], size_t nValues) \
     {                                                                                                           \
         UNUSED(values), UNUSED(nValues);                                                                        \
+        CHECK(c);                                                                                               \
+        REQUIRE(fmi3GetValues, "fmi3Get" #T);                                                                   \
         return (fmi3Status)no_type(INST, "fmi3Get" #T, #T, nvr, vr);                                           \
     }
-#define NO_TYPE_SET(T, CT)                                                                                      \
+#define NO_TYPE_SET(T, CT, SET_RULE)                                                                            \
     fmi3Status fmi3Set##T(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, const CT values[],          \
                           size_t nValues)                                                                       \
     {                                                                                                           \
         UNUSED(values), UNUSED(nValues);                                                                        \
+        CHECK(c);                                                                                               \
+        REQUIRE(SET_RULE, "fmi3Set" #T);                                                                        \
         return (fmi3Status)no_type(INST, "fmi3Set" #T, #T, nvr, vr);                                           \
     }
-#define NO_TYPE(T, CT) NO_TYPE_GET(T, CT) NO_TYPE_SET(T, CT)
-NO_TYPE(Float32, fmi3Float32)
-NO_TYPE(Int8, fmi3Int8)
-NO_TYPE(UInt8, fmi3UInt8)
-NO_TYPE(Int16, fmi3Int16)
-NO_TYPE(UInt16, fmi3UInt16)
-NO_TYPE(UInt32, fmi3UInt32)
-NO_TYPE(Int64, fmi3Int64)
-NO_TYPE(UInt64, fmi3UInt64)
+#define NO_TYPE(T, CT, SET_RULE) NO_TYPE_GET(T, CT) NO_TYPE_SET(T, CT, SET_RULE)
+NO_TYPE(Float32, fmi3Float32, fmi3SetFloat)
+NO_TYPE(Int8, fmi3Int8, fmi3SetDiscrete)
+NO_TYPE(UInt8, fmi3UInt8, fmi3SetDiscrete)
+NO_TYPE(Int16, fmi3Int16, fmi3SetDiscrete)
+NO_TYPE(UInt16, fmi3UInt16, fmi3SetDiscrete)
+NO_TYPE(UInt32, fmi3UInt32, fmi3SetDiscrete)
+NO_TYPE(Int64, fmi3Int64, fmi3SetDiscrete)
+NO_TYPE(UInt64, fmi3UInt64, fmi3SetDiscrete)
 
 fmi3Status fmi3GetBinary(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, size_t valueSizes[],
                          fmi3Binary values[], size_t nValues)
 {
     UNUSED(valueSizes), UNUSED(values), UNUSED(nValues);
+    CHECK(c);
+    REQUIRE(fmi3GetValues, "fmi3GetBinary");
     return (fmi3Status)no_type(INST, "fmi3GetBinary", "Binary", nvr, vr);
 }
 
@@ -361,18 +369,24 @@ fmi3Status fmi3SetBinary(fmi3Instance c, const fmi3ValueReference vr[], size_t n
                          const fmi3Binary values[], size_t nValues)
 {
     UNUSED(valueSizes), UNUSED(values), UNUSED(nValues);
+    CHECK(c);
+    REQUIRE(fmi3SetDiscrete, "fmi3SetBinary");
     return (fmi3Status)no_type(INST, "fmi3SetBinary", "Binary", nvr, vr);
 }
 
 fmi3Status fmi3GetClock(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, fmi3Clock values[])
 {
     UNUSED(values);
+    CHECK(c);
+    REQUIRE(fmi3Clocks, "fmi3GetClock");
     return (fmi3Status)no_type(INST, "fmi3GetClock", "Clock", nvr, vr);
 }
 
 fmi3Status fmi3SetClock(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, const fmi3Clock values[])
 {
     UNUSED(values);
+    CHECK(c);
+    REQUIRE(fmi3Clocks, "fmi3SetClock");
     return (fmi3Status)no_type(INST, "fmi3SetClock", "Clock", nvr, vr);
 }
 
