@@ -37,6 +37,7 @@ class Machine(RuleBasedStateMachine):
         super().__init__()
         self.messages = []
         self.mode, self.t, self.saved = I, 0.0, []
+        self.pending = False  # FMI 3.0 CS: the last step returned eventHandlingNeeded (Event Mode next)
         self.fmu = self.make()
 
     def log(self, *args):
@@ -61,22 +62,22 @@ class Machine(RuleBasedStateMachine):
         state = ctypes.c_void_p()
         ok = self.expect(self.GET_STATE, True, self.raw(self.GET_STATE, ctypes.byref(state)))
         if ok:
-            self.saved.append((state, self.mode, self.t))
+            self.saved.append((state, self.mode, self.t, self.pending))
 
     @precondition(lambda self: self.saved)
     @rule(data=st.data())
     def set_state(self, data):
-        state, mode, t = data.draw(st.sampled_from(self.saved))
+        state, mode, t, pending = data.draw(st.sampled_from(self.saved))
         if self.expect(self.SET_STATE, True, self.raw(self.SET_STATE, state)):
-            self.mode, self.t = mode, t
+            self.mode, self.t, self.pending = mode, t, pending
 
     @rule()
     def reset(self):
         if self.expect(self.RESET, True, self.raw(self.RESET)):
-            self.mode, self.t = I, 0.0
+            self.mode, self.t, self.pending = I, 0.0, False
 
     def teardown(self):
-        for state, _, _ in self.saved:
+        for state, *_ in self.saved:
             self.raw(self.FREE_STATE, ctypes.byref(state))
         self.fmu.freeInstance()
 
@@ -208,7 +209,7 @@ class Fmi3Machine(Machine):
     def enter_event_mode(self):
         allowed = (self.mode == STEP and self.EVENT_MODE) if self.cs else self.mode == CONT
         if self.expect("fmi3EnterEventMode", allowed, self.raw("fmi3EnterEventMode")):
-            self.mode = EVENT
+            self.mode, self.pending = EVENT, False
 
     @rule()
     def update_discrete_states(self):
@@ -231,14 +232,15 @@ class Fmi3Machine(Machine):
     def do_step(self, h):
         flags = [B(), B(), B(), D()]
         refs = [ctypes.byref(f) for f in flags]
-        if self.expect("fmi3DoStep", self.cs and self.mode == STEP, self.raw("fmi3DoStep", D(self.t), D(h), True, *refs)):
-            self.t = flags[3].value
+        allowed = self.cs and self.mode == STEP and not self.pending  # (an event signalled: Event Mode first)
+        if self.expect("fmi3DoStep", allowed, self.raw("fmi3DoStep", D(self.t), D(h), True, *refs)):
+            self.t, self.pending = flags[3].value, flags[0].value
 
     @rule()
     def terminate(self):
         allowed = self.mode in ({STEP, EVENT} if self.cs else {CONT, EVENT})
         if self.expect("fmi3Terminate", allowed, self.raw("fmi3Terminate")):
-            self.mode = TERM
+            self.mode, self.pending = TERM, False
 
     @rule(dt=st.sampled_from([0.0, 1e-3]))
     def set_time(self, dt):
@@ -478,3 +480,39 @@ def test_fmi3_getters_and_setters_are_checked_against_the_call_state_table(backe
         cs.close()
         me.close()
 
+# =============================================================================================
+# FMI 3.0 co-simulation: an event the FMU signalled is handled in Event Mode before the next step
+# =============================================================================================
+
+@pytest.mark.parametrize("backend", BACKENDS, ids=["python", "native"])
+def test_a_step_after_event_handling_needed_is_refused_until_event_mode(backend):
+    """FMI 3.0 §4.2.1 (Step Mode: fmi3DoStep, fmi3EnterEventMode): after fmi3DoStep returned
+    eventHandlingNeeded the importer has to enter Event Mode (the FMU stopped before the event's
+    jump); another fmi3DoStep first is refused with Error naming the rule — also after restoring a
+    state (in memory or serialized) taken at that point — and after Event Mode the stepping goes on."""
+    inst = RawInstance(backend, 3, "cs", event_mode=True)
+    try:
+        inst.reach(EVENT)
+        assert inst.raw("fmi3EnterStepMode") == OK
+        for _ in range(2000):
+            status, event = inst.do_step(1e-2)
+            assert status == OK, inst.last()
+            if event:
+                break
+        assert event, "no event within 20 s"
+        pending, t_event = inst.get_state(), inst.t
+        blob = inst.serialize(pending)
+        for state in (None, pending, inst.deserialize(blob)):
+            if state is not None:
+                assert inst.set_state(state) == OK, inst.last()
+                inst.t = t_event
+            assert inst.do_step(1e-2)[0] == ERROR
+            assert "fmi3DoStep refused" in inst.last() and "eventHandlingNeeded" in inst.last() and \
+                "fmi3EnterEventMode" in inst.last(), inst.last()
+            assert inst.raw("fmi3EnterEventMode") == OK, inst.last()
+            refs = [ctypes.byref(B()) for _ in range(5)] + [ctypes.byref(D())]
+            assert inst.raw("fmi3UpdateDiscreteStates", *refs) == OK, inst.last()
+            assert inst.raw("fmi3EnterStepMode") == OK, inst.last()
+            assert inst.do_step(1e-3)[0] == OK, inst.last()
+    finally:
+        inst.close()

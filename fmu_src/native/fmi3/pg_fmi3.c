@@ -27,6 +27,7 @@ typedef struct {
     unsigned mode;
     int me;              /* a model-exchange instance */
     int event_mode_used; /* co-simulation: fixed at instantiation */
+    int event_pending;   /* co-simulation: the last fmi3DoStep returned eventHandlingNeeded (Event Mode next) */
     size_t nx, nz;       /* continuous states, event indicators */
     PgBackend *b;
 } Inst;
@@ -219,6 +220,7 @@ fmi3Status fmi3EnterEventMode(fmi3Instance c)
     }
     int st = pgb_enter_event_mode(INST->b);
     LEADS_TO(st, MODE_EVENT);
+    if (st <= ST_WARNING) INST->event_pending = 0;
     return (fmi3Status)st;
 }
 
@@ -228,6 +230,7 @@ fmi3Status fmi3Terminate(fmi3Instance c)
     REQUIRE(fmi3Terminate, "fmi3Terminate");
     int st = pgb_terminate(INST->b);
     LEADS_TO(st, MODE_TERMINATED);
+    if (st <= ST_WARNING) INST->event_pending = 0;
     return (fmi3Status)st;
 }
 
@@ -237,6 +240,7 @@ fmi3Status fmi3Reset(fmi3Instance c)
     REQUIRE(fmi3Reset, "fmi3Reset");
     int st = pgb_reset(INST->b);
     LEADS_TO(st, MODE_INSTANTIATED);
+    if (st <= ST_WARNING) INST->event_pending = 0;
     return (fmi3Status)st;
 }
 
@@ -410,7 +414,7 @@ fmi3Status fmi3GetFMUState(fmi3Instance c, fmi3FMUState *FMUState)
 {
     CHECK(c && FMUState);
     REQUIRE(fmi3FMUState, "fmi3GetFMUState");
-    return (fmi3Status)pgb_state_get(INST->b, INST->mode, FMUState);
+    return (fmi3Status)pgb_state_get(INST->b, INST->mode | (INST->event_pending ? MODE_EVENT_PENDING : 0u), FMUState);
 }
 
 /* The call state an FMU state was taken in (kept and serialized with it) is one this instance can
@@ -436,7 +440,10 @@ fmi3Status fmi3SetFMUState(fmi3Instance c, fmi3FMUState FMUState)
     unsigned mode = 0;
     if (!state_fits(INST, FMUState, "fmi3SetFMUState", &mode)) return fmi3Error;
     int st = pgb_state_set(INST->b, FMUState, &mode);
-    if (st <= ST_WARNING) INST->mode = mode; /* back in the call state it was taken in */
+    if (st <= ST_WARNING) { /* back in the call state it was taken in */
+        INST->mode = mode & ~MODE_FLAGS;
+        INST->event_pending = (mode & MODE_EVENT_PENDING) != 0;
+    }
     return (fmi3Status)st;
 }
 
@@ -725,10 +732,18 @@ fmi3Status fmi3DoStep(fmi3Instance c, fmi3Float64 currentCommunicationPoint, fmi
     UNUSED(noSetFMUStatePriorToCurrentPoint);
     CHECK(c);
     REQUIRE(fmi3DoStep, "fmi3DoStep");
+    /* the FMU stopped before the event's jump: a step on would skip it */
+    if (INST->event_pending) {
+        emit(INST, ST_ERROR, "logStatusError", "fmi3DoStep refused: the last fmi3DoStep returned eventHandlingNeeded "
+             "= true, and the importer has to enter Event Mode (fmi3EnterEventMode) to handle the event before the "
+             "next step (FMI 3.0 section 4.2.1, Step Mode: fmi3DoStep, fmi3EnterEventMode)");
+        return fmi3Error;
+    }
     int event = 0, terminate = 0, early = 0;
     double last = 0.0;
     int st = pgb_do_step3(INST->b, currentCommunicationPoint, communicationStepSize, &event, &terminate, &early, &last);
     if (st > ST_WARNING) return (fmi3Status)st;
+    INST->event_pending = event && INST->event_mode_used;
     put(eventHandlingNeeded, event), put(terminateSimulation, terminate), put(earlyReturn, early);
     if (lastSuccessfulTime) *lastSuccessfulTime = last;
     return (fmi3Status)st;
