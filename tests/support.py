@@ -4,6 +4,7 @@ Everything here drives the *built* FMUs in dist/, as an importer would.
 """
 from __future__ import annotations
 
+import ctypes
 import json
 import math
 import os
@@ -282,3 +283,157 @@ def clean_venv():
                         f"fmpy=={fmpy.__version__}", f"numpy=={numpy.__version__}"], check=True)
         (venv / ".complete").write_text("ok")
     return python
+
+
+# ---- one instance driven through the FMU's own functions ---------------------------------------
+
+BACKENDS = ["", "native/"]  # the Python-hosted FMUs dist/*.fmu, dist/fmi3/*.fmu; the native dist/native/...
+D, B = ctypes.c_double, ctypes.c_bool
+OK, ERROR = 0, 3
+# the call states as test_call_states models them, and the names the FMUs give them
+I, INIT, STEP, EVENT, CONT, TERM = "Instantiated", "Initialization", "Step", "Event", "ContinuousTime", "Terminated"
+STATE_NAMES = {I: "Instantiated", INIT: "Initialization Mode", STEP: None, EVENT: "Event Mode",
+               CONT: "Continuous-Time Mode", TERM: "Terminated"}
+
+
+class RawInstance:
+    """One instance of a built FMU driven through its own functions (statuses returned, the log
+    collected), FMI 2.0 co-simulation or FMI 3.0 co-simulation (with or without event mode) or
+    model exchange."""
+
+    def __init__(self, backend, fmi, interface="cs", event_mode=False, name="PogoStick", unzip_dir=None):
+        from fmpy import extract, read_model_description
+
+        self.fmi, self.interface, self.event_mode = fmi, interface, event_mode
+        self.messages = []
+        path = DIST / backend / ("fmi3/" if fmi == 3 else "") / f"{name}.fmu"
+        md = read_model_description(str(path))
+        self.vars = {v.name: v for v in md.modelVariables}
+        unzipped = extract(str(path)) if unzip_dir is None else unzip_dir
+        if fmi == 2:
+            from fmpy import calloc, free
+            from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
+                                   fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
+
+            self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipped, modelIdentifier=md.coSimulation.modelIdentifier,
+                                 instanceName="raw")
+            cb = fmi2CallbackFunctions()
+            cb.logger = fmi2CallbackLoggerTYPE(lambda c, inst, status, cat, msg: self.messages.append((status, msg.decode())))
+            cb.allocateMemory, cb.freeMemory = fmi2CallbackAllocateMemoryTYPE(calloc), fmi2CallbackFreeMemoryTYPE(free)
+            self._cb = cb
+            self.fmu.instantiate(loggingOn=True, callbacks=cb)
+        else:
+            from fmpy.fmi3 import FMU3Model, FMU3Slave
+
+            log = lambda env, status, cat, msg: self.messages.append((status, msg.decode()))  # noqa: E731
+            if interface == "cs":
+                self.fmu = FMU3Slave(guid=md.guid, unzipDirectory=unzipped,
+                                     modelIdentifier=md.coSimulation.modelIdentifier, instanceName="raw")
+                self.fmu.instantiate(loggingOn=True, eventModeUsed=event_mode, earlyReturnAllowed=event_mode,
+                                     logMessage=log)
+            else:
+                self.fmu = FMU3Model(guid=md.guid, unzipDirectory=unzipped,
+                                     modelIdentifier=md.modelExchange.modelIdentifier, instanceName="raw")
+                self.fmu.instantiate(loggingOn=True, logMessage=log)
+            self.nx = len(md.derivatives)
+        self.t = 0.0
+
+    def raw(self, name, *args):
+        return self.fmu._functions[name](self.fmu.component, *args)
+
+    def last(self):
+        return self.messages[-1][1] if self.messages else ""
+
+    def step_name(self):
+        return "Step Complete (initialized)" if self.fmi == 2 else "Step Mode"
+
+    # ---- the transitions (each asserts OK) --------------------------------------------------
+    def enter_initialization(self):
+        if self.fmi == 2:
+            assert self.raw("fmi2SetupExperiment", 0, D(0.0), D(0.0), 0, D(0.0)) == OK
+            assert self.raw("fmi2EnterInitializationMode") == OK, self.last()
+        else:
+            assert self.raw("fmi3EnterInitializationMode", 0, D(0.0), D(0.0), 0, D(0.0)) == OK, self.last()
+
+    def exit_initialization(self):
+        assert self.raw(f"fmi{self.fmi}ExitInitializationMode") == OK, self.last()
+
+    def do_step(self, h=1e-3):
+        if self.fmi == 2:
+            status = self.raw("fmi2DoStep", D(self.t), D(h), 1)
+            self.t += h
+            return status, False
+        flags = [B(), B(), B(), D()]
+        status = self.raw("fmi3DoStep", D(self.t), D(h), True, *[ctypes.byref(f) for f in flags])
+        if status <= 1:
+            self.t = flags[3].value
+        return status, flags[0].value
+
+    def reach(self, mode):
+        """From Instantiated to `mode` by the standard's transitions."""
+        if mode == I:
+            return
+        self.enter_initialization()
+        self.t = 0.0
+        if mode == INIT:
+            return
+        self.exit_initialization()  # FMI 2.0 and FMI 3.0 CS without event mode: Step; else Event Mode
+        if mode == EVENT:
+            return
+        if self.interface == "me":
+            assert self.raw("fmi3EnterContinuousTimeMode") == OK, self.last()
+            if mode == CONT:
+                return
+        else:
+            if self.fmi == 3 and self.event_mode:
+                assert self.raw("fmi3EnterStepMode") == OK, self.last()
+            assert self.do_step()[0] == OK, self.last()
+            if mode == STEP:
+                return
+        assert self.raw(f"fmi{self.fmi}Terminate") == OK, self.last()
+
+    def assert_in(self, mode):
+        """The instance is in `mode`: a call the standard forbids there is refused naming it, and
+        the call that goes on from it succeeds."""
+        name = self.step_name() if mode == STEP else STATE_NAMES[mode]
+        if self.interface == "me":
+            probe = ("fmi3CompletedIntegratorStep", True, ctypes.byref(B()), ctypes.byref(B())) if mode != CONT else \
+                ("fmi3EnterInitializationMode", 0, D(0.0), D(0.0), 0, D(0.0))
+            assert self.raw(*probe) == ERROR
+        elif mode == STEP:
+            assert self.raw(f"fmi{self.fmi}EnterInitializationMode", *(() if self.fmi == 2 else
+                                                                       (0, D(0.0), D(0.0), 0, D(0.0)))) == ERROR
+        else:
+            assert self.do_step()[0] == ERROR
+        assert f"not allowed in {name}" in self.last(), (mode, self.last())
+        if mode == I:
+            self.enter_initialization()
+        elif mode == INIT:
+            self.exit_initialization()
+        elif mode == STEP:
+            assert self.do_step()[0] == OK, self.last()
+        elif mode == EVENT:
+            refs = [ctypes.byref(B()) for _ in range(5)] + [ctypes.byref(D())]
+            assert self.raw("fmi3UpdateDiscreteStates", *refs) == OK, self.last()
+        elif mode == CONT:
+            assert self.raw("fmi3CompletedIntegratorStep", True, ctypes.byref(B()), ctypes.byref(B())) == OK, self.last()
+        else:
+            assert self.raw(f"fmi{self.fmi}Reset") == OK, self.last()
+
+    def get_state(self):
+        return self.fmu.getFMUstate() if self.fmi == 2 else self.fmu.getFMUState()
+
+    def set_state(self, state):
+        return self.raw("fmi2SetFMUstate" if self.fmi == 2 else "fmi3SetFMUState", state)
+
+    def serialize(self, state):
+        return bytes(self.fmu.serializeFMUstate(state) if self.fmi == 2 else self.fmu.serializeFMUState(state))
+
+    def deserialize(self, blob):
+        return self.fmu.deSerializeFMUstate(blob) if self.fmi == 2 else self.fmu.deserializeFMUState(blob)
+
+    def free(self, state):
+        self.raw("fmi2FreeFMUstate" if self.fmi == 2 else "fmi3FreeFMUState", ctypes.byref(state))
+
+    def close(self):
+        self.fmu.freeInstance()

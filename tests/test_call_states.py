@@ -15,7 +15,7 @@ from hypothesis import HealthCheck, settings
 from hypothesis import strategies as st
 from hypothesis.stateful import RuleBasedStateMachine, precondition, rule
 
-from support import DIST
+from support import BACKENDS, DIST, RawInstance
 
 EXAMPLES = int(os.environ.get("POGOFMU_STATEFUL_EXAMPLES", "10"))
 SETTINGS = settings(max_examples=EXAMPLES, stateful_step_count=30, derandomize=True, deadline=None,
@@ -37,6 +37,7 @@ class Machine(RuleBasedStateMachine):
         super().__init__()
         self.messages = []
         self.mode, self.t, self.saved = I, 0.0, []
+        self.pending = False  # FMI 3.0 CS: the last step returned eventHandlingNeeded (Event Mode next)
         self.fmu = self.make()
 
     def log(self, *args):
@@ -61,22 +62,22 @@ class Machine(RuleBasedStateMachine):
         state = ctypes.c_void_p()
         ok = self.expect(self.GET_STATE, True, self.raw(self.GET_STATE, ctypes.byref(state)))
         if ok:
-            self.saved.append((state, self.mode, self.t))
+            self.saved.append((state, self.mode, self.t, self.pending))
 
     @precondition(lambda self: self.saved)
     @rule(data=st.data())
     def set_state(self, data):
-        state, mode, t = data.draw(st.sampled_from(self.saved))
+        state, mode, t, pending = data.draw(st.sampled_from(self.saved))
         if self.expect(self.SET_STATE, True, self.raw(self.SET_STATE, state)):
-            self.mode, self.t = mode, t
+            self.mode, self.t, self.pending = mode, t, pending
 
     @rule()
     def reset(self):
         if self.expect(self.RESET, True, self.raw(self.RESET)):
-            self.mode, self.t = I, 0.0
+            self.mode, self.t, self.pending = I, 0.0, False
 
     def teardown(self):
-        for state, _, _ in self.saved:
+        for state, *_ in self.saved:
             self.raw(self.FREE_STATE, ctypes.byref(state))
         self.fmu.freeInstance()
 
@@ -208,7 +209,7 @@ class Fmi3Machine(Machine):
     def enter_event_mode(self):
         allowed = (self.mode == STEP and self.EVENT_MODE) if self.cs else self.mode == CONT
         if self.expect("fmi3EnterEventMode", allowed, self.raw("fmi3EnterEventMode")):
-            self.mode = EVENT
+            self.mode, self.pending = EVENT, False
 
     @rule()
     def update_discrete_states(self):
@@ -231,14 +232,15 @@ class Fmi3Machine(Machine):
     def do_step(self, h):
         flags = [B(), B(), B(), D()]
         refs = [ctypes.byref(f) for f in flags]
-        if self.expect("fmi3DoStep", self.cs and self.mode == STEP, self.raw("fmi3DoStep", D(self.t), D(h), True, *refs)):
-            self.t = flags[3].value
+        allowed = self.cs and self.mode == STEP and not self.pending  # (an event signalled: Event Mode first)
+        if self.expect("fmi3DoStep", allowed, self.raw("fmi3DoStep", D(self.t), D(h), True, *refs)):
+            self.t, self.pending = flags[3].value, flags[0].value
 
     @rule()
     def terminate(self):
         allowed = self.mode in ({STEP, EVENT} if self.cs else {CONT, EVENT})
         if self.expect("fmi3Terminate", allowed, self.raw("fmi3Terminate")):
-            self.mode = TERM
+            self.mode, self.pending = TERM, False
 
     @rule(dt=st.sampled_from([0.0, 1e-3]))
     def set_time(self, dt):
@@ -360,3 +362,157 @@ def test_every_fmi_function_is_defined_once_for_both_backends():
         body = entry.read_text()
         assert '#include "call_states.h"' in body and "pg_backend.h" in body and "Py" not in re.sub(
             r"/\*.*?\*/", "", body, flags=re.S)
+
+
+# =============================================================================================
+# The call state is part of an FMU state, serialized or not
+# =============================================================================================
+
+# every state in which the standard allows getting an FMU state (and the FMUs can be: no Discard,
+# no Pending), per interface
+STATE_CASES = ([(2, "cs", False, m) for m in (I, INIT, STEP, TERM)]
+               + [(3, "cs", False, m) for m in (I, INIT, STEP, TERM)]
+               + [(3, "cs", True, m) for m in (I, INIT, EVENT, STEP, TERM)]
+               + [(3, "me", False, m) for m in (I, INIT, EVENT, CONT, TERM)])
+
+
+def _case_id(case):
+    fmi, interface, event_mode, mode = case
+    return f"fmi{fmi}-{interface}{'-event-mode' if event_mode else ''}-{mode}"
+
+
+@pytest.mark.parametrize("backend", BACKENDS, ids=["python", "native"])
+@pytest.mark.parametrize("case", STATE_CASES, ids=[_case_id(c) for c in STATE_CASES])
+def test_a_serialized_state_restores_the_call_state_it_was_taken_in(backend, case):
+    """Get a state in a call state, serialize and deserialize it, move on to another call state,
+    set the deserialized copy: the instance is back in the call state the state was taken in,
+    exactly as with the in-memory state."""
+    fmi, interface, event_mode, mode = case
+    inst = RawInstance(backend, fmi, interface, event_mode)
+    try:
+        inst.reach(mode)
+        t = inst.t
+        original = inst.get_state()
+        copy = inst.deserialize(inst.serialize(original))
+        for state in (copy, original):
+            assert inst.raw(f"fmi{fmi}Reset") == OK  # move on to another call state
+            if mode == I:
+                inst.reach(TERM if interface == "cs" else CONT)
+            assert inst.set_state(state) == OK, inst.last()
+            inst.t = t
+            inst.assert_in(mode)
+        inst.free(copy)
+        inst.free(original)
+    finally:
+        inst.close()
+
+
+@pytest.mark.parametrize("backend", BACKENDS, ids=["python", "native"])
+def test_a_state_is_restored_only_into_an_instance_that_can_be_in_its_call_state(backend):
+    """A state of one FMU taken in a call state another instance of it cannot be in (Continuous-Time
+    Mode of model exchange into a co-simulation instance; Event Mode into a co-simulation instance
+    without event mode) is refused with Error naming the call state, in memory or serialized, and
+    the instance goes on where it was."""
+    me = RawInstance(backend, 3, "me")  # (one extraction: one loaded binary, one FMU)
+    em = RawInstance(backend, 3, "cs", event_mode=True, unzip_dir=me.fmu.unzipDirectory)
+    cs = RawInstance(backend, 3, "cs", unzip_dir=me.fmu.unzipDirectory)
+    try:
+        me.reach(CONT)
+        em.reach(EVENT)
+        cs.reach(STEP)
+        for source, mode in ((me, "Continuous-Time Mode"), (em, "Event Mode")):
+            state = source.get_state()
+            blob = source.serialize(state)
+            assert cs.set_state(state) == ERROR
+            assert "refused" in cs.last() and mode in cs.last() and "co-simulation" in cs.last(), cs.last()
+            buf = (ctypes.c_ubyte * len(blob)).from_buffer_copy(blob)
+            assert cs.raw("fmi3DeserializeFMUState", buf, len(blob), ctypes.byref(ctypes.c_void_p())) == ERROR
+            assert "refused" in cs.last() and mode in cs.last(), cs.last()
+            source.free(state)
+        cs.assert_in(STEP)
+    finally:
+        for inst in (me, em, cs):
+            inst.close()
+
+# =============================================================================================
+# FMI 3.0 getters and setters follow the one table
+# =============================================================================================
+
+FMI3_TYPES = ["Float32", "Float64", "Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64",
+              "Boolean", "String", "Binary"]
+
+
+def _get_or_set(inst, kind, type_):
+    """fmi3<kind><type_> of one value reference (the first variable of the FMU) and one value."""
+    vr = (ctypes.c_uint32 * 1)(inst.vars["F_ext"].valueReference if "F_ext" in inst.vars else 0)
+    fn = inst.fmu.dll[f"fmi3{kind}{type_}"]  # (a function object of its own: no argtypes of fmpy)
+    buf = (ctypes.c_uint64 * 4)()  # room for one value of any type (a pointer for String and Binary)
+    n = ctypes.c_size_t(1)
+    if type_ == "Binary":
+        sizes = (ctypes.c_size_t * 1)(1)
+        return fn(ctypes.c_void_p(inst.fmu.component), vr, n, sizes, buf, n)
+    return fn(ctypes.c_void_p(inst.fmu.component), vr, n, buf, n)
+
+
+@pytest.mark.parametrize("backend", BACKENDS, ids=["python", "native"])
+def test_fmi3_getters_and_setters_are_checked_against_the_call_state_table(backend):
+    """Every fmi3Get<T> is refused in Instantiated (the standard lists no getter there; start values
+    come from the model description) naming the state, and allowed from Initialization Mode on;
+    every discrete setter (integers, Boolean, String, Binary) is refused in Continuous-Time Mode,
+    Float32/Float64 setters are not refused by state there."""
+    cs = RawInstance(backend, 3, "cs")
+    me = RawInstance(backend, 3, "me")
+    try:
+        for type_ in FMI3_TYPES:
+            assert _get_or_set(cs, "Get", type_) == ERROR
+            assert f"fmi3Get{type_} refused: not allowed in Instantiated" in cs.last(), cs.last()
+        cs.reach(INIT)
+        assert _get_or_set(cs, "Get", "Float64") == OK, cs.last()
+        me.reach(CONT)
+        for type_ in FMI3_TYPES:
+            status = _get_or_set(me, "Set", type_)
+            if type_ in ("Float32", "Float64"):
+                assert "not allowed in" not in me.last() or status == OK, me.last()
+            else:
+                assert status == ERROR
+                assert f"fmi3Set{type_} refused: not allowed in Continuous-Time Mode" in me.last(), me.last()
+    finally:
+        cs.close()
+        me.close()
+
+# =============================================================================================
+# FMI 3.0 co-simulation: an event the FMU signalled is handled in Event Mode before the next step
+# =============================================================================================
+
+@pytest.mark.parametrize("backend", BACKENDS, ids=["python", "native"])
+def test_a_step_after_event_handling_needed_is_refused_until_event_mode(backend):
+    """FMI 3.0 §4.2.1 (Step Mode: fmi3DoStep, fmi3EnterEventMode): after fmi3DoStep returned
+    eventHandlingNeeded the importer has to enter Event Mode (the FMU stopped before the event's
+    jump); another fmi3DoStep first is refused with Error naming the rule — also after restoring a
+    state (in memory or serialized) taken at that point — and after Event Mode the stepping goes on."""
+    inst = RawInstance(backend, 3, "cs", event_mode=True)
+    try:
+        inst.reach(EVENT)
+        assert inst.raw("fmi3EnterStepMode") == OK
+        for _ in range(2000):
+            status, event = inst.do_step(1e-2)
+            assert status == OK, inst.last()
+            if event:
+                break
+        assert event, "no event within 20 s"
+        pending, t_event = inst.get_state(), inst.t
+        blob = inst.serialize(pending)
+        for state in (None, pending, inst.deserialize(blob)):
+            if state is not None:
+                assert inst.set_state(state) == OK, inst.last()
+                inst.t = t_event
+            assert inst.do_step(1e-2)[0] == ERROR
+            assert "fmi3DoStep refused" in inst.last() and "eventHandlingNeeded" in inst.last() and \
+                "fmi3EnterEventMode" in inst.last(), inst.last()
+            assert inst.raw("fmi3EnterEventMode") == OK, inst.last()
+            refs = [ctypes.byref(B()) for _ in range(5)] + [ctypes.byref(D())]
+            assert inst.raw("fmi3UpdateDiscreteStates", *refs) == OK, inst.last()
+            assert inst.raw("fmi3EnterStepMode") == OK, inst.last()
+            assert inst.do_step(1e-3)[0] == OK, inst.last()
+    finally:
+        inst.close()

@@ -52,9 +52,12 @@ typedef struct {
     X(fmi2CancelStep, MODE_STEP, 0)                                                                       \
     X(fmi2GetStatus, MODE_STEP | MODE_STEP_FAILED | MODE_TERMINATED, 0)
 
-/* FMI 3.0: the states follow the standard's state machines (and the Reference-FMUs' masks) */
-#define FMI3_GET (MODE_INSTANTIATED | MODE_INITIALIZATION | MODE_EVENT | MODE_CONTINUOUS | MODE_STEP | \
-                  MODE_STEP_FAILED | MODE_TERMINATED)
+/* FMI 3.0: the states follow the standard's state machines. Getters: the standard's "Allowed
+ * Function Calls" of Instantiated list fmi3Set{VariableType} and no getter (as FMI 2.0 has none
+ * there); the Reference-FMUs allow getters in Instantiated since v0.0.21, these FMUs do not
+ * (docs/fmi3.md). Every fmi3Get<T> / fmi3Set<T>, of a type the FMU has or not, is checked here. */
+#define FMI3_GET (MODE_INITIALIZATION | MODE_EVENT | MODE_CONTINUOUS | MODE_STEP | MODE_STEP_FAILED | \
+                  MODE_TERMINATED)
 #define FMI3_SET_CONTINUOUS (MODE_INSTANTIATED | MODE_INITIALIZATION | MODE_EVENT | MODE_CONTINUOUS | MODE_STEP | \
                              MODE_TERMINATED)
 #define FMI3_SET_DISCRETE (MODE_INSTANTIATED | MODE_INITIALIZATION | MODE_EVENT | MODE_STEP | MODE_TERMINATED)
@@ -84,6 +87,16 @@ typedef struct {
     X(fmi3EnterStepMode, MODE_EVENT, 0) /* (the standard: from Event Mode only) */                       \
     X(fmi3GetOutputDerivatives, MODE_STEP | MODE_TERMINATED, 0)                                           \
     X(fmi3DoStep, MODE_STEP, 0)
+
+/* An FMU state carries the call state it was taken in (its number, with the flag below), in
+ * memory and serialized; a set puts the instance back in it. It is restored only into an instance
+ * that can be in that call state: these are the states an instance of each kind can be in (the
+ * standard allows getting an FMU state in every one of them). */
+#define MODE_EVENT_PENDING (1u << 8) /* FMI 3.0 CS flag: the last fmi3DoStep returned eventHandlingNeeded */
+#define MODE_FLAGS MODE_EVENT_PENDING
+#define FMI2_STATE_MODES (MODE_INSTANTIATED | MODE_INITIALIZATION | MODE_STEP | MODE_STEP_FAILED | MODE_TERMINATED)
+#define FMI3_CS_STATE_MODES (MODE_INSTANTIATED | MODE_INITIALIZATION | MODE_STEP | MODE_TERMINATED) /* + Event Mode if used */
+#define FMI3_ME_STATE_MODES (MODE_INSTANTIATED | MODE_INITIALIZATION | MODE_EVENT | MODE_CONTINUOUS | MODE_TERMINATED)
 
 #define RULE_ENUM(name, cs, me) RULE_##name,
 #define RULE_ENTRY(name, cs, me) {#name, cs, me},
@@ -120,6 +133,28 @@ static void mode_list(unsigned mask, int fmi3, char *out, size_t size)
         n += (size_t)snprintf(out + n, size - n, "%s%s", count == 1 ? "" : count == total ? " or " : ", ",
                               mode_name(all[i], fmi3));
     }
+}
+
+/* A state's call state `saved` fits an instance that can be in the states `modes` (and carry the
+ * flags `flags`, set in Step Mode only): 1. Else 0, and "<function> refused: ..." in `out`,
+ * naming the call state and the kind of instance (`kind`). */
+static int state_call_state_fits(unsigned saved, unsigned modes, unsigned flags, int fmi3, const char *function,
+                                 const char *kind, char *out, size_t size)
+{
+    unsigned base = saved & ~MODE_FLAGS, extra = saved & MODE_FLAGS;
+    int one = base && !(base & (base - 1));
+    if (one && (base & modes) && !(extra & ~flags) && (!extra || base == MODE_STEP)) return 1;
+    char where[400];
+    mode_list(modes, fmi3, where, sizeof where);
+    if (!one || (extra && base != MODE_STEP))
+        snprintf(out, size, "%s refused: the FMU state carries no call state this FMU knows (%u)", function, saved);
+    else if (!(base & modes))
+        snprintf(out, size, "%s refused: the FMU state was taken in %s, and this %s instance cannot be in it (it can "
+                 "be in %s)", function, mode_name(base, fmi3), kind, where);
+    else
+        snprintf(out, size, "%s refused: the FMU state was taken after fmi3DoStep returned eventHandlingNeeded, and "
+                 "this %s instance has no Event Mode to handle it", function, kind);
+    return 0;
 }
 
 #endif

@@ -59,17 +59,17 @@ int pgb_set_integer(PgBackend *b, const unsigned vr[], size_t n, const int value
  * "String") unless n == 0 */
 int pgb_no_such_type(PgBackend *b, const unsigned vr[], size_t n, const char *type);
 
-/* FMU states: *slot a new handle (or the one there overwritten); `mode` the instance's call state,
- * given back by set (0: leave the call state as it is) */
+/* FMU states: *slot a new handle (or the one there overwritten); `mode` the instance's call state
+ * (the entry file's number, its flags included), kept with the state, serialized and sealed with
+ * it, deserialized with it and given back by set and by pgb_state_mode (which the entry file
+ * checks before a set) */
 int pgb_state_get(PgBackend *b, unsigned mode, void **slot);
 int pgb_state_set(PgBackend *b, void *state, unsigned *mode);
+int pgb_state_mode(PgBackend *b, void *state, unsigned *mode);
 int pgb_state_free(PgBackend *b, void **slot);
 int pgb_state_size(PgBackend *b, void *state, size_t *size);
 int pgb_state_serialize(PgBackend *b, void *state, unsigned char *bytes, size_t size);
-/* the new handle's call state: `mode_initialized` for a state past initialization, else
- * `mode_instantiated` (0 where the backend cannot tell: set leaves the call state alone) */
-int pgb_state_deserialize(PgBackend *b, const unsigned char *bytes, size_t size, void **slot,
-                          unsigned mode_initialized, unsigned mode_instantiated);
+int pgb_state_deserialize(PgBackend *b, const unsigned char *bytes, size_t size, void **slot);
 
 /* sensitivity = J seed at the point the outputs describe; `fn` names the FMI function */
 int pgb_directional(PgBackend *b, const unsigned *unknowns, size_t n_unknowns, const unsigned *knowns, size_t n_knowns,

@@ -112,10 +112,11 @@ int pgb_state_serialize(PgBackend *b, void *state, unsigned char *bytes, size_t 
     return pg_handle_serialize(&b->inst, state, bytes, size);
 }
 
-int pgb_state_deserialize(PgBackend *b, const unsigned char *bytes, size_t size, void **slot,
-                          unsigned mode_initialized, unsigned mode_instantiated)
+int pgb_state_mode(PgBackend *b, void *state, unsigned *mode) { return pg_handle_mode(&b->inst, state, mode); }
+
+int pgb_state_deserialize(PgBackend *b, const unsigned char *bytes, size_t size, void **slot)
 {
-    return pg_handle_deserialize(&b->inst, bytes, size, slot, mode_initialized, mode_instantiated);
+    return pg_handle_deserialize(&b->inst, bytes, size, slot);
 }
 
 int pgb_directional(PgBackend *b, const unsigned *unknowns, size_t n_unknowns, const unsigned *knowns, size_t n_knowns,

@@ -59,10 +59,19 @@ int pg_handle_free(PgInstance *in, void **slot)
     return PG_ST_OK;
 }
 
+int pg_handle_mode(PgInstance *in, void *state, unsigned *mode)
+{
+    PgHandle *h = pg_handle_check(in, state, "set FMU state");
+    if (!h) return PG_ST_ERROR;
+    *mode = h->mode;
+    return PG_ST_OK;
+}
+
 int pg_handle_size(PgInstance *in, void *state, size_t *size)
 {
-    if (!pg_handle_check(in, state, "serialized FMU state size")) return PG_ST_ERROR;
-    *size = pg_inst_serialized_size(in);
+    PgHandle *h = pg_handle_check(in, state, "serialized FMU state size");
+    if (!h) return PG_ST_ERROR;
+    *size = pg_inst_serialized_size(in, h->mode);
     return PG_ST_OK;
 }
 
@@ -70,22 +79,22 @@ int pg_handle_serialize(PgInstance *in, void *state, unsigned char *bytes, size_
 {
     PgHandle *h = pg_handle_check(in, state, "serialize FMU state");
     if (!h) return PG_ST_ERROR;
-    return pg_inst_serialize(in, &h->state, bytes, size);
+    return pg_inst_serialize(in, &h->state, h->mode, bytes, size);
 }
 
-int pg_handle_deserialize(PgInstance *in, const unsigned char *bytes, size_t size, void **slot,
-                          unsigned mode_initialized, unsigned mode_instantiated)
+int pg_handle_deserialize(PgInstance *in, const unsigned char *bytes, size_t size, void **slot)
 {
     PgHandle *h = malloc(sizeof *h);
     if (!h) return PG_ST_ERROR;
-    int st = pg_inst_deserialize(in, bytes, size, &h->state);
+    unsigned mode = 0;
+    int st = pg_inst_deserialize(in, bytes, size, &h->state, &mode);
     if (st) {
         free(h);
         return st;
     }
     h->magic = PG_HANDLE_MAGIC;
     h->owner = in->fmu;
-    h->mode = h->state.has_sim ? mode_initialized : mode_instantiated;
+    h->mode = mode; /* the call state it was taken in, as serialized */
     if (*slot && ((PgHandle *)*slot)->magic == PG_HANDLE_MAGIC) {
         *(PgHandle *)*slot = *h;
         free(h);

@@ -21,12 +21,12 @@ int pg_handle_get(PgInstance *in, unsigned mode, void **slot);
 PgHandle *pg_handle_check(PgInstance *in, void *state, const char *what);
 /* Set: the state restored; *mode the call state it was taken in (0: none) */
 int pg_handle_set(PgInstance *in, void *state, unsigned *mode);
+/* the call state a state was taken in (serialized with it) */
+int pg_handle_mode(PgInstance *in, void *state, unsigned *mode);
 int pg_handle_free(PgInstance *in, void **slot);
 int pg_handle_size(PgInstance *in, void *state, size_t *size);
 int pg_handle_serialize(PgInstance *in, void *state, unsigned char *bytes, size_t size);
-/* Deserialize into *slot; the handle's call state is `mode_initialized` if the state is past
- * initialization, `mode_instantiated` otherwise */
-int pg_handle_deserialize(PgInstance *in, const unsigned char *bytes, size_t size, void **slot,
-                          unsigned mode_initialized, unsigned mode_instantiated);
+/* Deserialize into *slot, with the call state it was serialized with */
+int pg_handle_deserialize(PgInstance *in, const unsigned char *bytes, size_t size, void **slot);
 
 #endif

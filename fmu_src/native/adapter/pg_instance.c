@@ -10,7 +10,7 @@
 #include "pg_support.h"
 
 #define MAX_INTERNAL_STEPS_PER_CALL 1e8
-#define STATE_FORMAT "pogofmu-native-state-1"
+#define STATE_FORMAT "pogofmu-native-state-2"
 
 /* ---- messages ------------------------------------------------------------------------------ */
 static void say(PgInstance *in, int status, const char *category, const char *text)
@@ -562,22 +562,25 @@ static void owner_text(const char *model, const char *build, int fmi, PgMsg *m)
     pg_msg_printf(m, "model '%s', build '%s', FMI %s", model, build, fmi == 3 ? "3.0" : "2.0");
 }
 
-static size_t header(const PgInstance *in, char *out, size_t size)
+/* the sealed header: format, owner, the call state the state was taken in (the entry file's number,
+ * checked there on restore), the size of the record */
+static size_t header(const PgInstance *in, unsigned call_state, char *out, size_t size)
 {
-    return (size_t)snprintf(out, size, "{\"format\":\"%s\",\"owner\":[\"%s\",\"%s\",\"fmi%d\"],\"bytes\":%zu}\n",
-                            STATE_FORMAT, model_name(in), in->fmu->build, in->fmu->fmi, sizeof(PgState));
+    return (size_t)snprintf(out, size,
+                            "{\"format\":\"%s\",\"owner\":[\"%s\",\"%s\",\"fmi%d\"],\"call_state\":%u,\"bytes\":%zu}\n",
+                            STATE_FORMAT, model_name(in), in->fmu->build, in->fmu->fmi, call_state, sizeof(PgState));
 }
 
-size_t pg_inst_serialized_size(const PgInstance *in)
+size_t pg_inst_serialized_size(const PgInstance *in, unsigned call_state)
 {
     char head[512];
-    return header(in, head, sizeof head) + sizeof(PgState) + 1 + 64;
+    return header(in, call_state, head, sizeof head) + sizeof(PgState) + 1 + 64;
 }
 
-int pg_inst_serialize(PgInstance *in, const PgState *state, unsigned char *bytes, size_t size)
+int pg_inst_serialize(PgInstance *in, const PgState *state, unsigned call_state, unsigned char *bytes, size_t size)
 {
     char head[512];
-    size_t nh = header(in, head, sizeof head);
+    size_t nh = header(in, call_state, head, sizeof head);
     size_t need = nh + sizeof(PgState) + 1 + 64;
     if (size < need) {
         PgMsg m;
@@ -599,7 +602,8 @@ int pg_inst_serialize(PgInstance *in, const PgState *state, unsigned char *bytes
     return PG_ST_OK;
 }
 
-int pg_inst_deserialize(PgInstance *in, const unsigned char *bytes, size_t size, PgState *state)
+int pg_inst_deserialize(PgInstance *in, const unsigned char *bytes, size_t size, PgState *state,
+                        unsigned *call_state)
 {
     char fn[40];
     fn_name(in, "DeSerializeFMUstate", fn, sizeof fn);
@@ -630,7 +634,10 @@ int pg_inst_deserialize(PgInstance *in, const unsigned char *bytes, size_t size,
     }
     memcpy(head, bytes, nh);
     head[nh] = '\0';
-    header(in, mine, sizeof mine);
+    unsigned saved_call_state = 0;
+    const char *cs = strstr(head, "\"call_state\":");
+    if (cs) sscanf(cs + 13, "%u", &saved_call_state);
+    header(in, saved_call_state, mine, sizeof mine);
     if (strcmp(head, mine) != 0) {
         /* the owner from the header: ["model","build","fmiN"] */
         char model[128] = "?", build[128] = "?";
@@ -655,6 +662,7 @@ int pg_inst_deserialize(PgInstance *in, const unsigned char *bytes, size_t size,
     }
     memcpy(state, bytes + nh, sizeof *state);
     state->sim.model = in->fmu->model;
+    *call_state = saved_call_state;
     return PG_ST_OK;
 }
 

@@ -90,10 +90,12 @@ int pg_inst_exit_initialization(PgInstance *in);
 int pg_inst_do_step(PgInstance *in, double t, double h);
 double pg_inst_last_successful_time(const PgInstance *in);
 
-/* FMU states: a copy of st; serialized with the owner (model, build, FMI version) and a SHA-256 seal */
-size_t pg_inst_serialized_size(const PgInstance *in);
-int pg_inst_serialize(PgInstance *in, const PgState *state, unsigned char *bytes, size_t size);
-int pg_inst_deserialize(PgInstance *in, const unsigned char *bytes, size_t size, PgState *state);
+/* FMU states: a copy of st; serialized with the owner (model, build, FMI version), the call state
+ * it was taken in (a number of the entry file, given back by deserialize) and a SHA-256 seal */
+size_t pg_inst_serialized_size(const PgInstance *in, unsigned call_state);
+int pg_inst_serialize(PgInstance *in, const PgState *state, unsigned call_state, unsigned char *bytes, size_t size);
+int pg_inst_deserialize(PgInstance *in, const unsigned char *bytes, size_t size, PgState *state,
+                        unsigned *call_state);
 void pg_inst_restore(PgInstance *in, const PgState *state);
 
 /* directional derivatives (pg_derivatives.c): sensitivity = J seed, J the Jacobian of the unknowns

@@ -18,7 +18,14 @@
 #define ST_WARNING fmi2Warning
 #define ST_ERROR fmi2Error
 
+/* A live instance starts with this word; fmi2FreeInstance clears it before the memory goes back,
+ * and every entry point checks it: a call on a freed instance (or on no instance) is refused, a
+ * second free does nothing, where they would have used freed memory (as far as the word, the
+ * first bytes of the instance, is still mapped and not yet given to another instance). */
+#define INST_MAGIC 0x706f6732u /* 'pog2' */
+
 typedef struct {
+    unsigned magic;
     char *name;
     fmi2CallbackFunctions cb;
     PgLogFilter filter; /* fmi2SetDebugLogging */
@@ -66,6 +73,16 @@ static int allowed(Inst *in, int rule, const char *function)
     return 0;
 }
 
+/* A NULL where the standard wants an argument: Error naming it (as the Reference-FMUs'
+ * ASSERT_NOT_NULL does) */
+static fmi2Status null_argument(Inst *in, const char *function, const char *argument)
+{
+    char msg[300];
+    snprintf(msg, sizeof msg, "%s refused: the argument %s must not be NULL", function, argument);
+    emit(in, ST_ERROR, "logStatusError", msg);
+    return fmi2Error;
+}
+
 static fmi2Status unsupported(Inst *in, const char *what)
 {
     char msg[300];
@@ -76,7 +93,12 @@ static fmi2Status unsupported(Inst *in, const char *what)
 
 
 #define INST ((Inst *)c)
-#define CHECK(c) do { if (!(c)) return fmi2Error; } while (0)
+#define LIVE(c) ((c) && ((const Inst *)(c))->magic == INST_MAGIC)
+/* a live instance (nothing to log to otherwise) */
+#define CHECK(c) do { if (!LIVE(c)) return fmi2Error; } while (0)
+#define NOT_NULL(p, function, argument) do { if (!(p)) return null_argument(INST, function, argument); } while (0)
+/* nvr values: the arrays vr and value given */
+#define VALUES(n, vr, value, function) do { if (n) { NOT_NULL(vr, function, "vr"); NOT_NULL(value, function, "value"); } } while (0)
 #define REQUIRE(rule, function) do { if (!allowed(INST, RULE_##rule, function)) return fmi2Error; } while (0)
 #define LEADS_TO(st, m) do { if ((st) <= ST_WARNING) INST->mode = (m); } while (0)
 
@@ -87,16 +109,22 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
                               fmi2String fmuResourceLocation, const fmi2CallbackFunctions *functions,
                               fmi2Boolean visible, fmi2Boolean loggingOn)
 {
+    /* the standard's callbacks: without a logger nothing could be said, about this or anything else */
+    if (!functions || !functions->logger) return NULL;
+    if (!instanceName) {
+        functions->logger(functions->componentEnvironment, "", fmi2Error, "logStatusError",
+                          "fmi2Instantiate refused: the argument instanceName must not be NULL");
+        return NULL;
+    }
     Inst *in = calloc(1, sizeof *in);
     if (!in) return NULL;
-    const char *name = instanceName ? instanceName : "";
-    in->name = malloc(strlen(name) + 1);
+    in->name = malloc(strlen(instanceName) + 1);
     if (!in->name) {
         free(in);
         return NULL;
     }
-    strcpy(in->name, name);
-    if (functions) in->cb = *functions;
+    strcpy(in->name, instanceName);
+    in->cb = *functions;
     in->filter.on = loggingOn;
     if (fmuType != fmi2CoSimulation) {
         emit(in, fmi2Error, "logStatusError",
@@ -106,6 +134,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
         in->b = pgb_new(&setup);
         if (in->b) {
             in->mode = MODE_INSTANTIATED;
+            in->magic = INST_MAGIC;
             return in;
         }
     }
@@ -116,7 +145,8 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
 
 void fmi2FreeInstance(fmi2Component c)
 {
-    if (!c) return;
+    if (!LIVE(c)) return; /* none, or freed already */
+    INST->magic = 0;
     pgb_free(INST->b);
     pg_log_free(&INST->filter);
     free(INST->name);
@@ -127,7 +157,7 @@ fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nC
 {
     CHECK(c);
     REQUIRE(fmi2SetDebugLogging, "fmi2SetDebugLogging");
-    if (nCategories && !categories) return fmi2Error;
+    if (nCategories) NOT_NULL(categories, "fmi2SetDebugLogging", "categories");
     char text[1200];
     size_t n_known = 0;
     const char *const *known = pgb_log_categories(INST->b, &n_known);
@@ -193,7 +223,7 @@ fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
 {
     CHECK(c);
     REQUIRE(fmi2GetValues, "fmi2GetReal");
-    if (nvr && (!vr || !value)) return fmi2Error;
+    VALUES(nvr, vr, value, "fmi2GetReal");
     return (fmi2Status)pgb_get_real(INST->b, vr, nvr, value);
 }
 
@@ -201,7 +231,7 @@ fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
 {
     CHECK(c);
     REQUIRE(fmi2GetValues, "fmi2GetInteger");
-    if (nvr && (!vr || !value)) return fmi2Error;
+    VALUES(nvr, vr, value, "fmi2GetInteger");
     return (fmi2Status)pgb_get_integer(INST->b, vr, nvr, value);
 }
 
@@ -210,7 +240,7 @@ fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
     CHECK(c);
     REQUIRE(fmi2GetValues, "fmi2GetBoolean");
     (void)value;
-    if (nvr && !vr) return fmi2Error;
+    if (nvr) NOT_NULL(vr, "fmi2GetBoolean", "vr");
     return (fmi2Status)pgb_no_such_type(INST->b, vr, nvr, "Boolean");
 }
 
@@ -219,7 +249,7 @@ fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
     CHECK(c);
     REQUIRE(fmi2GetValues, "fmi2GetString");
     (void)value;
-    if (nvr && !vr) return fmi2Error;
+    if (nvr) NOT_NULL(vr, "fmi2GetString", "vr");
     return (fmi2Status)pgb_no_such_type(INST->b, vr, nvr, "String");
 }
 
@@ -227,7 +257,7 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
 {
     CHECK(c);
     REQUIRE(fmi2SetValues, "fmi2SetReal");
-    if (nvr && (!vr || !value)) return fmi2Error;
+    VALUES(nvr, vr, value, "fmi2SetReal");
     return (fmi2Status)pgb_set_real(INST->b, vr, nvr, value);
 }
 
@@ -235,7 +265,7 @@ fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
 {
     CHECK(c);
     REQUIRE(fmi2SetValues, "fmi2SetInteger");
-    if (nvr && (!vr || !value)) return fmi2Error;
+    VALUES(nvr, vr, value, "fmi2SetInteger");
     return (fmi2Status)pgb_set_integer(INST->b, vr, nvr, value);
 }
 
@@ -244,7 +274,7 @@ fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
     CHECK(c);
     REQUIRE(fmi2SetValues, "fmi2SetBoolean");
     (void)value;
-    if (nvr && !vr) return fmi2Error;
+    if (nvr) NOT_NULL(vr, "fmi2SetBoolean", "vr");
     return (fmi2Status)pgb_no_such_type(INST->b, vr, nvr, "Boolean");
 }
 
@@ -253,16 +283,28 @@ fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
     CHECK(c);
     REQUIRE(fmi2SetValues, "fmi2SetString");
     (void)value;
-    if (nvr && !vr) return fmi2Error;
+    if (nvr) NOT_NULL(vr, "fmi2SetString", "vr");
     return (fmi2Status)pgb_no_such_type(INST->b, vr, nvr, "String");
 }
 
 /* ---- FMU states (the backend's handles) ------------------------------------------------------ */
 fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
 {
-    CHECK(c && FMUstate);
+    CHECK(c);
     REQUIRE(fmi2FMUstate, "fmi2GetFMUstate");
+    NOT_NULL(FMUstate, "fmi2GetFMUstate", "FMUstate");
     return (fmi2Status)pgb_state_get(INST->b, INST->mode, FMUstate);
+}
+
+/* The call state an FMU state was taken in (kept and serialized with it) is one this instance can
+ * be in: 1; else 0 with the reason logged. */
+static int state_fits(Inst *in, void *state, const char *function, unsigned *mode)
+{
+    if (pgb_state_mode(in->b, state, mode) > ST_WARNING) return 0;
+    char text[700];
+    if (state_call_state_fits(*mode, FMI2_STATE_MODES, 0, 0, function, "co-simulation", text, sizeof text)) return 1;
+    emit(in, ST_ERROR, "logStatusError", text);
+    return 0;
 }
 
 fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate)
@@ -270,8 +312,9 @@ fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate)
     CHECK(c);
     REQUIRE(fmi2FMUstate, "fmi2SetFMUstate");
     unsigned mode = 0;
+    if (!state_fits(INST, FMUstate, "fmi2SetFMUstate", &mode)) return fmi2Error;
     int st = pgb_state_set(INST->b, FMUstate, &mode);
-    if (st <= fmi2Warning && mode) INST->mode = mode; /* back in the call state it was taken in */
+    if (st <= fmi2Warning) INST->mode = mode; /* back in the call state it was taken in */
     return (fmi2Status)st;
 }
 
@@ -284,24 +327,33 @@ fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
 
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate, size_t *size)
 {
-    CHECK(c && size);
+    CHECK(c);
     REQUIRE(fmi2FMUstate, "fmi2SerializedFMUstateSize");
+    NOT_NULL(size, "fmi2SerializedFMUstateSize", "size");
     return (fmi2Status)pgb_state_size(INST->b, FMUstate, size);
 }
 
 fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate, fmi2Byte serializedState[], size_t size)
 {
-    CHECK(c && serializedState);
+    CHECK(c);
     REQUIRE(fmi2FMUstate, "fmi2SerializeFMUstate");
+    NOT_NULL(serializedState, "fmi2SerializeFMUstate", "serializedState");
     return (fmi2Status)pgb_state_serialize(INST->b, FMUstate, (unsigned char *)serializedState, size);
 }
 
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedState[], size_t size, fmi2FMUstate *FMUstate)
 {
-    CHECK(c && serializedState && FMUstate);
+    CHECK(c);
     REQUIRE(fmi2FMUstate, "fmi2DeSerializeFMUstate");
-    return (fmi2Status)pgb_state_deserialize(INST->b, (const unsigned char *)serializedState, size, FMUstate,
-                                             MODE_STEP, MODE_INSTANTIATED);
+    NOT_NULL(serializedState, "fmi2DeSerializeFMUstate", "serializedState");
+    NOT_NULL(FMUstate, "fmi2DeSerializeFMUstate", "FMUstate");
+    int st = pgb_state_deserialize(INST->b, (const unsigned char *)serializedState, size, FMUstate);
+    unsigned mode = 0;
+    if (st <= fmi2Warning && !state_fits(INST, *FMUstate, "fmi2DeSerializeFMUstate", &mode)) {
+        pgb_state_free(INST->b, FMUstate);
+        return fmi2Error;
+    }
+    return (fmi2Status)st;
 }
 
 /* ---- the rest of co-simulation --------------------------------------------------------------- */
@@ -311,7 +363,14 @@ fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReferenc
 {
     CHECK(c);
     REQUIRE(fmi2GetDirectionalDerivative, "fmi2GetDirectionalDerivative");
-    if ((nUnknown && (!vUnknown_ref || !dvUnknown)) || (nKnown && (!vKnown_ref || !dvKnown))) return fmi2Error;
+    if (nUnknown) {
+        NOT_NULL(vUnknown_ref, "fmi2GetDirectionalDerivative", "vUnknown_ref");
+        NOT_NULL(dvUnknown, "fmi2GetDirectionalDerivative", "dvUnknown");
+    }
+    if (nKnown) {
+        NOT_NULL(vKnown_ref, "fmi2GetDirectionalDerivative", "vKnown_ref");
+        NOT_NULL(dvKnown, "fmi2GetDirectionalDerivative", "dvKnown");
+    }
     return (fmi2Status)pgb_directional(INST->b, vUnknown_ref, nUnknown, vKnown_ref, nKnown, dvKnown, dvUnknown,
                                            "fmi2GetDirectionalDerivative");
 }
@@ -362,8 +421,9 @@ fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status *va
 
 fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real *value)
 {
-    CHECK(c && value);
+    CHECK(c);
     REQUIRE(fmi2GetStatus, "fmi2GetRealStatus");
+    NOT_NULL(value, "fmi2GetRealStatus", "value");
     if (s != fmi2LastSuccessfulTime) return unsupported(INST, "fmi2GetRealStatus for this status kind");
     return (fmi2Status)pgb_last_successful_time(INST->b, value);
 }
@@ -378,8 +438,9 @@ fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Int
 
 fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean *value)
 {
-    CHECK(c && value);
+    CHECK(c);
     REQUIRE(fmi2GetStatus, "fmi2GetBooleanStatus");
+    NOT_NULL(value, "fmi2GetBooleanStatus", "value");
     if (s != fmi2Terminated) return unsupported(INST, "fmi2GetBooleanStatus for this status kind");
     int terminated = 0;
     fmi2Status st = (fmi2Status)pgb_terminated(INST->b, &terminated);

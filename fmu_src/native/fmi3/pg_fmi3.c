@@ -19,7 +19,14 @@
 #define ST_WARNING fmi3Warning
 #define ST_ERROR fmi3Error
 
+/* A live instance starts with this word; fmi3FreeInstance clears it before the memory goes back,
+ * and every entry point checks it: a call on a freed instance (or on no instance) is refused, a
+ * second free does nothing, where they would have used freed memory (as far as the word, the
+ * first bytes of the instance, is still mapped and not yet given to another instance). */
+#define INST_MAGIC 0x706f6733u /* 'pog3' */
+
 typedef struct {
+    unsigned magic;
     char *name;
     fmi3InstanceEnvironment env;
     fmi3LogMessageCallback log;
@@ -27,6 +34,7 @@ typedef struct {
     unsigned mode;
     int me;              /* a model-exchange instance */
     int event_mode_used; /* co-simulation: fixed at instantiation */
+    int event_pending;   /* co-simulation: the last fmi3DoStep returned eventHandlingNeeded (Event Mode next) */
     size_t nx, nz;       /* continuous states, event indicators */
     PgBackend *b;
 } Inst;
@@ -61,6 +69,27 @@ static int allowed(Inst *in, int rule, const char *function)
     return 0;
 }
 
+/* A NULL where the standard wants an argument: Error naming it (as the Reference-FMUs'
+ * ASSERT_NOT_NULL does) */
+static fmi3Status null_argument(Inst *in, const char *function, const char *argument)
+{
+    char msg[300];
+    snprintf(msg, sizeof msg, "%s refused: the argument %s must not be NULL", function, argument);
+    emit(in, ST_ERROR, "logStatusError", msg);
+    return fmi3Error;
+}
+
+/* Every variable of this FMU is a scalar: one value per value reference. */
+static int counts_match(Inst *in, const char *function, size_t nvr, size_t n_values)
+{
+    if (nvr == n_values) return 1;
+    char msg[300];
+    snprintf(msg, sizeof msg, "%s refused: nValues = %zu for nValueReferences = %zu (every variable of this FMU is "
+             "a scalar: nValues must equal nValueReferences)", function, n_values, nvr);
+    emit(in, ST_ERROR, "logStatusError", msg);
+    return 0;
+}
+
 static fmi3Status unsupported(Inst *in, const char *what)
 {
     char msg[300];
@@ -78,7 +107,19 @@ static char *copy_text(const char *text)
 }
 
 #define INST ((Inst *)c)
-#define CHECK(c) do { if (!(c)) return fmi3Error; } while (0)
+#define LIVE(c) ((c) && ((const Inst *)(c))->magic == INST_MAGIC)
+/* a live instance (nothing to log to otherwise) */
+#define CHECK(c) do { if (!LIVE(c)) return fmi3Error; } while (0)
+#define NOT_NULL(p, function, argument) do { if (!(p)) return null_argument(INST, function, argument); } while (0)
+/* nvr scalar values: the counts equal, the arrays given */
+#define VALUES(nvr, n_values, vr, values, function)                                                 \
+    do {                                                                                            \
+        if (!counts_match(INST, function, nvr, n_values)) return fmi3Error;                         \
+        if (nvr) {                                                                                  \
+            NOT_NULL(vr, function, "valueReferences");                                              \
+            NOT_NULL(values, function, "values");                                                   \
+        }                                                                                           \
+    } while (0)
 #define REQUIRE(rule, function) do { if (!allowed(INST, RULE_##rule, function)) return fmi3Error; } while (0)
 #define LEADS_TO(st, m) do { if ((st) <= ST_WARNING) INST->mode = (m); } while (0)
 #define UNUSED(x) (void)(x)
@@ -89,7 +130,7 @@ fmi3Status fmi3SetDebugLogging(fmi3Instance c, fmi3Boolean loggingOn, size_t nCa
 {
     CHECK(c);
     REQUIRE(fmi3SetDebugLogging, "fmi3SetDebugLogging");
-    if (nCategories && !categories) return fmi3Error;
+    if (nCategories) NOT_NULL(categories, "fmi3SetDebugLogging", "categories");
     char text[1200];
     size_t n_known = 0;
     const char *const *known = pgb_log_categories(INST->b, &n_known);
@@ -99,13 +140,19 @@ fmi3Status fmi3SetDebugLogging(fmi3Instance c, fmi3Boolean loggingOn, size_t nCa
     return rc ? fmi3Error : fmi3OK;
 }
 
-static Inst *instantiate(fmi3String instanceName, fmi3String token, fmi3String resources, int visible,
-                         fmi3Boolean loggingOn, fmi3InstanceEnvironment env, fmi3LogMessageCallback log, int me,
-                         int event_mode_used, int early_return_allowed, size_t n_required)
+static Inst *instantiate(const char *function, fmi3String instanceName, fmi3String token, fmi3String resources,
+                         int visible, fmi3Boolean loggingOn, fmi3InstanceEnvironment env, fmi3LogMessageCallback log,
+                         int me, int event_mode_used, int early_return_allowed, size_t n_required)
 {
+    if (!instanceName) {
+        char msg[200];
+        snprintf(msg, sizeof msg, "%s refused: the argument instanceName must not be NULL", function);
+        if (log) log(env, fmi3Error, "logStatusError", msg);
+        return NULL;
+    }
     Inst *in = calloc(1, sizeof *in);
     if (!in) return NULL;
-    in->name = copy_text(instanceName ? instanceName : "");
+    in->name = copy_text(instanceName);
     if (!in->name) {
         free(in);
         return NULL;
@@ -121,6 +168,7 @@ static Inst *instantiate(fmi3String instanceName, fmi3String token, fmi3String r
         if (in->b) {
             pgb_counts(in->b, &in->nx, &in->nz);
             in->mode = MODE_INSTANTIATED;
+            in->magic = INST_MAGIC;
             return in;
         }
     }
@@ -134,8 +182,8 @@ fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String in
                                           fmi3InstanceEnvironment instanceEnvironment,
                                           fmi3LogMessageCallback logMessage)
 {
-    return instantiate(instanceName, instantiationToken, resourcePath, visible, loggingOn, instanceEnvironment,
-                       logMessage, 1, 0, 0, 0);
+    return instantiate("fmi3InstantiateModelExchange", instanceName, instantiationToken, resourcePath, visible,
+                       loggingOn, instanceEnvironment, logMessage, 1, 0, 0, 0);
 }
 
 fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String instantiationToken,
@@ -148,8 +196,9 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
                                          fmi3IntermediateUpdateCallback intermediateUpdate)
 {
     UNUSED(requiredIntermediateVariables), UNUSED(intermediateUpdate);
-    return instantiate(instanceName, instantiationToken, resourcePath, visible, loggingOn, instanceEnvironment,
-                       logMessage, 0, eventModeUsed, earlyReturnAllowed, nRequiredIntermediateVariables);
+    return instantiate("fmi3InstantiateCoSimulation", instanceName, instantiationToken, resourcePath, visible,
+                       loggingOn, instanceEnvironment, logMessage, 0, eventModeUsed, earlyReturnAllowed,
+                       nRequiredIntermediateVariables);
 }
 
 fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3String instantiationToken,
@@ -170,7 +219,8 @@ fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3Stri
 
 void fmi3FreeInstance(fmi3Instance c)
 {
-    if (!c) return;
+    if (!LIVE(c)) return; /* none, or freed already */
+    INST->magic = 0;
     pgb_free(INST->b);
     pg_log_free(&INST->filter);
     free(INST->name);
@@ -219,6 +269,7 @@ fmi3Status fmi3EnterEventMode(fmi3Instance c)
     }
     int st = pgb_enter_event_mode(INST->b);
     LEADS_TO(st, MODE_EVENT);
+    if (st <= ST_WARNING) INST->event_pending = 0;
     return (fmi3Status)st;
 }
 
@@ -228,6 +279,7 @@ fmi3Status fmi3Terminate(fmi3Instance c)
     REQUIRE(fmi3Terminate, "fmi3Terminate");
     int st = pgb_terminate(INST->b);
     LEADS_TO(st, MODE_TERMINATED);
+    if (st <= ST_WARNING) INST->event_pending = 0;
     return (fmi3Status)st;
 }
 
@@ -237,6 +289,7 @@ fmi3Status fmi3Reset(fmi3Instance c)
     REQUIRE(fmi3Reset, "fmi3Reset");
     int st = pgb_reset(INST->b);
     LEADS_TO(st, MODE_INSTANTIATED);
+    if (st <= ST_WARNING) INST->event_pending = 0;
     return (fmi3Status)st;
 }
 
@@ -244,6 +297,7 @@ fmi3Status fmi3Reset(fmi3Instance c)
 static int no_type(Inst *in, const char *function, const char *type, size_t nvr, const fmi3ValueReference vr[])
 {
     if (nvr == 0) return fmi3OK;
+    if (!vr) return null_argument(in, function, "valueReferences");
     char msg[256];
     snprintf(msg, sizeof msg, "%s: value reference %u is not a variable of type %s (this FMU has Float64 and "
              "Int32 variables only)", function, vr ? (unsigned)vr[0] : 0u, type);
@@ -255,8 +309,7 @@ fmi3Status fmi3GetFloat64(fmi3Instance c, const fmi3ValueReference vr[], size_t 
 {
     CHECK(c);
     REQUIRE(fmi3GetValues, "fmi3GetFloat64");
-    if (nValues != nvr) return unsupported(INST, "fmi3GetFloat64 with nValues != nValueReferences (arrays)");
-    if (nvr && (!vr || !values)) return fmi3Error;
+    VALUES(nvr, nValues, vr, values, "fmi3GetFloat64");
     return (fmi3Status)pgb_get_real(INST->b, vr, nvr, values);
 }
 
@@ -264,26 +317,27 @@ fmi3Status fmi3GetInt32(fmi3Instance c, const fmi3ValueReference vr[], size_t nv
 {
     CHECK(c);
     REQUIRE(fmi3GetValues, "fmi3GetInt32");
-    if (nValues != nvr) return unsupported(INST, "fmi3GetInt32 with nValues != nValueReferences (arrays)");
-    if (nvr && (!vr || !values)) return fmi3Error;
+    VALUES(nvr, nValues, vr, values, "fmi3GetInt32");
     return (fmi3Status)pgb_get_integer(INST->b, vr, nvr, values);
 }
 
 fmi3Status fmi3GetBoolean(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, fmi3Boolean values[], size_t nValues)
 {
-    UNUSED(values), UNUSED(nValues);
+    UNUSED(values);
     CHECK(c);
     REQUIRE(fmi3GetValues, "fmi3GetBoolean");
-    if (nvr && !vr) return fmi3Error;
+    if (!counts_match(INST, "fmi3GetBoolean", nvr, nValues)) return fmi3Error;
+    if (nvr) NOT_NULL(vr, "fmi3GetBoolean", "valueReferences");
     return (fmi3Status)pgb_no_such_type(INST->b, vr, nvr, "Boolean");
 }
 
 fmi3Status fmi3GetString(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, fmi3String values[], size_t nValues)
 {
-    UNUSED(values), UNUSED(nValues);
+    UNUSED(values);
     CHECK(c);
     REQUIRE(fmi3GetValues, "fmi3GetString");
-    if (nvr && !vr) return fmi3Error;
+    if (!counts_match(INST, "fmi3GetString", nvr, nValues)) return fmi3Error;
+    if (nvr) NOT_NULL(vr, "fmi3GetString", "valueReferences");
     return (fmi3Status)pgb_no_such_type(INST->b, vr, nvr, "String");
 }
 
@@ -292,8 +346,7 @@ fmi3Status fmi3SetFloat64(fmi3Instance c, const fmi3ValueReference vr[], size_t 
 {
     CHECK(c);
     REQUIRE(fmi3SetFloat, "fmi3SetFloat64");
-    if (nValues != nvr) return unsupported(INST, "fmi3SetFloat64 with nValues != nValueReferences (arrays)");
-    if (nvr && (!vr || !values)) return fmi3Error;
+    VALUES(nvr, nValues, vr, values, "fmi3SetFloat64");
     return (fmi3Status)pgb_set_real(INST->b, vr, nvr, values);
 }
 
@@ -301,84 +354,104 @@ fmi3Status fmi3SetInt32(fmi3Instance c, const fmi3ValueReference vr[], size_t nv
 {
     CHECK(c);
     REQUIRE(fmi3SetDiscrete, "fmi3SetInt32");
-    if (nValues != nvr) return unsupported(INST, "fmi3SetInt32 with nValues != nValueReferences (arrays)");
-    if (nvr && (!vr || !values)) return fmi3Error;
+    VALUES(nvr, nValues, vr, values, "fmi3SetInt32");
     return (fmi3Status)pgb_set_integer(INST->b, vr, nvr, values);
 }
 
 fmi3Status fmi3SetBoolean(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, const fmi3Boolean values[],
                           size_t nValues)
 {
-    UNUSED(values), UNUSED(nValues);
+    UNUSED(values);
     CHECK(c);
     REQUIRE(fmi3SetDiscrete, "fmi3SetBoolean");
-    if (nvr && !vr) return fmi3Error;
+    if (!counts_match(INST, "fmi3SetBoolean", nvr, nValues)) return fmi3Error;
+    if (nvr) NOT_NULL(vr, "fmi3SetBoolean", "valueReferences");
     return (fmi3Status)pgb_no_such_type(INST->b, vr, nvr, "Boolean");
 }
 
 fmi3Status fmi3SetString(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, const fmi3String values[],
                          size_t nValues)
 {
-    UNUSED(values), UNUSED(nValues);
+    UNUSED(values);
     CHECK(c);
     REQUIRE(fmi3SetDiscrete, "fmi3SetString");
-    if (nvr && !vr) return fmi3Error;
+    if (!counts_match(INST, "fmi3SetString", nvr, nValues)) return fmi3Error;
+    if (nvr) NOT_NULL(vr, "fmi3SetString", "valueReferences");
     return (fmi3Status)pgb_no_such_type(INST->b, vr, nvr, "String");
 }
 
-/* types this FMU has no variables of: an error naming the function and the value reference */
+/* types this FMU has no variables of: checked against the call-state table like the others
+ * (`SET_RULE`: fmi3SetFloat for Float32, fmi3SetDiscrete for the rest), then an error naming the
+ * function and the value reference */
 #define NO_TYPE_GET(T, CT)                                                                                      \
     fmi3Status fmi3Get##T(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, CT values[], size_t nValues) \
     {                                                                                                           \
-        UNUSED(values), UNUSED(nValues);                                                                        \
+        UNUSED(values);                                                                                         \
+        CHECK(c);                                                                                               \
+        REQUIRE(fmi3GetValues, "fmi3Get" #T);                                                                   \
+        if (!counts_match(INST, "fmi3Get" #T, nvr, nValues)) return fmi3Error;                                 \
         return (fmi3Status)no_type(INST, "fmi3Get" #T, #T, nvr, vr);                                           \
     }
-#define NO_TYPE_SET(T, CT)                                                                                      \
+#define NO_TYPE_SET(T, CT, SET_RULE)                                                                            \
     fmi3Status fmi3Set##T(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, const CT values[],          \
                           size_t nValues)                                                                       \
     {                                                                                                           \
-        UNUSED(values), UNUSED(nValues);                                                                        \
+        UNUSED(values);                                                                                         \
+        CHECK(c);                                                                                               \
+        REQUIRE(SET_RULE, "fmi3Set" #T);                                                                        \
+        if (!counts_match(INST, "fmi3Set" #T, nvr, nValues)) return fmi3Error;                                 \
         return (fmi3Status)no_type(INST, "fmi3Set" #T, #T, nvr, vr);                                           \
     }
-#define NO_TYPE(T, CT) NO_TYPE_GET(T, CT) NO_TYPE_SET(T, CT)
-NO_TYPE(Float32, fmi3Float32)
-NO_TYPE(Int8, fmi3Int8)
-NO_TYPE(UInt8, fmi3UInt8)
-NO_TYPE(Int16, fmi3Int16)
-NO_TYPE(UInt16, fmi3UInt16)
-NO_TYPE(UInt32, fmi3UInt32)
-NO_TYPE(Int64, fmi3Int64)
-NO_TYPE(UInt64, fmi3UInt64)
+#define NO_TYPE(T, CT, SET_RULE) NO_TYPE_GET(T, CT) NO_TYPE_SET(T, CT, SET_RULE)
+NO_TYPE(Float32, fmi3Float32, fmi3SetFloat)
+NO_TYPE(Int8, fmi3Int8, fmi3SetDiscrete)
+NO_TYPE(UInt8, fmi3UInt8, fmi3SetDiscrete)
+NO_TYPE(Int16, fmi3Int16, fmi3SetDiscrete)
+NO_TYPE(UInt16, fmi3UInt16, fmi3SetDiscrete)
+NO_TYPE(UInt32, fmi3UInt32, fmi3SetDiscrete)
+NO_TYPE(Int64, fmi3Int64, fmi3SetDiscrete)
+NO_TYPE(UInt64, fmi3UInt64, fmi3SetDiscrete)
 
 fmi3Status fmi3GetBinary(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, size_t valueSizes[],
                          fmi3Binary values[], size_t nValues)
 {
-    UNUSED(valueSizes), UNUSED(values), UNUSED(nValues);
+    UNUSED(valueSizes), UNUSED(values);
+    CHECK(c);
+    REQUIRE(fmi3GetValues, "fmi3GetBinary");
+    if (!counts_match(INST, "fmi3GetBinary", nvr, nValues)) return fmi3Error;
     return (fmi3Status)no_type(INST, "fmi3GetBinary", "Binary", nvr, vr);
 }
 
 fmi3Status fmi3SetBinary(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, const size_t valueSizes[],
                          const fmi3Binary values[], size_t nValues)
 {
-    UNUSED(valueSizes), UNUSED(values), UNUSED(nValues);
+    UNUSED(valueSizes), UNUSED(values);
+    CHECK(c);
+    REQUIRE(fmi3SetDiscrete, "fmi3SetBinary");
+    if (!counts_match(INST, "fmi3SetBinary", nvr, nValues)) return fmi3Error;
     return (fmi3Status)no_type(INST, "fmi3SetBinary", "Binary", nvr, vr);
 }
 
 fmi3Status fmi3GetClock(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, fmi3Clock values[])
 {
     UNUSED(values);
+    CHECK(c);
+    REQUIRE(fmi3Clocks, "fmi3GetClock");
     return (fmi3Status)no_type(INST, "fmi3GetClock", "Clock", nvr, vr);
 }
 
 fmi3Status fmi3SetClock(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, const fmi3Clock values[])
 {
     UNUSED(values);
+    CHECK(c);
+    REQUIRE(fmi3Clocks, "fmi3SetClock");
     return (fmi3Status)no_type(INST, "fmi3SetClock", "Clock", nvr, vr);
 }
 
 fmi3Status fmi3GetNumberOfVariableDependencies(fmi3Instance c, fmi3ValueReference valueReference, size_t *nDependencies)
 {
     UNUSED(valueReference), UNUSED(nDependencies);
+    CHECK(c);
     return unsupported(INST, "fmi3GetNumberOfVariableDependencies (the model description lists the dependencies)");
 }
 
@@ -388,15 +461,33 @@ fmi3Status fmi3GetVariableDependencies(fmi3Instance c, fmi3ValueReference depend
 {
     UNUSED(dependent), UNUSED(elementIndicesOfDependent), UNUSED(independents);
     UNUSED(elementIndicesOfIndependents), UNUSED(dependencyKinds), UNUSED(nDependencies);
+    CHECK(c);
     return unsupported(INST, "fmi3GetVariableDependencies (the model description lists the dependencies)");
 }
 
 /* ---- FMU states (the backend's handles) ------------------------------------------------------ */
 fmi3Status fmi3GetFMUState(fmi3Instance c, fmi3FMUState *FMUState)
 {
-    CHECK(c && FMUState);
+    CHECK(c);
     REQUIRE(fmi3FMUState, "fmi3GetFMUState");
-    return (fmi3Status)pgb_state_get(INST->b, INST->mode, FMUState);
+    NOT_NULL(FMUState, "fmi3GetFMUState", "FMUState");
+    return (fmi3Status)pgb_state_get(INST->b, INST->mode | (INST->event_pending ? MODE_EVENT_PENDING : 0u), FMUState);
+}
+
+/* The call state an FMU state was taken in (kept and serialized with it) is one this instance can
+ * be in (an instance of the same FMU may be of the other interface, or without Event Mode): 1;
+ * else 0 with the reason logged. */
+static int state_fits(Inst *in, void *state, const char *function, unsigned *mode)
+{
+    if (pgb_state_mode(in->b, state, mode) > ST_WARNING) return 0;
+    unsigned modes = in->me ? FMI3_ME_STATE_MODES : FMI3_CS_STATE_MODES | (in->event_mode_used ? MODE_EVENT : 0u);
+    unsigned flags = !in->me && in->event_mode_used ? MODE_EVENT_PENDING : 0u;
+    const char *kind = in->me ? "model-exchange" : in->event_mode_used ? "co-simulation"
+                                                                       : "co-simulation (eventModeUsed = false)";
+    char text[700];
+    if (state_call_state_fits(*mode, modes, flags, 1, function, kind, text, sizeof text)) return 1;
+    emit(in, ST_ERROR, "logStatusError", text);
+    return 0;
 }
 
 fmi3Status fmi3SetFMUState(fmi3Instance c, fmi3FMUState FMUState)
@@ -404,8 +495,12 @@ fmi3Status fmi3SetFMUState(fmi3Instance c, fmi3FMUState FMUState)
     CHECK(c);
     REQUIRE(fmi3FMUState, "fmi3SetFMUState");
     unsigned mode = 0;
+    if (!state_fits(INST, FMUState, "fmi3SetFMUState", &mode)) return fmi3Error;
     int st = pgb_state_set(INST->b, FMUState, &mode);
-    if (st <= ST_WARNING && mode) INST->mode = mode; /* back in the call state it was taken in */
+    if (st <= ST_WARNING) { /* back in the call state it was taken in */
+        INST->mode = mode & ~MODE_FLAGS;
+        INST->event_pending = (mode & MODE_EVENT_PENDING) != 0;
+    }
     return (fmi3Status)st;
 }
 
@@ -418,25 +513,33 @@ fmi3Status fmi3FreeFMUState(fmi3Instance c, fmi3FMUState *FMUState)
 
 fmi3Status fmi3SerializedFMUStateSize(fmi3Instance c, fmi3FMUState FMUState, size_t *size)
 {
-    CHECK(c && size);
+    CHECK(c);
     REQUIRE(fmi3FMUState, "fmi3SerializedFMUStateSize");
+    NOT_NULL(size, "fmi3SerializedFMUStateSize", "size");
     return (fmi3Status)pgb_state_size(INST->b, FMUState, size);
 }
 
 fmi3Status fmi3SerializeFMUState(fmi3Instance c, fmi3FMUState FMUState, fmi3Byte serializedState[], size_t size)
 {
-    CHECK(c && serializedState);
+    CHECK(c);
     REQUIRE(fmi3FMUState, "fmi3SerializeFMUState");
+    NOT_NULL(serializedState, "fmi3SerializeFMUState", "serializedState");
     return (fmi3Status)pgb_state_serialize(INST->b, FMUState, (unsigned char *)serializedState, size);
 }
 
 fmi3Status fmi3DeserializeFMUState(fmi3Instance c, const fmi3Byte serializedState[], size_t size, fmi3FMUState *FMUState)
 {
-    CHECK(c && serializedState && FMUState);
+    CHECK(c);
     REQUIRE(fmi3FMUState, "fmi3DeserializeFMUState");
-    /* the state's call state: past initialization, Step Mode (co-simulation) or Event Mode (model exchange) */
-    return (fmi3Status)pgb_state_deserialize(INST->b, (const unsigned char *)serializedState, size, FMUState,
-                                             INST->me ? MODE_EVENT : MODE_STEP, MODE_INSTANTIATED);
+    NOT_NULL(serializedState, "fmi3DeserializeFMUState", "serializedState");
+    NOT_NULL(FMUState, "fmi3DeserializeFMUState", "FMUState");
+    int st = pgb_state_deserialize(INST->b, (const unsigned char *)serializedState, size, FMUState);
+    unsigned mode = 0;
+    if (st <= ST_WARNING && !state_fits(INST, *FMUState, "fmi3DeserializeFMUState", &mode)) {
+        pgb_state_free(INST->b, FMUState);
+        return fmi3Error;
+    }
+    return (fmi3Status)st;
 }
 
 /* ---- not provided --------------------------------------------------------------------------- */
@@ -455,7 +558,14 @@ fmi3Status fmi3GetDirectionalDerivative(fmi3Instance c, const fmi3ValueReference
         emit(INST, ST_ERROR, "logStatusError", text);
         return fmi3Error;
     }
-    if ((nUnknowns && (!unknowns || !sensitivity)) || (nKnowns && (!knowns || !seed))) return fmi3Error;
+    if (nUnknowns) {
+        NOT_NULL(unknowns, "fmi3GetDirectionalDerivative", "unknowns");
+        NOT_NULL(sensitivity, "fmi3GetDirectionalDerivative", "sensitivity");
+    }
+    if (nKnowns) {
+        NOT_NULL(knowns, "fmi3GetDirectionalDerivative", "knowns");
+        NOT_NULL(seed, "fmi3GetDirectionalDerivative", "seed");
+    }
     return (fmi3Status)pgb_directional(INST->b, unknowns, nUnknowns, knowns, nKnowns, seed, sensitivity,
                                            "fmi3GetDirectionalDerivative");
 }
@@ -473,15 +583,17 @@ fmi3Status fmi3GetAdjointDerivative(fmi3Instance c, const fmi3ValueReference unk
 
 fmi3Status fmi3EnterConfigurationMode(fmi3Instance c)
 {
+    CHECK(c);
     return unsupported(INST, "fmi3EnterConfigurationMode (this FMU has no structural parameters)");
 }
 
 fmi3Status fmi3ExitConfigurationMode(fmi3Instance c)
 {
+    CHECK(c);
     return unsupported(INST, "fmi3ExitConfigurationMode (this FMU has no structural parameters)");
 }
 
-#define NO_CLOCKS(call_) return unsupported(INST, call_ " (this FMU has no clocks)")
+#define NO_CLOCKS(call_) do { CHECK(c); return unsupported(INST, call_ " (this FMU has no clocks)"); } while (0)
 fmi3Status fmi3GetIntervalDecimal(fmi3Instance c, const fmi3ValueReference vr[], size_t n, fmi3Float64 intervals[],
                                   fmi3IntervalQualifier qualifiers[])
 {
@@ -531,6 +643,7 @@ fmi3Status fmi3EvaluateDiscreteStates(fmi3Instance c) { NO_CLOCKS("fmi3EvaluateD
 fmi3Status fmi3ActivateModelPartition(fmi3Instance c, fmi3ValueReference clockReference, fmi3Float64 activationTime)
 {
     UNUSED(clockReference), UNUSED(activationTime);
+    CHECK(c);
     return unsupported(INST, "fmi3ActivateModelPartition (scheduled execution is not supported)");
 }
 
@@ -615,7 +728,7 @@ fmi3Status fmi3SetContinuousStates(fmi3Instance c, const fmi3Float64 continuousS
     CHECK(c);
     REQUIRE(fmi3SetContinuousStates, "fmi3SetContinuousStates");
     if (!right_count(INST, "fmi3SetContinuousStates", "nContinuousStates", nContinuousStates, NX, "nx")) return fmi3Error;
-    if (nContinuousStates && !continuousStates) return fmi3Error;
+    if (nContinuousStates) NOT_NULL(continuousStates, "fmi3SetContinuousStates", "continuousStates");
     return (fmi3Status)pgb_set_continuous_states(INST->b, continuousStates, nContinuousStates);
 }
 
@@ -625,7 +738,7 @@ fmi3Status fmi3GetContinuousStateDerivatives(fmi3Instance c, fmi3Float64 derivat
     REQUIRE(fmi3GetContinuous, "fmi3GetContinuousStateDerivatives");
     if (!right_count(INST, "fmi3GetContinuousStateDerivatives", "nContinuousStates", nContinuousStates, NX, "nx"))
         return fmi3Error;
-    if (nContinuousStates && !derivatives) return fmi3Error;
+    if (nContinuousStates) NOT_NULL(derivatives, "fmi3GetContinuousStateDerivatives", "derivatives");
     return (fmi3Status)pgb_get_derivatives(INST->b, derivatives, nContinuousStates);
 }
 
@@ -634,7 +747,7 @@ fmi3Status fmi3GetEventIndicators(fmi3Instance c, fmi3Float64 eventIndicators[],
     CHECK(c);
     REQUIRE(fmi3GetContinuous, "fmi3GetEventIndicators");
     if (!right_count(INST, "fmi3GetEventIndicators", "nEventIndicators", nEventIndicators, NZ, "nz")) return fmi3Error;
-    if (nEventIndicators && !eventIndicators) return fmi3Error;
+    if (nEventIndicators) NOT_NULL(eventIndicators, "fmi3GetEventIndicators", "eventIndicators");
     return (fmi3Status)pgb_get_event_indicators(INST->b, eventIndicators, nEventIndicators);
 }
 
@@ -643,7 +756,7 @@ fmi3Status fmi3GetContinuousStates(fmi3Instance c, fmi3Float64 continuousStates[
     CHECK(c);
     REQUIRE(fmi3GetContinuous, "fmi3GetContinuousStates");
     if (!right_count(INST, "fmi3GetContinuousStates", "nContinuousStates", nContinuousStates, NX, "nx")) return fmi3Error;
-    if (nContinuousStates && !continuousStates) return fmi3Error;
+    if (nContinuousStates) NOT_NULL(continuousStates, "fmi3SetContinuousStates", "continuousStates");
     return (fmi3Status)pgb_get_continuous_states(INST->b, continuousStates, nContinuousStates);
 }
 
@@ -653,22 +766,24 @@ fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance c, fmi3Float64 nominal
     REQUIRE(fmi3GetContinuous, "fmi3GetNominalsOfContinuousStates");
     if (!right_count(INST, "fmi3GetNominalsOfContinuousStates", "nContinuousStates", nContinuousStates, NX, "nx"))
         return fmi3Error;
-    if (nContinuousStates && !nominals) return fmi3Error;
+    if (nContinuousStates) NOT_NULL(nominals, "fmi3GetNominalsOfContinuousStates", "nominals");
     return (fmi3Status)pgb_get_nominals(INST->b, nominals, nContinuousStates);
 }
 
 fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance c, size_t *nEventIndicators)
 {
-    CHECK(c && nEventIndicators);
+    CHECK(c);
     REQUIRE(fmi3GetNumbers, "fmi3GetNumberOfEventIndicators");
+    NOT_NULL(nEventIndicators, "fmi3GetNumberOfEventIndicators", "nEventIndicators");
     *nEventIndicators = NZ;
     return fmi3OK;
 }
 
 fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance c, size_t *nContinuousStates)
 {
-    CHECK(c && nContinuousStates);
+    CHECK(c);
     REQUIRE(fmi3GetNumbers, "fmi3GetNumberOfContinuousStates");
+    NOT_NULL(nContinuousStates, "fmi3GetNumberOfContinuousStates", "nContinuousStates");
     *nContinuousStates = NX;
     return fmi3OK;
 }
@@ -690,10 +805,18 @@ fmi3Status fmi3DoStep(fmi3Instance c, fmi3Float64 currentCommunicationPoint, fmi
     UNUSED(noSetFMUStatePriorToCurrentPoint);
     CHECK(c);
     REQUIRE(fmi3DoStep, "fmi3DoStep");
+    /* the FMU stopped before the event's jump: a step on would skip it */
+    if (INST->event_pending) {
+        emit(INST, ST_ERROR, "logStatusError", "fmi3DoStep refused: the last fmi3DoStep returned eventHandlingNeeded "
+             "= true, and the importer has to enter Event Mode (fmi3EnterEventMode) to handle the event before the "
+             "next step (FMI 3.0 section 4.2.1, Step Mode: fmi3DoStep, fmi3EnterEventMode)");
+        return fmi3Error;
+    }
     int event = 0, terminate = 0, early = 0;
     double last = 0.0;
     int st = pgb_do_step3(INST->b, currentCommunicationPoint, communicationStepSize, &event, &terminate, &early, &last);
     if (st > ST_WARNING) return (fmi3Status)st;
+    INST->event_pending = event && INST->event_mode_used;
     put(eventHandlingNeeded, event), put(terminateSimulation, terminate), put(earlyReturn, early);
     if (lastSuccessfulTime) *lastSuccessfulTime = last;
     return (fmi3Status)st;

@@ -67,7 +67,7 @@ static void emit(Inst *in, int status, const char *category, const char *message
 
 typedef struct {
     unsigned magic;
-    unsigned mode; /* the instance's call state when the state was taken */
+    unsigned mode; /* the instance's call state when the state was taken (serialized with it) */
     PyObject *state;
     PyObject *bytes; /* serialized form, kept between SerializedFMUStateSize and Serialize */
 } StateHandle;
@@ -678,6 +678,18 @@ static int keep_state(Inst *in, PyObject *r, void *ctx)
     return ST_OK;
 }
 
+/* a deserialized state: the state, and the call state the Python side read from the sealed bytes
+ * (its "call_state") */
+static int keep_restored(Inst *in, PyObject *r, void *ctx)
+{
+    StateHandle *h = ctx;
+    keep_state(in, r, ctx);
+    PyObject *mode = py.PyDict_GetItemString(r, "call_state"); /* (borrowed) */
+    h->mode = mode ? (unsigned)py.PyLong_AsLong(mode) : 0u;
+    py.PyErr_Clear();
+    return ST_OK;
+}
+
 static int keep_bytes(Inst *in, PyObject *r, void *ctx)
 {
     (void)in;
@@ -725,8 +737,16 @@ int pgb_state_set(PgBackend *in, void *state, unsigned *mode)
     StateHandle *h = state_handle(in, state, "set FMU state");
     if (!h) return ST_ERROR;
     Status st = call(in, "_set_fmu_state", NULL, NULL, "(O)", h->state);
-    *mode = h->mode; /* the call state it was taken in (0: a deserialized state) */
+    *mode = h->mode; /* the call state it was taken in */
     return st;
+}
+
+int pgb_state_mode(PgBackend *in, void *state, unsigned *mode)
+{
+    StateHandle *h = state_handle(in, state, "set FMU state");
+    if (!h) return ST_ERROR;
+    *mode = h->mode;
+    return ST_OK;
 }
 
 int pgb_state_free(PgBackend *in, void **state)
@@ -751,7 +771,7 @@ int pgb_state_size(PgBackend *in, void *state, size_t *size)
 {
     StateHandle *h = state_handle(in, state, "serialized FMU state size");
     if (!h) return ST_ERROR;
-    Status st = call(in, "_fmu_state_to_bytes", keep_bytes, h, "(O)", h->state);
+    Status st = call(in, "_fmu_state_to_bytes", keep_bytes, h, "(Ok)", h->state, (unsigned long)h->mode);
     if (st <= ST_WARNING) {
         GIL g = py.PyGILState_Ensure();
         *size = (size_t)py.PyBytes_Size(h->bytes);
@@ -782,17 +802,15 @@ int pgb_state_serialize(PgBackend *in, void *state, unsigned char *bytes, size_t
     return ST_OK;
 }
 
-int pgb_state_deserialize(PgBackend *in, const unsigned char *bytes, size_t size, void **state,
-                          unsigned mode_initialized, unsigned mode_instantiated)
+int pgb_state_deserialize(PgBackend *in, const unsigned char *bytes, size_t size, void **state)
 {
-    (void)mode_initialized, (void)mode_instantiated; /* the Python side knows: set leaves the call state */
     StateHandle *h = calloc(1, sizeof *h);
     if (!h) return ST_ERROR;
     h->magic = STATE_MAGIC;
     GIL g = py.PyGILState_Ensure();
     PyObject *b = py.PyBytes_FromStringAndSize((const char *)bytes, (Py_ssize_t_)size);
     py.PyGILState_Release(g);
-    Status st = call(in, "_fmu_state_from_bytes", keep_state, h, "(N)", b);
+    Status st = call(in, "_fmu_state_from_bytes", keep_restored, h, "(N)", b);
     if (st <= ST_WARNING) *state = h;
     else free(h);
     return st;

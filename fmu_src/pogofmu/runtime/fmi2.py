@@ -61,7 +61,7 @@ from .status import ERROR, FATAL, OK, WARNING, log_category
 __all__ = ["HybridSlave", "FMUError", "FmiVariable", "fmi2_variables", "LOG_CATEGORIES"]
 
 MAX_INTERNAL_STEPS_PER_CALL = 1e8  # a communication step needing more is refused before any work
-_STATE_FORMAT = "pogofmu-fmu-state-2"
+_STATE_FORMAT = "pogofmu-fmu-state-3"
 # the package this module was imported as: "_pogofmu_<Model>_<hash>" inside an FMU (one name per
 # build of one model, see build_fmu.py), "pogofmu" from the source tree
 _BUILD = __name__.rpartition(".")[0]
@@ -558,24 +558,27 @@ class HybridSlave:
         else:
             self._out = dict(state["out"])
 
-    def _fmu_state_to_bytes(self, state):
+    def _fmu_state_to_bytes(self, state, call_state=0):
         """fmi2SerializeFMUstate: the state as JSON (floats exact through repr), tagged with the
-        model, the build and the FMI version it belongs to and sealed with the SHA-256 of the rest
-        (a changed byte is found, not restored)."""
+        model, the build and the FMI version it belongs to and with the call state it was taken in
+        (the FMI entry file's number: the launcher keeps it with the state and checks it on
+        restore), sealed with the SHA-256 of the rest (a changed byte is found, not restored)."""
         self._check_owner(state, "SerializeFMUstate")
         try:
             data = dict(state, sim=None if state["sim"] is None else snapshot_to_data(state["sim"]))
+            data.pop("call_state", None)  # (a deserialized state's: the one given is the handle's)
             data["owner"] = list(data["owner"])
-            body = json.dumps({"format": _STATE_FORMAT, "owner": data.pop("owner"), "state": data},
-                              separators=(",", ":"), sort_keys=True)
+            body = json.dumps({"format": _STATE_FORMAT, "owner": data.pop("owner"), "state": data,
+                               "taken_in": int(call_state)}, separators=(",", ":"), sort_keys=True)
         except (TypeError, ValueError) as exc:
             raise FMUError(f"{self._fn('SerializeFMUstate')}: the state cannot be serialized ({exc})") from None
         return (body + "\n" + hashlib.sha256(body.encode()).hexdigest()).encode()
 
     def _fmu_state_from_bytes(self, data):
-        """fmi2DeSerializeFMUstate: the inverse of :meth:`_fmu_state_to_bytes`. Refused, naming
-        the cause: bytes that are no pogofmu state, a state whose seal does not match (damaged),
-        one of another model, build or FMI version (both named)."""
+        """fmi2DeSerializeFMUstate: the inverse of :meth:`_fmu_state_to_bytes`, the call state the
+        state was taken in given back as its ``"call_state"``. Refused, naming the cause: bytes
+        that are no pogofmu state, a state whose seal does not match (damaged), one of another
+        model, build or FMI version (both named)."""
         call = self._fn("DeSerializeFMUstate")
         raw = bytes(data)
         body, sep, seal = raw.rpartition(b"\n")
@@ -593,8 +596,9 @@ class HybridSlave:
             raise FMUError(f"{call} refused: a pogofmu FMU state of format {fmt!r}; this FMU reads {_STATE_FORMAT!r}")
         owner = doc.get("owner")
         state = doc.get("state")
-        if not isinstance(state, dict):
-            raise FMUError(f"{call} refused: the sealed state has no state record")
+        if not isinstance(state, dict) or not isinstance(doc.get("taken_in"), int):
+            raise FMUError(f"{call} refused: the sealed state has no state record or no call state")
+        state["call_state"] = doc["taken_in"]
         state["owner"] = tuple(owner) if isinstance(owner, list) else owner
         try:
             self._check_owner(state, "DeSerializeFMUstate")
