@@ -163,22 +163,18 @@ def test_me_pogostick_events_match_the_closed_form():
 
 
 def independent_events(name, stop):
-    """[(name, time)] of the default experiment by the scipy model of the model's own test file
+    """[(name, time)] of the default experiment by the scipy model in tests/references.py
     (DOP853 at rtol 1e-13, the equations written there from docs/models.md, not the package's)."""
     from pogofmu.runtime.models import get
 
-    if name == "PogoStickMem":
-        from test_mem import scipy_mem
+    from references import penetrator_reference, scipy_mem, scipy_sma
 
+    if name == "PogoStickMem":
         p = get(name).params()
         return [(n, t) for n, t, _ in scipy_mem(p.spring_law, p.beta, p.gamma, stop, c=p.c, a0=p.a_0)]
     if name == "PogoStickSMA":
-        from test_sma import scipy_sma
-
         return scipy_sma(stop)
-    from test_penetrator import reference
-
-    return [(n, t) for n, t, _ in reference(stop)[0]]
+    return [(n, t) for n, t, _ in penetrator_reference(stop)[0]]
 
 
 @pytest.mark.parametrize("name", ["PogoStickMem", "PogoStickSMA", "Penetrator"])

@@ -1,15 +1,14 @@
 """PogoStickMem.fmu (docs/models.md "PogoStickMem"): mem-spring and mem-dashpot legs, through the built FMU.
 
 References are independent of the code under test: the closed-form event times of the basic stick
-(pogofmu.closed_form), a solve_ivp model of the mem-stick written here, the
+(pogofmu.closed_form), a solve_ivp model of the mem-stick (tests/references.py), the
 energy balance, and the geometry of the pinched loop.
 """
 import re
 
 import numpy as np
 import pytest
-from scipy.integrate import solve_ivp
-
+from references import scipy_mem
 from support import Instance, assert_parameter_rejected, reference_events, simulate
 
 NAME = "PogoStickMem"
@@ -18,55 +17,6 @@ E0 = M * G * 1.5  # E = m ydot^2/2 + m g y at the default start (y = 1.5 m, at r
 TIGHT = {"method": 8, "rel_tol": 1e-11, "abs_tol": 1e-14}
 LAWS = (0, 1, 2)
 
-
-# ---- an independent model of the mem-stick: solve_ivp with terminal events ----------------------
-
-def scipy_mem(law, beta, gamma, t_end, c=C, a0=0.0):
-    """Events [(name, t, state)] of the mem-stick from the default drop; 'bottom' if xbar hits 0."""
-
-    def k_of(a):
-        return K if law == 0 else (K / (1 + beta * abs(a)) if law == 1 else K * (1 + beta * abs(a)))
-
-    def flight(t, X):
-        xbar, xdot, y, ydot, z, a = X
-        return [0.0, 0.0, ydot, -G, ydot, 0.0]
-
-    def contact(t, X):
-        xbar, xdot, y, ydot, z, a = X
-        x = xbar - X_I
-        r = k_of(a) * x + c * (1 + gamma * x * x) * xdot
-        acc = -r / M - G
-        return [xdot, acc, ydot, acc, 0.0, x]
-
-    def touchdown(t, X):
-        return X[4]
-
-    def liftoff(t, X):
-        return X[0] - X_I
-
-    def bottom(t, X):
-        return X[0]
-
-    for f, d in ((touchdown, -1), (liftoff, 1), (bottom, -1)):
-        f.terminal, f.direction = True, d
-    X, s, t, out = [X_I, 0.0, 1.5, 0.0, 0.5, a0], 0, 0.0, []
-    while t < t_end:
-        rhs, evs = (flight, [touchdown]) if s == 0 else (contact, [liftoff, bottom])
-        sol = solve_ivp(rhs, (t, t_end), X, method="DOP853", events=evs, rtol=1e-13, atol=1e-15, max_step=0.01)
-        assert sol.status >= 0, sol.message
-        if sol.status == 0:
-            break
-        j = next(i for i, te in enumerate(sol.t_events) if len(te))
-        t, X = sol.t_events[j][0], list(sol.y_events[j][0])
-        name = evs[j].__name__
-        out.append((name, t, list(X)))
-        if name == "bottom":
-            break
-        if name == "touchdown":
-            X[1], X[4], s = X[3], 0.0, 1
-        else:
-            X[0], X[1], X[4], s = X_I, 0.0, 0.0, 0
-    return out
 
 
 def mem_run(stop_time, output_interval=1e-3, **params):

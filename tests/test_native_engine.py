@@ -20,7 +20,7 @@ from native_engine import NativeEngine, both_runs
 from pogofmu.codegen.build import CompileError, c_compiler, engine_library
 from pogofmu.runtime.engine import SOLVER_PARAMETERS
 from pogofmu.runtime.models import all_models
-from test_properties import THRUST, penetrator_params, stick_params
+from parameter_sets import THRUST, penetrator_params, stick_params
 
 MODELS = sorted(all_models())
 SAME = settings(max_examples=25, deadline=None, derandomize=True, database=None,

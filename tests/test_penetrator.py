@@ -1,97 +1,22 @@
 """Penetrator.fmu: the stick driven into a Hunt-Crossley soil (issue 4, docs/models.md "Penetrator").
 
-Every test drives the built FMU through fmpy.  The reference is written here independently of
-the package: Eq. 50 integrated by scipy's DOP853 at rtol = 1e-13, with scipy's own event
+Every test drives the built FMU through fmpy.  The reference (tests/references.py) is written
+independently of the package: Eq. 50 integrated by scipy's DOP853 at rtol = 1e-13, with scipy's own event
 location (touchdown: the foot height y - x_i - x_lift exp(-(k/c)(t - t_lift)) falling, i.e.
 y - x_i once the massless leg has relaxed after liftoff; liftoff: delta falling; a new record of
 the penetration: delta' falling through 0 while delta exceeds every earlier penetration).
 """
-import functools
 import math
 
 import numpy as np
 import pytest
-from scipy.integrate import solve_ivp
 
+from references import PENETRATOR_DEFAULTS as DEFAULTS
+from references import hunt_crossley
+from references import penetrator_reference as reference
 from support import Instance, assert_parameter_rejected, simulate
 
-DEFAULTS = dict(m=1.0, k=100.0, c=0.5, x_i=1.0, g=9.81, K=1e4, n=1.5, c_r=0.5, d0dot=3.1321,
-                d0dot_from_impact=0, y_0=1.5, ydot_0=0.0)
 CONTACT_EVENTS = ("touchdown", "liftoff")
-
-
-# ---------------------------------------------------------------------------------------------
-# independent reference (scipy)
-# ---------------------------------------------------------------------------------------------
-
-def _rhs(t, x, s, lam, P):
-    y, v, d = x
-    if not s:
-        return [v, -P["g"], 0.0]
-    m, k, c, x_i, K, n = P["m"], P["k"], P["c"], P["x_i"], P["K"], P["n"]
-    pw = max(0.0, d) ** n
-    dd = (-k * y - c * v - K * pw - k * d + k * x_i) / (lam * pw + c)  # Eq. 50
-    return [v, -P["g"] - k / m * (y + d) + k / m * x_i - c / m * (v + dd), dd]
-
-
-def _event(fun, direction, terminal):
-    fun.direction, fun.terminal = direction, terminal
-    return fun
-
-
-@functools.lru_cache(maxsize=None)
-def _reference_cached(t_end, items):
-    P = dict(items)
-    t, x = 0.0, [P["y_0"], P["ydot_0"], 0.0]
-    s, d0, record = 0, P["d0dot"], 0.0
-    t_lift, x_lift = 0.0, 0.0  # latest liftoff: time and leg deflection
-    rk = P["k"] / P["c"]
-    assert P["y_0"] > P["x_i"], "the reference starts in flight"
-    out = []
-
-    def foot(t, x, s, lam, P):  # foot height in flight: the free massless leg relaxes, k x + c x' = 0
-        return x[0] - P["x_i"] - x_lift * math.exp(-rk * (t - t_lift))
-
-    while t < t_end:
-        lam = 1.5 * (1.0 - P["c_r"]) * P["K"] / d0
-        if s == 0:
-            events = [_event(foot, -1, True)]
-        else:
-            events = [_event(lambda t, x, s, lam, P: x[2], -1, True),
-                      _event(lambda t, x, s, lam, P: _rhs(t, x, 1, lam, P)[2], -1, False)]
-        sol = solve_ivp(_rhs, (t, t_end), x, method="DOP853", rtol=1e-13, atol=1e-15, events=events,
-                        args=(s, lam, P))
-        assert sol.status >= 0, sol.message
-        if s == 1:
-            for te, xe in zip(sol.t_events[1], sol.y_events[1]):
-                if xe[2] > record:
-                    record = xe[2]
-                    out.append(("max_penetration", float(te), xe.copy()))
-        if sol.status != 1:
-            break
-        te, xe = float(sol.t_events[0][0]), sol.y_events[0][0].copy()
-        out.append(("touchdown" if s == 0 else "liftoff", te, xe))
-        x = [xe[0], xe[1], 0.0]
-        if s == 0:
-            impact = -xe[1] - rk * x_lift * math.exp(-rk * (te - t_lift))  # foot speed
-            d0 = impact if P["d0dot_from_impact"] and impact > 0 else P["d0dot"]
-        else:
-            t_lift, x_lift = te, xe[0] - P["x_i"]
-        t, s = te, 1 - s
-    return out, record
-
-
-def reference(t_end=10.0, **par):
-    """[(name, time, state before jump)], largest penetration; for the parameters ``par``."""
-    return _reference_cached(t_end, tuple(sorted(dict(DEFAULTS, **par).items())))
-
-
-def hunt_crossley(state, d0, **par):
-    """Soil force of a contact state [y, ydot, delta] (independent of the package)."""
-    P = dict(DEFAULTS, **par)
-    lam = 1.5 * (1 - P["c_r"]) * P["K"] / d0
-    dd = _rhs(0.0, state[:3], 1, lam, P)[2]
-    return P["K"] * max(0.0, state[2]) ** P["n"] * (1 + lam / P["K"] * dd)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -23,9 +23,11 @@ import re
 from functools import lru_cache
 
 import pytest
-from hypothesis import HealthCheck, Phase, assume, given, settings
+from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
+from parameter_sets import THRUST, logf, penetrator_params, stick_params
+from references import reference_stick
 from support import Instance, example_models, fmu_path, model_of
 
 LONG = os.environ.get("POGOFMU_FUZZ", "") == "long"
@@ -70,86 +72,6 @@ def _run(name, params, stop=STOP, step=STEP, inputs=None, outputs=("E", "W_leg",
         return None, rec
     finally:
         inst.close()
-
-
-def logf(lo, hi):
-    """Log-uniform floats in [lo, hi]."""
-    return st.floats(math.log10(lo), math.log10(hi)).map(lambda e: 10.0 ** e)
-
-
-SOLVER = st.fixed_dictionaries({
-    "method": st.sampled_from([5, 8]),
-    "rel_tol": logf(1e-10, 1e-4),
-    "abs_tol": logf(1e-14, 1e-8),
-    "max_step": st.sampled_from([0.0, 0.01, 0.05]),
-})
-
-
-@st.composite
-def stick_params(draw, name):
-    m, x_i = draw(logf(0.1, 10.0)), draw(st.floats(0.2, 2.0))
-    g = draw(st.sampled_from([9.81, 1.62, 0.28]) | logf(0.1, 30.0))
-    c = draw(st.just(0.0) | st.floats(0.0, 5.0))
-    p = dict(m=m, x_i=x_i, g=g, c=c, **draw(SOLVER))
-    if name == "PogoStickSMA":
-        k1 = draw(logf(50.0, 5e3))
-        x3 = -x_i * draw(st.floats(0.02, 0.3))
-        x1 = max(x3 * draw(st.floats(1.2, 3.0)), -0.9 * x_i)
-        p.update(k1=k1, k2=k1 * draw(st.floats(0.05, 0.999999)), x1=x1, x3=x3)
-        k_low, k_fast, deflection_max = p["k2"], k1, 0.9 * abs(x1)
-    else:
-        k = draw(logf(20.0, 5e3))
-        p["k"] = k
-        k_low = k_fast = k
-        deflection_max = 0.2 * x_i
-        if name == "PogoStickMem":
-            law, beta = draw(st.sampled_from([0, 1, 2])), draw(st.floats(0.0, 3.0))
-            a_0 = draw(st.floats(-0.2, 0.2))
-            p.update(spring_law=law, beta=beta, gamma=draw(st.floats(0.0, 3.0)), a_0=a_0)
-            grow = beta * (abs(a_0) + x_i * STOP)  # |a| <= |a_0| + x_i t
-            if law == 1:
-                k_low = k / (1 + grow)
-            elif law == 2:
-                k_fast = k * (1 + grow)
-    if draw(st.booleans()):  # flight start
-        z_0, ydot_0 = draw(st.floats(1e-3 * x_i, 2.0)), draw(st.floats(-3.0, 3.0))
-        p.update(xbar_0=x_i, xdot_0=0.0, y_0=x_i + z_0, z_0=z_0, ydot_0=ydot_0)
-    else:  # contact start, on the virgin line for the SMA
-        xbar_0 = x_i - draw(st.floats(0.0, 1.0)) * deflection_max
-        ydot_0 = draw(st.floats(-2.0, 2.0))
-        p.update(xbar_0=xbar_0, xdot_0=ydot_0, y_0=xbar_0, z_0=0.0, ydot_0=ydot_0)
-    # the leg cannot bottom out: even the softest leg stores 4x the total energy at full compression
-    energy = m * (g * p["y_0"] + p["ydot_0"] ** 2 / 2) + k_fast * (x_i - p["xbar_0"]) ** 2 / 2
-    assume(k_low * x_i ** 2 / 2 >= 4 * energy)
-    assume(math.sqrt(m / k_fast) >= 1e-4 and (c == 0 or m / c >= 1e-4))
-    p["_scale"] = min(x_i, m * g / k_fast, abs(p.get("x3", x_i)))  # smallest length the error control must resolve
-    p["abs_tol"] = min(p["abs_tol"], 1e-3 * p["_scale"])  # the rule (README "Errors")
-    return p
-
-
-@st.composite
-def penetrator_params(draw):
-    m, x_i, k = draw(logf(0.1, 10.0)), draw(st.floats(0.2, 2.0)), draw(logf(20.0, 5e3))
-    g = draw(st.sampled_from([9.81, 1.62]) | logf(0.1, 30.0))
-    K, n = draw(logf(1e2, 1e6)), draw(st.floats(1.0, 2.0))
-    p = dict(m=m, k=k, c=draw(st.floats(0.05, 5.0)), x_i=x_i, g=g, K=K, n=n, c_r=draw(st.floats(0.0, 1.0)),
-             d0dot=draw(logf(0.3, 10.0)), d0dot_from_impact=draw(st.sampled_from([0, 1])), **draw(SOLVER))
-    if draw(st.booleans()):
-        p.update(y_0=x_i + draw(st.floats(1e-3, 2.0)), ydot_0=draw(st.floats(-3.0, 3.0)))
-    else:
-        p.update(y_0=x_i * (1 - draw(st.floats(0.0, 0.1))), ydot_0=draw(st.floats(-1.0, 1.0)))
-    energy = m * (g * p["y_0"] + p["ydot_0"] ** 2 / 2) + k * (x_i - min(p["y_0"], x_i)) ** 2 / 2
-    assume(k * (x_i / 2) ** 2 / 2 >= 4 * energy and K * (x_i / 2) ** (n + 1) / (n + 1) >= 4 * energy)
-    K_s = K * n * (m * g / K) ** ((n - 1) / n)  # soil stiffness at the resting depth
-    assume(min(p["c"] / k, math.sqrt(m / k), p["c"] / K_s) >= 1e-4)
-    p["_scale"] = min(x_i, m * g / k, (m * g / K) ** (1 / n))
-    p["abs_tol"] = min(p["abs_tol"], 1e-3 * p["_scale"])  # the rule (README "Errors")
-    return p
-
-
-# a thrust held over each communication step, cycled: upward only (in [0, 2 m g]), so the leg can
-# still not bottom out; it forces liftoffs (F > m g) and restarts the integrator at input changes
-THRUST = st.lists(st.floats(0.0, 2.0), min_size=1, max_size=8)
 
 
 def _check_valid_run(name, p, soil=False, thrust=()):
@@ -408,85 +330,6 @@ def test_any_parameters_give_a_result_or_a_clear_message(name):
 PHYSICS_TIGHT = {"method": 8, "rel_tol": 1e-11}
 PHYSICS_STOP = 4.0  # s: most random drops touch down and lift off within it
 
-
-def _ev(fun, direction, name):
-    fun.terminal, fun.direction, fun.__name__ = True, direction, name
-    return fun
-
-
-def reference_stick(name, p, t_end):
-    """[(event name, time)] of a free (unforced) run of the stick with parameters ``p``."""
-    from scipy.integrate import solve_ivp
-
-    m, g, x_i, c = p["m"], p["g"], p["x_i"], p["c"]
-    law, beta, gamma = p.get("spring_law", 0), p.get("beta", 0.0), p.get("gamma", 0.0)
-    k1, k2, x1, x3 = p.get("k1"), p.get("k2"), p.get("x1"), p.get("x3")
-
-    def k_of(a):  # the mem-spring's stiffness: linear, softening, hardening in the absement
-        k = p["k"]
-        return k if law == 0 else (k / (1 + beta * abs(a)) if law == 1 else k * (1 + beta * abs(a)))
-
-    def contact(force):
-        def f(t, X):
-            xbar, xdot, y, ydot, z, a = X
-            x = xbar - x_i
-            acc = -force(x, xdot, a) / m - g
-            return [xdot, acc, ydot, acc, 0.0, x]
-        return f
-
-    def flight(t, X):
-        return [0.0, 0.0, X[3], -g, X[3], 0.0]
-
-    touchdown = _ev(lambda t, X: X[4], -1, "touchdown")
-    liftoff = _ev(lambda t, X: X[0] - x_i, 1, "liftoff")
-    r_upper = lambda x: k1 * x1 + k2 * (x - x1)  # noqa: E731  (the SMA's plateaus)
-    r_lower = lambda x: k1 * x3 + k2 * (x - x3)  # noqa: E731
-    X = [p["xbar_0"], p["xdot_0"], p["y_0"], p["ydot_0"], p["z_0"], p.get("a_0", 0.0)]
-    mode = "flight" if p["z_0"] > 0 else "contact"
-    H = None
-    t, out = 0.0, []
-    while t < t_end:
-        if len(out) > 400:
-            return None  # chattering (a model for the engine's storm rules, not for this reference)
-        if mode == "flight":
-            f, evs = flight, [touchdown]
-        elif name != "PogoStickSMA":
-            f, evs = contact(lambda x, xdot, a: k_of(a) * x + c * (1 + gamma * x * x) * xdot), [liftoff]
-        elif mode == "contact":  # the SMA's virgin (elastic) line
-            f = contact(lambda x, xdot, a: k1 * x + c * xdot)
-            evs = [liftoff, _ev(lambda t, X: X[0] - x_i - x1, -1, "upper_plateau")]
-        elif mode == "upper":
-            f, evs = contact(lambda x, xdot, a: r_upper(x) + c * xdot), [_ev(lambda t, X: X[1], 1, "reversal")]
-        elif mode == "unload":  # elastic from the reversal at H; meets the lower plateau at H + x3 - x1
-            f = contact(lambda x, xdot, a, H=H: r_upper(H) + k1 * (x - H) + c * xdot)
-            evs = [_ev(lambda t, X, H=H: X[0] - x_i - (H + x3 - x1), 1, "lower_plateau"),
-                   _ev(lambda t, X, H=H: X[0] - x_i - H, -1, "upper_plateau")]
-        else:  # the lower plateau
-            f = contact(lambda x, xdot, a: r_lower(x) + c * xdot)
-            evs = [_ev(lambda t, X: X[0] - x_i - x3, 1, "virgin_line"), _ev(lambda t, X: X[1], -1, "reload")]
-        sol = solve_ivp(f, (t, t_end), X, method="DOP853", events=evs, rtol=1e-12,
-                        atol=1e-14 * max(1.0, x_i), max_step=0.01)
-        assert sol.status >= 0, sol.message
-        if sol.status == 0:
-            break
-        j = next(i for i, te in enumerate(sol.t_events) if len(te))
-        t, X, event = sol.t_events[j][0], list(sol.y_events[j][0]), evs[j].__name__
-        out.append((event, t))
-        if event == "touchdown":
-            X[1], X[4], mode = X[3], 0.0, "contact"
-        elif event == "liftoff":
-            X[0], X[1], X[4], mode = x_i, 0.0, 0.0, "flight"
-        elif event == "upper_plateau":
-            mode = "upper"
-        elif event == "reversal":
-            H, mode = X[0] - x_i, "unload"
-        elif event == "lower_plateau":
-            mode = "lower"
-        elif event == "virgin_line":
-            mode = "contact"
-        else:  # a reload from the lower plateau: not in this reference (an unforced drop seldom has one)
-            return None
-    return out
 
 
 @pytest.mark.parametrize("name", STICKS)

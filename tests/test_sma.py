@@ -1,7 +1,7 @@
 """PogoStickSMA.fmu (docs/models.md "PogoStickSMA"): shape-memory-alloy flag leg, through the built FMU.
 
 References are independent of the code under test: the flag's geometry (plateau lines, the
-closed-form meeting point and area of a cycle), a solve_ivp model (the property suite's
+closed-form meeting point and area of a cycle), a solve_ivp model (tests/references.py's
 ``reference_stick``) with guards in ``x`` instead of the FMU's force differences, and the energy
 balance.
 """
@@ -10,6 +10,7 @@ import math
 import numpy as np
 import pytest
 
+from references import scipy_sma
 from support import Instance, assert_parameter_rejected, parse_event_log, simulate
 
 NAME = "PogoStickSMA"
@@ -46,20 +47,6 @@ def xev(e):
 
 def energy(e):
     return M * G * e["state"]["y"] + 0.5 * M * e["state"]["ydot"] ** 2
-
-
-# ---- an independent SMA stick: the property suite's solve_ivp reference (one mode per branch,
-# guards written in x instead of the FMU's force differences) at this file's defaults -------------
-
-def scipy_sma(t_end, c=C):
-    """Events [(name, t)] of a free drop from y = 1.5 m (no forcing)."""
-    from test_properties import reference_stick
-
-    p = dict(m=M, g=G, x_i=X_I, c=c, k1=K1, k2=K2, x1=X1, x3=X3,
-             xbar_0=X_I, xdot_0=0.0, y_0=1.5, ydot_0=0.0, z_0=0.5)
-    out = reference_stick(NAME, p, t_end)
-    assert out is not None, "the reference met a reload, which a free drop has not"
-    return out
 
 
 # ---- the default drop ---------------------------------------------------------------------------

@@ -1,0 +1,264 @@
+"""The tests' independent references: models of the FMUs' equations written here with scipy,
+not calling the project's code (closed forms are in pogofmu.closed_form and in the tests that
+use them). One module, so that no test imports another test for its reference.
+
+* :func:`scipy_mem` — the mem-stick (PogoStickMem) from the default drop;
+* :func:`reference_stick` — any stick (linear, mem, SMA) of given parameters, one mode per branch
+  of the SMA flag, guards written in x instead of the FMUs' force differences; :func:`scipy_sma`
+  the SMA stick from the default drop;
+* :func:`penetrator_reference` — the Penetrator (Eq. 50), :func:`hunt_crossley` its soil force.
+
+Checked-in outputs of these (``tests/data/references/<Model>_ref.csv``, event name and time) let
+a test compare an FMU without running scipy and show when a reference itself changes
+(``python tests/references.py --write`` rewrites them; ``test_references`` checks them).
+"""
+import functools
+import math
+
+from scipy.integrate import solve_ivp
+
+# the default drop of the sticks: m, k, c, x_i, g
+M, K, C, X_I, G = 1.0, 100.0, 0.5, 1.0, 9.81
+K1, K2, X1, X3 = 100.0, 40.0, -0.2, -0.1  # the SMA flag's defaults
+PENETRATOR_DEFAULTS = dict(m=1.0, k=100.0, c=0.5, x_i=1.0, g=9.81, K=1e4, n=1.5, c_r=0.5, d0dot=3.1321,
+                d0dot_from_impact=0, y_0=1.5, ydot_0=0.0)
+
+
+def scipy_mem(law, beta, gamma, t_end, c=C, a0=0.0):
+    """Events [(name, t, state)] of the mem-stick from the default drop; 'bottom' if xbar hits 0."""
+
+    def k_of(a):
+        return K if law == 0 else (K / (1 + beta * abs(a)) if law == 1 else K * (1 + beta * abs(a)))
+
+    def flight(t, X):
+        xbar, xdot, y, ydot, z, a = X
+        return [0.0, 0.0, ydot, -G, ydot, 0.0]
+
+    def contact(t, X):
+        xbar, xdot, y, ydot, z, a = X
+        x = xbar - X_I
+        r = k_of(a) * x + c * (1 + gamma * x * x) * xdot
+        acc = -r / M - G
+        return [xdot, acc, ydot, acc, 0.0, x]
+
+    def touchdown(t, X):
+        return X[4]
+
+    def liftoff(t, X):
+        return X[0] - X_I
+
+    def bottom(t, X):
+        return X[0]
+
+    for f, d in ((touchdown, -1), (liftoff, 1), (bottom, -1)):
+        f.terminal, f.direction = True, d
+    X, s, t, out = [X_I, 0.0, 1.5, 0.0, 0.5, a0], 0, 0.0, []
+    while t < t_end:
+        rhs, evs = (flight, [touchdown]) if s == 0 else (contact, [liftoff, bottom])
+        sol = solve_ivp(rhs, (t, t_end), X, method="DOP853", events=evs, rtol=1e-13, atol=1e-15, max_step=0.01)
+        assert sol.status >= 0, sol.message
+        if sol.status == 0:
+            break
+        j = next(i for i, te in enumerate(sol.t_events) if len(te))
+        t, X = sol.t_events[j][0], list(sol.y_events[j][0])
+        name = evs[j].__name__
+        out.append((name, t, list(X)))
+        if name == "bottom":
+            break
+        if name == "touchdown":
+            X[1], X[4], s = X[3], 0.0, 1
+        else:
+            X[0], X[1], X[4], s = X_I, 0.0, 0.0, 0
+    return out
+
+
+def _ev(fun, direction, name):
+    fun.terminal, fun.direction, fun.__name__ = True, direction, name
+    return fun
+
+
+def reference_stick(name, p, t_end):
+    """[(event name, time)] of a free (unforced) run of the stick with parameters ``p``."""
+    from scipy.integrate import solve_ivp
+
+    m, g, x_i, c = p["m"], p["g"], p["x_i"], p["c"]
+    law, beta, gamma = p.get("spring_law", 0), p.get("beta", 0.0), p.get("gamma", 0.0)
+    k1, k2, x1, x3 = p.get("k1"), p.get("k2"), p.get("x1"), p.get("x3")
+
+    def k_of(a):  # the mem-spring's stiffness: linear, softening, hardening in the absement
+        k = p["k"]
+        return k if law == 0 else (k / (1 + beta * abs(a)) if law == 1 else k * (1 + beta * abs(a)))
+
+    def contact(force):
+        def f(t, X):
+            xbar, xdot, y, ydot, z, a = X
+            x = xbar - x_i
+            acc = -force(x, xdot, a) / m - g
+            return [xdot, acc, ydot, acc, 0.0, x]
+        return f
+
+    def flight(t, X):
+        return [0.0, 0.0, X[3], -g, X[3], 0.0]
+
+    touchdown = _ev(lambda t, X: X[4], -1, "touchdown")
+    liftoff = _ev(lambda t, X: X[0] - x_i, 1, "liftoff")
+    r_upper = lambda x: k1 * x1 + k2 * (x - x1)  # noqa: E731  (the SMA's plateaus)
+    r_lower = lambda x: k1 * x3 + k2 * (x - x3)  # noqa: E731
+    X = [p["xbar_0"], p["xdot_0"], p["y_0"], p["ydot_0"], p["z_0"], p.get("a_0", 0.0)]
+    mode = "flight" if p["z_0"] > 0 else "contact"
+    H = None
+    t, out = 0.0, []
+    while t < t_end:
+        if len(out) > 400:
+            return None  # chattering (a model for the engine's storm rules, not for this reference)
+        if mode == "flight":
+            f, evs = flight, [touchdown]
+        elif name != "PogoStickSMA":
+            f, evs = contact(lambda x, xdot, a: k_of(a) * x + c * (1 + gamma * x * x) * xdot), [liftoff]
+        elif mode == "contact":  # the SMA's virgin (elastic) line
+            f = contact(lambda x, xdot, a: k1 * x + c * xdot)
+            evs = [liftoff, _ev(lambda t, X: X[0] - x_i - x1, -1, "upper_plateau")]
+        elif mode == "upper":
+            f, evs = contact(lambda x, xdot, a: r_upper(x) + c * xdot), [_ev(lambda t, X: X[1], 1, "reversal")]
+        elif mode == "unload":  # elastic from the reversal at H; meets the lower plateau at H + x3 - x1
+            f = contact(lambda x, xdot, a, H=H: r_upper(H) + k1 * (x - H) + c * xdot)
+            evs = [_ev(lambda t, X, H=H: X[0] - x_i - (H + x3 - x1), 1, "lower_plateau"),
+                   _ev(lambda t, X, H=H: X[0] - x_i - H, -1, "upper_plateau")]
+        else:  # the lower plateau
+            f = contact(lambda x, xdot, a: r_lower(x) + c * xdot)
+            evs = [_ev(lambda t, X: X[0] - x_i - x3, 1, "virgin_line"), _ev(lambda t, X: X[1], -1, "reload")]
+        sol = solve_ivp(f, (t, t_end), X, method="DOP853", events=evs, rtol=1e-12,
+                        atol=1e-14 * max(1.0, x_i), max_step=0.01)
+        assert sol.status >= 0, sol.message
+        if sol.status == 0:
+            break
+        j = next(i for i, te in enumerate(sol.t_events) if len(te))
+        t, X, event = sol.t_events[j][0], list(sol.y_events[j][0]), evs[j].__name__
+        out.append((event, t))
+        if event == "touchdown":
+            X[1], X[4], mode = X[3], 0.0, "contact"
+        elif event == "liftoff":
+            X[0], X[1], X[4], mode = x_i, 0.0, 0.0, "flight"
+        elif event == "upper_plateau":
+            mode = "upper"
+        elif event == "reversal":
+            H, mode = X[0] - x_i, "unload"
+        elif event == "lower_plateau":
+            mode = "lower"
+        elif event == "virgin_line":
+            mode = "contact"
+        else:  # a reload from the lower plateau: not in this reference (an unforced drop seldom has one)
+            return None
+    return out
+
+
+def scipy_sma(t_end, c=C):
+    """Events [(name, t)] of the SMA stick's free drop from y = 1.5 m (no forcing)."""
+    p = dict(m=M, g=G, x_i=X_I, c=c, k1=K1, k2=K2, x1=X1, x3=X3,
+             xbar_0=X_I, xdot_0=0.0, y_0=1.5, ydot_0=0.0, z_0=0.5)
+    out = reference_stick("PogoStickSMA", p, t_end)
+    assert out is not None, "the reference met a reload, which a free drop has not"
+    return out
+
+
+def _rhs(t, x, s, lam, P):
+    y, v, d = x
+    if not s:
+        return [v, -P["g"], 0.0]
+    m, k, c, x_i, K, n = P["m"], P["k"], P["c"], P["x_i"], P["K"], P["n"]
+    pw = max(0.0, d) ** n
+    dd = (-k * y - c * v - K * pw - k * d + k * x_i) / (lam * pw + c)  # Eq. 50
+    return [v, -P["g"] - k / m * (y + d) + k / m * x_i - c / m * (v + dd), dd]
+
+
+def _event(fun, direction, terminal):
+    fun.direction, fun.terminal = direction, terminal
+    return fun
+
+
+@functools.lru_cache(maxsize=None)
+def _reference_cached(t_end, items):
+    P = dict(items)
+    t, x = 0.0, [P["y_0"], P["ydot_0"], 0.0]
+    s, d0, record = 0, P["d0dot"], 0.0
+    t_lift, x_lift = 0.0, 0.0  # latest liftoff: time and leg deflection
+    rk = P["k"] / P["c"]
+    assert P["y_0"] > P["x_i"], "the reference starts in flight"
+    out = []
+
+    def foot(t, x, s, lam, P):  # foot height in flight: the free massless leg relaxes, k x + c x' = 0
+        return x[0] - P["x_i"] - x_lift * math.exp(-rk * (t - t_lift))
+
+    while t < t_end:
+        lam = 1.5 * (1.0 - P["c_r"]) * P["K"] / d0
+        if s == 0:
+            events = [_event(foot, -1, True)]
+        else:
+            events = [_event(lambda t, x, s, lam, P: x[2], -1, True),
+                      _event(lambda t, x, s, lam, P: _rhs(t, x, 1, lam, P)[2], -1, False)]
+        sol = solve_ivp(_rhs, (t, t_end), x, method="DOP853", rtol=1e-13, atol=1e-15, events=events,
+                        args=(s, lam, P))
+        assert sol.status >= 0, sol.message
+        if s == 1:
+            for te, xe in zip(sol.t_events[1], sol.y_events[1]):
+                if xe[2] > record:
+                    record = xe[2]
+                    out.append(("max_penetration", float(te), xe.copy()))
+        if sol.status != 1:
+            break
+        te, xe = float(sol.t_events[0][0]), sol.y_events[0][0].copy()
+        out.append(("touchdown" if s == 0 else "liftoff", te, xe))
+        x = [xe[0], xe[1], 0.0]
+        if s == 0:
+            impact = -xe[1] - rk * x_lift * math.exp(-rk * (te - t_lift))  # foot speed
+            d0 = impact if P["d0dot_from_impact"] and impact > 0 else P["d0dot"]
+        else:
+            t_lift, x_lift = te, xe[0] - P["x_i"]
+        t, s = te, 1 - s
+    return out, record
+
+
+def penetrator_reference(t_end=10.0, **par):
+    """[(name, time, state before jump)], largest penetration; for the parameters ``par``."""
+    return _reference_cached(t_end, tuple(sorted(dict(PENETRATOR_DEFAULTS, **par).items())))
+
+
+def hunt_crossley(state, d0, **par):
+    """Soil force of a contact state [y, ydot, delta] (independent of the package)."""
+    P = dict(PENETRATOR_DEFAULTS, **par)
+    lam = 1.5 * (1 - P["c_r"]) * P["K"] / d0
+    dd = _rhs(0.0, state[:3], 1, lam, P)[2]
+    return P["K"] * max(0.0, state[2]) ** P["n"] * (1 + lam / P["K"] * dd)
+
+
+REFERENCE_OUTPUTS = {  # model: (its reference's events [(name, time)], the stop time)
+    "PogoStickMem": (lambda: [(n, t) for n, t, _ in scipy_mem(1, 1.0, 0.0, 10.0)], 10.0),
+    "PogoStickSMA": (lambda: scipy_sma(10.0), 10.0),
+    "Penetrator": (lambda: [(n, t) for n, t, _ in penetrator_reference(10.0)[0]], 10.0),
+}
+
+
+def reference_csv(model):
+    from pathlib import Path
+
+    return Path(__file__).resolve().parent / "data" / "references" / f"{model}_ref.csv"
+
+
+def read_reference(model):
+    """The checked-in events [(name, time)] of ``model``'s reference."""
+    rows = reference_csv(model).read_text().splitlines()[1:]
+    return [(r.split(",")[0], float(r.split(",")[1])) for r in rows]
+
+
+def write_references():
+    for model, (events, _) in REFERENCE_OUTPUTS.items():
+        path = reference_csv(model)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text("event,time_s\n" + "".join(f"{n},{t!r}\n" for n, t in events()))
+
+
+if __name__ == "__main__":
+    import sys
+
+    if sys.argv[1:] == ["--write"]:
+        write_references()
