@@ -254,7 +254,7 @@ def write_references():
     for model, (events, _) in REFERENCE_OUTPUTS.items():
         path = reference_csv(model)
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text("event,time_s\n" + "".join(f"{n},{t!r}\n" for n, t in events()))
+        path.write_text("event,time_s\n" + "".join(f"{n},{t!r}\n" for n, t in ((n, float(t)) for n, t in events())))
 
 
 if __name__ == "__main__":
