@@ -32,7 +32,7 @@ from .errors import BuildError
 
 PACKAGE = Path(__file__).resolve().parents[1]  # fmu_src/pogofmu
 RUNTIME = PACKAGE / "runtime"  # the code that goes into every FMU, staged as a whole
-NATIVE = PACKAGE.parent / "native"  # the C layer
+from pogofmu.codegen.build import NATIVE  # noqa: E402 (the C layer, in a clone or an installed wheel)
 
 
 def fmi_headers() -> Path:

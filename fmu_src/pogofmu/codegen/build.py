@@ -13,7 +13,15 @@ import subprocess
 from pathlib import Path
 from typing import Iterable, Optional, Sequence
 
-NATIVE = Path(__file__).resolve().parents[2] / "native"
+def native_dir() -> Path:
+    """The C layer: ``fmu_src/native`` of a clone (or an editable install), else the copy an
+    installed wheel carries as the package data ``pogofmu/_native``."""
+    package = Path(__file__).resolve().parents[1]
+    source = package.parent / "native"
+    return source if (source / "pg_backend.h").is_file() else package / "_native"
+
+
+NATIVE = native_dir()
 ENGINE = NATIVE / "engine"
 CFLAGS = ("-std=c99", "-O2", "-ffp-contract=off", "-fno-strict-aliasing", "-Wall", "-Wextra")
 
