@@ -595,3 +595,24 @@ def test_a_construct_the_native_generator_cannot_follow_is_refused_naming_line_a
     assert (tmp_path / "out" / "Ball.fmu").exists() and not (tmp_path / "out" / "native").exists()
     res, events = run(tmp_path / "out" / "Ball.fmu", CS2, 1.0, 1e-3)  # the Python-hosted FMU runs
     assert len(events) == 1
+
+
+def test_a_users_fmus_run_in_a_venv_with_fmpy_only(exported):
+    """As a colleague runs them: a venv with fmpy and numpy only (no pogofmu), a fresh process."""
+    from support import clean_venv
+
+    script = textwrap.dedent('''\
+        import sys
+        from fmpy import simulate_fmu
+        for path in sys.argv[1:]:
+            res = simulate_fmu(path, stop_time=3.0, output_interval=1e-3)
+            print(int(res["n_events"][-1]), repr(float(res["h"][-1])))
+        ''')
+    out = exported / "out"
+    paths = [out / "Ball.fmu", out / "native" / "Ball.fmu", out / "fmi3" / "Ball.fmu", out / "native" / "fmi3" / "Ball.fmu"]
+    proc = subprocess.run([str(clean_venv()), "-I", "-c", script, *map(str, paths)], capture_output=True, text=True,
+                          cwd=exported, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    lines = proc.stdout.split()
+    assert len(lines) == 8 and len(set(lines[0::2])) == 1 and int(lines[0]) >= 6  # the same events everywhere
+    assert len(set(lines[1::2])) == 1  # and the same final height, to the bit

@@ -698,3 +698,24 @@ def test_several_fmi2_and_fmi3_fmus_in_one_fresh_process():
     assert got["me3"] == pytest.approx(ref_pen, abs=1e-6)
     assert got["live"][0] == got["live"][1] == ref_stick
     assert got["live"][2] == ref_pen
+
+
+def test_a_getter_of_the_wrong_type_names_the_fmi3_types():
+    """FMI 3.0 names its types Float64 and Int32: so does the refusal (FMI 2.0's Real/Integer before)."""
+    from fmpy.fmi1 import FMICallException
+
+    messages = []
+    fmu = cs_instance("PogoStick", messages)
+    try:
+        fmu.enterInitializationMode()
+        s = next(v.valueReference for v in md3("PogoStick").modelVariables if v.name == "s")
+        y = next(v.valueReference for v in md3("PogoStick").modelVariables if v.name == "y")
+        with pytest.raises(FMICallException):
+            fmu.getFloat64([s])
+        assert "variable s (value reference" in messages[-1][2] and "is of type Int32, not Float64: use the Int32 " \
+            "getter/setter" in messages[-1][2], messages[-1]
+        with pytest.raises(FMICallException):
+            fmu.getInt32([y])
+        assert "is of type Float64, not Int32" in messages[-1][2], messages[-1]
+    finally:
+        fmu.freeInstance()

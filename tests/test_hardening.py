@@ -382,7 +382,7 @@ def test_an_event_storm_inside_an_fmu_step_is_an_error_and_the_instance_is_resto
         model = ball
 
     slave = BallSlave(instance_name="ball")
-    slave._native_attach()  # as the launcher: errors become statuses
+    slave._launcher_attach()  # as the launcher: errors become statuses
     slave.setup_experiment(0.0, None, None)
     slave.enter_initialization_mode()
     slave.exit_initialization_mode()

@@ -572,8 +572,8 @@ def test_the_native_package_runs_the_python_hosted_ones_bits(package):
     (events synchronized), and libcosim's run of the FMI 2.0 one the same as of the Python-hosted."""
     a = master.simulate(DIST / package, parameters="moon", stop_time=2.0, step=1e-3)
     b = master.simulate(DIST / "native" / package, parameters="moon", stop_time=2.0, step=1e-3)
-    assert a.dtype.names == b.dtype.names and len(a) == len(b)
-    for column in a.dtype.names:
+    assert a.names == b.names and a.rows == b.rows > 2000
+    for column in a.names:
         assert np.array_equal(a[column], b[column]), column
     if package == "SpaceHopper.ssp":
         times = [round(k * 1e-3, 12) for k in range(1, 1001)]

@@ -84,7 +84,12 @@ const PgVar *pg_inst_variable(const PgFmu *fmu, unsigned vr)
     return NULL;
 }
 
-static const char *type_name(char t) { return t == 'R' ? "Real" : t == 'I' ? "Integer" : t == 'B' ? "Boolean" : "String"; }
+/* the type's name in the instance's FMI version (fmi2.py _type_name): FMI 3.0 says Float64 and Int32 */
+static const char *type_name(const PgInstance *in, char t)
+{
+    if (in->fmu->fmi == 3) return t == 'R' ? "Float64" : t == 'I' ? "Int32" : t == 'B' ? "Boolean" : "String";
+    return t == 'R' ? "Real" : t == 'I' ? "Integer" : t == 'B' ? "Boolean" : "String";
+}
 
 /* _variable */
 static const PgVar *variable(PgInstance *in, unsigned vr, char type)
@@ -99,7 +104,7 @@ static const PgVar *variable(PgInstance *in, unsigned vr, char type)
     }
     if (v->type != type) {
         pg_msg_printf(&m, "variable %s (value reference %u) is of type %s, not %s: use the %s getter/setter", v->name,
-                      vr, type_name(v->type), type_name(type), type_name(v->type));
+                      vr, type_name(in, v->type), type_name(in, type), type_name(in, v->type));
         refuse(in, &m);
         return NULL;
     }

@@ -587,7 +587,7 @@ static void read_interface(Inst *in)
     py.PyErr_Clear();
 }
 
-/* Create the Python slave.  `mode` is passed to _native_attach: "cs" or "me"; for FMI 3 CS the
+/* Create the Python slave.  `mode` is passed to _launcher_attach: "cs" or "me"; for FMI 3 CS the
  * event-mode and early-return grants as well.  On failure the reason is logged and NULL returned. */
 static Inst *instantiate(Inst *in, const char *location, const char *token, int visible,
                          const char *mode, int event_mode_used, int early_return_allowed)
@@ -633,7 +633,7 @@ static Inst *instantiate(Inst *in, const char *location, const char *token, int 
                                    "visible", py.PyBool_FromLong(visible), "fmi_binary", "pogofmu") : NULL;
     PyObject *empty = kwargs ? py.PyTuple_New(0) : NULL;
     in->obj = empty ? py.PyObject_Call(cls, empty, kwargs) : NULL;
-    PyObject *attach = in->obj ? py.PyObject_GetAttrString(in->obj, "_native_attach") : NULL;
+    PyObject *attach = in->obj ? py.PyObject_GetAttrString(in->obj, "_launcher_attach") : NULL;
     PyObject *aargs = attach ? build("(sNN)", mode, py.PyBool_FromLong(event_mode_used),
                                      py.PyBool_FromLong(early_return_allowed)) : NULL;
     PyObject *buffers = aargs ? py.PyObject_CallObject(attach, aargs) : NULL;

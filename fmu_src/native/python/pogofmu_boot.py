@@ -1,4 +1,4 @@
-"""Bootstrap of a pogofmu FMU's Python side, run by the native launcher (the bridge pg_bridge.c).
+"""Bootstrap of a pogofmu FMU's Python side, run by the launcher (the bridge pg_bridge.c).
 
 The launcher compiles this file from the FMU's ``resources/`` folder once per process and calls
 ``load(resources)`` at each instantiation.  It needs the standard library only.

@@ -143,7 +143,7 @@ def _shown(path: Path) -> str:
 
 def export_files(files: Sequence[str], out: Path, names: Sequence[str] = (), requires: Sequence[str] = (),
                  fmi: Sequence[int] = (2, 3), backends: Sequence[str] = ("python", "native"),
-                 log=print) -> List[Path]:
+                 log=print, cache: Optional[Path] = None) -> List[Path]:
     """Export every model of ``files`` (``names``: only those) into ``out``; raises the first mistake.
     Returns the FMUs written (native refusals are in the exception :class:`NativeRefusal` raised
     after everything else is written)."""
@@ -157,7 +157,7 @@ def export_files(files: Sequence[str], out: Path, names: Sequence[str] = (), req
                                  f"an FMU is named after its model")
         seen[s.model.name] = s.where()
     built = []
-    with Exporter(out, fmi, backends, log=log) as ex:
+    with Exporter(out, fmi, backends, cache=cache, log=log) as ex:
         for s in sources:
             built += ex.export(s)
         if ex.refusals:
@@ -185,6 +185,8 @@ def main(argv=None, prog="pogofmu export") -> int:
                     help="allow the model to import this third-party module (recorded in the FMU's documentation; "
                          "the target's Python must have it; no native FMU can call it)")
     ap.add_argument("--check", action="store_true", help="run every check, build nothing")
+    ap.add_argument("--cache", metavar="DIR", help="keep the compiled launchers and C objects in DIR for the next "
+                    "export (default: a temporary folder, removed afterwards)")
     args = ap.parse_args(argv)
     if not args.check and not args.out:
         print(f"{prog}: --out DIR is required (or --check)", file=sys.stderr)
@@ -209,7 +211,8 @@ def main(argv=None, prog="pogofmu export") -> int:
                 print(f"{prog}: {one_line(r)}", file=sys.stderr)
             return 1 if refusals else 0
         out = Path(args.out)
-        built = export_files(args.files, out, args.model, args.requires, fmi, backends)
+        built = export_files(args.files, out, args.model, args.requires, fmi, backends,
+                             cache=Path(args.cache) if args.cache else None)
     except NativeRefusal as exc:
         print(f"{prog}: {one_line(exc)} (the Python-hosted FMUs are written)", file=sys.stderr)
         return 1

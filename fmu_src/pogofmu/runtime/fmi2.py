@@ -16,9 +16,9 @@ The adapter needs the standard library only and imports nothing from pythonfmu: 
 the calling convention of pythonfmu's binaries (constructor keywords, ``set_real``/``get_real``,
 ``do_step`` returning a bool, ``log_queue``, ``_get_fmu_state`` ...), so the same code runs under
 
-* the project's native launcher (the FMI entry files ``fmu_src/native/fmi2/pg_fmi2.c`` /
+* the project's launcher (the FMI entry files ``fmu_src/native/fmi2/pg_fmi2.c`` /
   ``fmi3/pg_fmi3.c`` with the bridge ``fmu_src/native/python/pg_bridge.c``: the Linux binary of
-  every Python-hosted FMU): it calls :meth:`HybridSlave._native_attach` first, and then
+  every Python-hosted FMU): it calls :meth:`HybridSlave._launcher_attach` first, and then
 
   - serves outputs from buffers filled once per step (no Python call per ``fmi2GetReal``),
   - maps an :class:`FMUError` to its ``fmi_status``: a refused call (bad input, a parameter
@@ -77,7 +77,7 @@ LOG_CATEGORIES = {
 
 
 class LogMsg(NamedTuple):
-    """One queued log message: a tuple for the native launcher, attributes for pythonfmu's binary."""
+    """One queued log message: a tuple for the launcher, attributes for pythonfmu's binary."""
 
     status: int
     category: str
@@ -87,7 +87,7 @@ class LogMsg(NamedTuple):
 
 class FMUError(Exception):
     """An FMI call cannot be carried out; the message says why, ``fmi_status`` is the FMI status
-    the native launcher returns (Error: the instance can be reset, restored or freed)."""
+    the launcher returns (Error: the instance can be reset, restored or freed)."""
 
     def __init__(self, message: str, status: int = ERROR):
         super().__init__(message)
@@ -159,7 +159,7 @@ class HybridSlave:
         self.resources = kwargs.get("resources")
         self.visible = kwargs.get("visible", False)
         self.log_queue = []
-        self._native = False
+        self._launcher = False
         variables, by_vr, real_out, int_out = self._variable_tables()
         self._vars = by_vr
         self._output_fn = model.output_fn
@@ -207,18 +207,18 @@ class HybridSlave:
         self._h_fast = -1.0  # steps up to this size need no detailed check (set at initialization)
         self._ctl[0] = 0
 
-    # ---- native launcher --------------------------------------------------------------------
+    # ---- launcher --------------------------------------------------------------------
     def _fn(self, name):
         """The FMI 2.0 function ``fmi2<name>`` as this FMU's FMI version spells it (for messages)."""
         if self._api == "fmi2":
             return "fmi2" + name
         return "fmi3" + name.replace("FMUstate", "FMUState").replace("DeSerialize", "Deserialize")
 
-    def _native_attach(self, mode="cs", event_mode_used=False, early_return_allowed=False):
-        """Called by the native launcher right after construction: errors become FMI statuses,
+    def _launcher_attach(self, mode="cs", event_mode_used=False, early_return_allowed=False):
+        """Called by the launcher right after construction: errors become FMI statuses,
         and the outputs are served from the returned buffer (the reals as doubles, then the
         integers as int32, in the order of the value references given)."""
-        self._native = True
+        self._launcher = True
         return (self._real_out_vrs, self._int_out_vrs, self._obuf, self._ctl)
 
     @property
@@ -236,9 +236,9 @@ class HybridSlave:
 
     def _refuse(self, message, status=ERROR):
         """A call that cannot be carried out but leaves the instance usable: fmi2Error under the
-        native launcher; under pythonfmu's binary (where any exception is fatal) the message is
+        launcher; under pythonfmu's binary (where any exception is fatal) the message is
         logged and the caller returns its failure value."""
-        if self._native:
+        if self._launcher:
             raise FMUError(message, status)
         self.log(message, ERROR)
         return False
@@ -249,9 +249,16 @@ class HybridSlave:
         if var is None:
             raise FMUError(f"value reference {vr} is not a variable of {type(self).model.name}")
         if var.type != type_:
-            raise FMUError(f"variable {var.name} (value reference {vr}) is of type {var.type}, "
-                           f"not {type_}: use the {var.type} getter/setter")
+            have, want = self._type_name(var.type), self._type_name(type_)
+            raise FMUError(f"variable {var.name} (value reference {vr}) is of type {have}, "
+                           f"not {want}: use the {have} getter/setter")
         return var
+
+    _TYPE_NAMES = {"fmi3": {"Real": "Float64", "Integer": "Int32"}}
+
+    def _type_name(self, type_):
+        """A type's name in this FMU's FMI version (FMI 3.0: Float64 and Int32)."""
+        return self._TYPE_NAMES.get(self._api, {}).get(type_, type_)
 
     def _get(self, vrs, type_, convert):
         out = self._out
@@ -383,7 +390,7 @@ class HybridSlave:
         except (ModelError, ValueError, ArithmeticError) as exc:
             self._sim = None
             raise FMUError(f"{model.name}: initialization failed: {exc}",
-                           ERROR if self._native else FATAL) from None
+                           ERROR if self._launcher else FATAL) from None
         self._inputs_changed = False
         self._h_fast = self._fast_step_limit()
         self._drain_engine()
@@ -425,7 +432,7 @@ class HybridSlave:
         usable)."""
         self._failed = f"{type(self).model.name}: {exc}"
         self._drain_engine()
-        return FMUError(self._failed, ERROR if self._native else FATAL)
+        return FMUError(self._failed, ERROR if self._launcher else FATAL)
 
     def _stopped(self, call, t):
         """Why ``call`` is refused after the model stopped at ``t``."""

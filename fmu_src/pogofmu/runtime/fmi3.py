@@ -147,12 +147,12 @@ class Fmi3Slave(HybridSlave):
         self._event_mode = False
         self._stop = None
 
-    def _native_attach(self, mode="cs", event_mode_used=False, early_return_allowed=False):
+    def _launcher_attach(self, mode="cs", event_mode_used=False, early_return_allowed=False):
         if mode not in ("cs", "me"):
             raise FMUError(f"interface type {mode!r} is not provided (model exchange or co-simulation)")
         self._mode = mode
         self._event_mode_used, self._early_return_allowed = bool(event_mode_used), bool(early_return_allowed)
-        return super()._native_attach(mode, event_mode_used, early_return_allowed)
+        return super()._launcher_attach(mode, event_mode_used, early_return_allowed)
 
     # ---- variables --------------------------------------------------------------------------
     def _complete_outputs(self, t, x, q, u, p, out):
