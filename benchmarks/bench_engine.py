@@ -12,16 +12,16 @@ each counts (the median is
 printed too).  The event error is the largest ``|t_i - t_ref_i|`` against the case's reference
 event times (both sequences must match the reference in count and kind).
 
-A second peer, for information (issue 19): scipy's Fortran integrators ``ode('dopri5')`` /
+A second peer, for information: scipy's Fortran integrators ``ode('dopri5')`` /
 ``ode('dop853')`` (Hairer's codes, the faster scipy choice) on the model's own functions — a
 ``solout`` callback watches the active guards after every accepted step, a crossing in its
 direction is located by secant iterations on re-integrations from the step's start (the
 Fortran codes expose no dense output to scipy), the jump is applied and the integration
 restarted — timed and scored the same way (columns ``ode s``, ``ode/engine``, ``ode err s``).
 
-Targets (issue 2, judged on cases with ``targets=True``): the engine at least 2x faster than
+Targets (judged on cases with ``targets=True``): the engine at least 2x faster than
 scipy, with an event error no larger; other cases are rows for information.  A case with
-``compare_to`` is also timed against that case's engine time (issue 3: PogoStickMem with a
+``compare_to`` is also timed against that case's engine time (PogoStickMem with a
 linear law at most 1.3x PogoStick).  Exit status 1 if a target is missed.
 
     python benchmarks/bench_engine.py [--repeat 9] [--case PogoStick ...]

@@ -23,7 +23,7 @@ it mostly measures fmpy recording every output instead of one.  ``native/floor-i
 native FMU (``dist/native/``, no Python) the same way, every output recorded, against the same
 floor; its table must equal the Python-hosted FMU's to the bit (else the benchmark stops).
 
-A third peer, the C importer (issue 8): the tests' C host ``tests/c_host/fmi2_host.c``, compiled
+A third peer, the C importer: the tests' C host ``tests/c_host/fmi2_host.c``, compiled
 here with the system compiler and ``-DRECORD_IN_MEMORY``, loads the FMU's binary with ``dlopen(RTLD_LOCAL)`` in a process with no Python (the
 launcher brings its own interpreter) and records every output at every point in memory, as
 fmpy does.  Its CPU time (``getrusage`` of the child) is compared with fmpy's *per communication
@@ -32,9 +32,9 @@ interpreter) are measured by a run of one step and subtracted, ``(T(stop) - T(on
 
 Targets, judged and printed for every case (the ``met`` column):
 
-* issue 8: the FMU through fmpy within 1.2x the do-nothing FMU with the same outputs
+* the FMU through fmpy within 1.2x the do-nothing FMU with the same outputs
   (``FMU/floor-io``), and the C host at least 3x faster per step than fmpy (``fmpy/C``);
-* issue 2: ``1-out/floor`` at most 3x.
+* ``1-out/floor`` at most 3x.
 
 Exit status 1 if one is missed (on any case).
 
@@ -62,9 +62,9 @@ sys.path.insert(0, str(ROOT))
 from cases import all_cases  # noqa: E402
 
 OUTPUT_INTERVAL = 1e-3
-FLOOR_TARGET = 3.0  # 1-out/floor (issue 2)
-FLOOR_IO_TARGET = 1.2  # FMU/floor-io (issue 8)
-C_HOST_TARGET = 3.0  # fmpy per step / C host per step (issue 8)
+FLOOR_TARGET = 3.0  # 1-out/floor
+FLOOR_IO_TARGET = 1.2  # FMU/floor-io
+C_HOST_TARGET = 3.0  # fmpy per step / C host per step
 
 
 def quiet():

@@ -1,12 +1,12 @@
 #!/usr/bin/env python3
-"""Benchmark (c): fmi2GetFMUstate as events accumulate (issue 9, item 9).
+"""Benchmark (c): fmi2GetFMUstate as events accumulate.
 
 The built PogoStick FMU (dist/, through fmpy's FMU2Slave) hops elastically (``c = 0``,
 ``k = 1e6``, a 0.1 mm drop: ~165 events per simulated second) until ``--events`` events have
 happened; at a tenth of them and at all of them, ``fmi2GetFMUstate`` + ``fmi2FreeFMUstate`` is timed
 (best CPU time of ``--repeat`` calls).  The subject is the ratio late/early: the state must not
-grow with the event count (before issue 9 the engine kept every event in the state, and the call
-slowed from 72 ms to 558 ms between 2.6k and 25.8k events).  Run with ``log_events = 0`` (the
+grow with the event count (an engine that keeps every event in its state slowed the call from 72 ms
+to 558 ms between 2.6k and 25.8k events).  Run with ``log_events = 0`` (the
 default: constant memory) and, for information, ``log_events = 1`` (full history kept on
 purpose).  Exit status 1 if the ratio of the default run exceeds 2.
 

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Benchmark (g): the native FMUs (dist/native/, issue 18) against their peers, in one run.
+"""Benchmark (g): the native FMUs (dist/native/) against their peers, in one run.
 
 Every model's default experiment at a 1 ms communication grid, every output recorded in memory:
 
@@ -17,7 +17,7 @@ the last read: loading, instantiation and an interpreter's start-up are not in i
 columns are that time per communication step; fmpy runs are timed whole, by this process's CPU
 time (``time.process_time``). Each variant runs ``--repeat`` times, rotated; the best counts.
 
-Targets (PogoStick, issue 18): native C at most 2x the limit per step; python C / native C at
+Targets (PogoStick): native C at most 2x the limit per step; python C / native C at
 least 20x per step; native fmpy at most 1.05x floor-io. The other models are rows for
 information. Exit status 1 if a target is missed. Builds into a temporary folder, never dist/.
 

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Soak benchmark (issue 9 item 10): peak memory of the SSP master over 10^4, 10^5, 10^6 steps.
+"""Soak benchmark: peak memory of the SSP master over 10^4, 10^5, 10^6 steps.
 
 Each run is a fresh process running the user's command,
 ``python -m pogofmu.ssp run SpaceHopper.ssp --stop-time T --step 1e-3 --quiet --out TMP``

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Benchmark (c): ``pogofmu sweep`` on Dask against bare ``fmpy.simulate_fmu`` runs (issue 11).
+"""Benchmark (c): ``pogofmu sweep`` on Dask against bare ``fmpy.simulate_fmu`` runs.
 
 N PogoStick runs (default 1000), 10 s at ``output_interval`` 1e-3 (10 000 communication steps),
 every output recorded, a grid over the stiffness ``k`` from 80 to 120 N/m (every run differs):
@@ -14,7 +14,7 @@ every output recorded, a grid over the stiffness ``k`` from 80 to 120 N/m (every
   the workers' imports of fmpy and scipy) is timed apart and not counted: it is paid once per
   sweep, not per run. Sending the FMU to the workers and extracting it there are counted.
 
-* **native**: the native FMU (dist/native/PogoStick.fmu, issue 18) the same ways — through fmpy's
+* **native**: the native FMU (dist/native/PogoStick.fmu) the same ways — through fmpy's
   Python loop (bare, extracted once) and through the sweep, whose runner drives it by the FMU's
   own C stepping loop (``pogofmu_fmi2_run_grid``); its table must equal the Python-hosted FMU's
   sweep table to the bit (every column but the run's wall time).

@@ -5,7 +5,7 @@ ending in an error status with a clear message while the host survives, FMU stat
 and agreement with an independent importer (libcosimpy).
 
 The suite runs on both backends of the FMI 2.0 FMUs: the Python-hosted ones (``dist/<Model>.fmu``)
-and the native ones (``dist/native/<Model>.fmu``, issue 18), with the same expectations.
+and the native ones (``dist/native/<Model>.fmu``), with the same expectations.
 """
 import json
 import math
@@ -104,7 +104,7 @@ def test_bad_step_and_nan_input_are_refused_instance_survives(name):
             inst.fmu.doStep(currentCommunicationPoint=0.0, communicationStepSize=-1e-3)
         assert "(error)" in str(exc.value)
         assert any("step_size = -0.001" in m[2] and "0 <= step_size" in m[2] for m in inst.messages)
-        # issue 9, item 5: a non-finite communication point or a step whose end is not finite is
+        # a non-finite communication point or a step whose end is not finite is
         # refused at once (before: NaN/+inf/1e300 never returned, -inf returned OK doing nothing)
         for t, h, text in ((math.nan, 1e-3, "currentCommunicationPoint = nan"),
                            (math.inf, 1e-3, "currentCommunicationPoint = inf"),
@@ -112,7 +112,7 @@ def test_bad_step_and_nan_input_are_refused_instance_survives(name):
                            (0.0, math.inf, "step_size = inf"), (0.0, math.nan, "step_size = nan"),
                            (0.0, 1e300, "step_size = 1e+300")):
             if h == 1e300 and not model.states:
-                # a model without states takes no internal steps (issue 9, item 2): the step is
+                # a model without states takes no internal steps: the step is
                 # done at once, the outputs are those of the law at the held inputs
                 saved = inst.fmu.getFMUstate()
                 before = inst.outputs()

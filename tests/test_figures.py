@@ -1,4 +1,4 @@
-"""The figures users get (issue 9 item 12): units on every axis, integer signals on integer ticks,
+"""The figures users get: units on every axis, integer signals on integer ticks,
 each connected signal drawn once, a Hunt-Crossley loop whose loading branch is seen above the
 unloading one, and a HopController figure that shows its law at work.
 

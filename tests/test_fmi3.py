@@ -1,4 +1,4 @@
-"""The FMI 3.0 FMUs (dist/fmi3/<Model>.fmu, issue 10), as users run them.
+"""The FMI 3.0 FMUs (dist/fmi3/<Model>.fmu), as users run them.
 
 * model exchange through fmpy's CVode: PogoStick's events against the closed-form reference,
   the other models' events against the FMI 2.0 FMUs' (whose engine is independent of CVode);
@@ -9,7 +9,7 @@
   several FMI 2.0 and 3.0 FMUs in one fresh process.
 
 Every test runs on both backends: the Python-hosted FMUs (dist/fmi3/) and the native ones
-(dist/native/fmi3/, issue 18), which tests/test_native_fmu.py also compares with each other.
+(dist/native/fmi3/), which tests/test_native_fmu.py also compares with each other.
 """
 import ctypes
 import math

@@ -1,4 +1,4 @@
-"""The FMUs in the Reference-FMUs' importer fmusim (issue 18): a C importer that is not the project's.
+"""The FMUs in the Reference-FMUs' importer fmusim: a C importer that is not the project's.
 
 fmusim is not on PyPI nor in Debian, so it is found, if at all, as ``$POGOFMU_FMUSIM`` or
 ``fmusim`` on the PATH, and these tests are skipped without it. They need the C fmusim of the

@@ -27,7 +27,7 @@ def _energy_residual(run, soil=False):
 # ---- item 1: a start exactly on a guard behaves as the physics says --------------------------------
 
 @pytest.mark.parametrize("name", STICKS)
-def test_item1_stick_at_free_length_moving_up_lifts_off_at_t0(name):
+def test_stick_at_free_length_moving_up_lifts_off_at_t0(name):
     """y_0 = xbar_0 = x_i = 1, z_0 = 0, ydot_0 = xdot_0 = 1: contact at the free length with the mass
     moving up.  Physics: liftoff at t = 0, then a parabola z = t - g t^2/2 (the foot leaves with the
     leg at its free length), touchdown at 2/g with ydot = -1.  Before: fmi2Error at t = 1e-5 s,
@@ -50,7 +50,7 @@ def test_item1_stick_at_free_length_moving_up_lifts_off_at_t0(name):
     # found by the property suite: the first steps (1e-9 s) leave xbar = x_i + g t^2/2 exactly at
     # x_i (below an ulp), and the guard, still at zero after the first step, was disarmed
     (dict(c=0.0, rel_tol=1e-4, abs_tol=1e-12, max_step=0.0), False)])
-def test_item1_thrust_above_weight_lifts_off_from_rest_at_t0(solver, before_init):
+def test_thrust_above_weight_lifts_off_from_rest_at_t0(solver, before_init):
     """At rest at the free length (contact), F_ext = 2 m g (set before initialization or at the
     first step): liftoff at t = 0 (within the first steps, 1e-8 s), then free flight with
     acceleration F/m - g: y = 1 + (F/m - g) t^2/2 (closed form)."""
@@ -85,7 +85,7 @@ def _run_until_error(name, h=1e-2, t_end=10.0, **params):
         inst.close()
 
 
-def test_item2_stiff_dashpot_ends_in_a_budget_error_naming_the_stiffness():
+def test_stiff_dashpot_ends_in_a_budget_error_naming_the_stiffness():
     """c = 1e6 (m/c = 1 us): before, 71 s to more than 90 s of CPU with no word.  Now a warning,
     then an error naming the work budget, the time scale m/c with c's value, and what to change."""
     messages, t = _run_until_error("PogoStick", c=1e6)
@@ -99,7 +99,7 @@ def test_item2_stiff_dashpot_ends_in_a_budget_error_naming_the_stiffness():
     assert t < 1.0  # stopped in the first contact (touchdown at 0.319 s)
 
 
-def test_item2_budget_is_a_parameter_a_larger_one_lets_the_run_finish():
+def test_budget_is_a_parameter_a_larger_one_lets_the_run_finish():
     """c = 3e4 needs ~1e4 steps per second of contact: refused with a budget of 2000, completed with
     the default 1e5, with the energy balance holding (independent check of the result)."""
     messages, _ = _run_until_error("PogoStick", t_end=2.0, c=3e4, max_steps_per_second=2000)
@@ -109,11 +109,11 @@ def test_item2_budget_is_a_parameter_a_larger_one_lets_the_run_finish():
     assert _energy_residual(run) <= 1e-6 * run["E"][0]
 
 
-def test_item2_tiny_max_step_is_refused_with_the_budget_rule():
+def test_tiny_max_step_is_refused_with_the_budget_rule():
     assert_parameter_rejected("PogoStick", {"max_step": 1e-8}, "max_step", "max_step >= 2/max_steps_per_second")
 
 
-def test_item2_a_model_without_states_takes_no_internal_steps():
+def test_a_model_without_states_takes_no_internal_steps():
     """HopController (no states) with max_step = 1e-6: before, 8 s of CPU per simulated second
     (internal steps of max_step on nothing).  Its max_step is unused, so it is not refused, and
     the engine takes no step: over 1e4 s, n_steps stays 0."""
@@ -130,7 +130,7 @@ def test_item2_a_model_without_states_takes_no_internal_steps():
 # ---- item 3: tight tolerances work -----------------------------------------------------------------
 
 @pytest.mark.parametrize("abs_tol, rel_tol, tol", [(1e-20, 1e-6, 1e-6), (1e-24, 1e-10, 1e-8), (1e-300, 1e-6, 1e-6)])
-def test_item3_tight_absolute_tolerances_work(abs_tol, rel_tol, tol):
+def test_tight_absolute_tolerances_work(abs_tol, rel_tol, tol):
     """Before: "step size collapsed" at t = 0 (the starting-step estimate was 1e-15 s); and a raw
     ZeroDivisionError for abs_tol = 1e-300.  Now the 19 closed-form events, each to `tol`."""
     run = simulate("PogoStick", start_values=dict(abs_tol=abs_tol, rel_tol=rel_tol, log_events=1))
@@ -142,7 +142,7 @@ def test_item3_tight_absolute_tolerances_work(abs_tol, rel_tol, tol):
 
 # ---- item 4: SMA with k2 close to k1; Penetrator with a huge K ------------------------------------
 
-def test_item4_sma_with_k2_almost_k1_is_the_linear_stick():
+def test_sma_with_k2_almost_k1_is_the_linear_stick():
     """k2 -> k1: both plateaus merge with the elastic lines, the leg is the linear spring k1 = 100 ||
     c = 0.5, i.e. the default PogoStick: its closed-form touchdowns and liftoffs.  Before, k2 >=
     0.999 k1 ended in "spring never extends" (a false upper_plateau right after a reversal)."""
@@ -155,13 +155,13 @@ def test_item4_sma_with_k2_almost_k1_is_the_linear_stick():
 
 
 @pytest.mark.parametrize("ratio", [0.999, 0.9999])
-def test_item4_sma_near_parallel_plateaus_keep_the_energy_balance(ratio):
+def test_sma_near_parallel_plateaus_keep_the_energy_balance(ratio):
     run = simulate("PogoStickSMA", start_values=dict(k2=100.0 * ratio))
     assert not run.errors
     assert _energy_residual(run) <= 1e-5 * run["E"][0]
 
 
-def test_item4_penetrator_soil_stiffness_beyond_resolution_is_refused():
+def test_penetrator_soil_stiffness_beyond_resolution_is_refused():
     """K = 1e17 (n = 1.5): the foot's time scale in the soil c/K_s is 7e-13 s.  Before: a missed
     touchdown after a false liftoff, falling through the ground.  Now a rule naming K."""
     text = init_failure_text("Penetrator", K=1e17)
@@ -172,7 +172,7 @@ def test_item4_penetrator_soil_stiffness_beyond_resolution_is_refused():
 
 @pytest.mark.parametrize("name", STICKS + ["Penetrator"])
 @pytest.mark.parametrize("param, value", [("g", 1e300), ("m", 1e-300), ("k", 1e300)])
-def test_item6_extreme_magnitudes_get_a_rule_not_a_raw_error(name, param, value):
+def test_extreme_magnitudes_get_a_rule_not_a_raw_error(name, param, value):
     if name == "PogoStickSMA" and param == "k":
         param = "k1"
     text = init_failure_text(name, **{param: value})
@@ -182,7 +182,7 @@ def test_item6_extreme_magnitudes_get_a_rule_not_a_raw_error(name, param, value)
 
 # ---- item 7: tolerances that cannot control the error are refused ---------------------------------
 
-def test_item7_loose_abs_tol_is_refused_with_the_scale_it_must_resolve():
+def test_loose_abs_tol_is_refused_with_the_scale_it_must_resolve():
     """abs_tol = 1, max_step = 0.287 completed with the energy balance off by 90 % of E(0)."""
     text = init_failure_text("PogoStick", abs_tol=1.0, max_step=0.287)
     assert "parameter abs_tol = 1.0" in text and "m g/k (static leg deflection)" in text, text
@@ -193,7 +193,7 @@ def test_item7_loose_abs_tol_is_refused_with_the_scale_it_must_resolve():
     assert _energy_residual(run) <= 1e-3 * run["E"][0]
 
 
-def test_item7_loose_rel_tol_is_refused():
+def test_loose_rel_tol_is_refused():
     assert_parameter_rejected("PogoStick", {"rel_tol": 0.01}, "rel_tol", "rel_tol <= 0.001")
     assert_parameter_rejected("Penetrator", {"abs_tol": 1e-3}, "abs_tol", "resting depth in the soil")
 
@@ -236,7 +236,7 @@ def _footprint(obj, seen=None):
     return size + sum(_footprint(v, seen) for v in items)
 
 
-def test_item9_state_size_is_constant_as_events_grow():
+def test_state_size_is_constant_as_events_grow():
     """Before: ~1.9 kB more per event in every fmi2GetFMUstate copy.  Without log_events the
     snapshot's size is the same after 300 and 3000 events; with it, the history is there."""
     from pogofmu.runtime.engine import Simulator
@@ -256,7 +256,7 @@ def test_item9_state_size_is_constant_as_events_grow():
     assert sizes[True, 3000] > sizes[True, 300] + 2700 * 50
 
 
-def test_item9_outputs_and_log_agree_without_the_history():
+def test_outputs_and_log_agree_without_the_history():
     """n_events / t_last_event / last_event come from the constant-memory record: equal to the
     event log of a log_events = 1 run, and a state saved late restores to identical outputs."""
     sv = dict(c=0.0, k=1e4, y_0=1.01, z_0=0.01)  # elastic hopping: 17 events per second
@@ -269,7 +269,7 @@ def test_item9_outputs_and_log_agree_without_the_history():
     assert int(quiet["last_event"][-1]) == {"touchdown": 1, "liftoff": 2}[ev[-1]["name"]]
 
 
-def test_item6_a_collapse_after_one_event_is_not_called_an_event_storm():
+def test_a_collapse_after_one_event_is_not_called_an_event_storm():
     """After a single event the dynamics become too fast to resolve (acceleration 1e300 m/s2 once
     the ball has hit the ground): the message says so, names the event and the time; "event
     storm" is kept for accumulating events (test_engine.py::test_zeno_ends_in_a_clear_error)."""

@@ -1,4 +1,4 @@
-"""Directional derivatives of the native FMUs (issue 18): exact Jacobian-vector products generated
+"""Directional derivatives of the native FMUs: exact Jacobian-vector products generated
 from the Python model on dual numbers (pogofmu.codegen.dual), checked against finite differences
 of the FMU's own functions and against closed forms.
 

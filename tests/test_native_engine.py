@@ -1,4 +1,4 @@
-"""The native engine (fmu_src/native/engine, C) against the Python engine it follows (issue 18 item 4).
+"""The native engine (fmu_src/native/engine, C) against the Python engine it follows.
 
 Both integrate the same model — the C generated from the Python model — from the same parameters,
 settings and inputs, and are compared at every communication point *to the bit*: the served time,

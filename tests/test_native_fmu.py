@@ -1,4 +1,4 @@
-"""The native FMUs (issue 18): dist/native/<Model>.fmu, the same FMU as dist/<Model>.fmu without Python.
+"""The native FMUs: dist/native/<Model>.fmu, the same FMU as dist/<Model>.fmu without Python.
 
 * the binary needs the C library and libm only (no libpython, no Py* symbol) and the
   modelDescription is the Python-hosted FMU's (every variable, value reference, unit, start value,

@@ -1,4 +1,4 @@
-"""The C generated from each Python model (issue 18 item 3) against the Python model itself.
+"""The C generated from each Python model against the Python model itself.
 
 Every generated function is called with the same inputs as its Python original — random
 parameter sets (valid ones, and ones that break a rule, are zero, huge, NaN), states, discrete

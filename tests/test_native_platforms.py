@@ -1,4 +1,4 @@
-"""The native FMUs beyond the Linux binary (issue 18): Windows under wine, and the source FMU.
+"""The native FMUs beyond the Linux binary: Windows under wine, and the source FMU.
 
 * Windows: ``binaries/win64/<Model>.dll`` (FMI 2.0) and ``binaries/x86_64-windows/<Model>.dll``
   (FMI 3.0), cross-compiled by the build with mingw-w64, need nothing but Windows' own

@@ -1,4 +1,4 @@
-"""Penetrator.fmu: the stick driven into a Hunt-Crossley soil (issue 4, docs/models.md "Penetrator").
+"""Penetrator.fmu: the stick driven into a Hunt-Crossley soil (docs/models.md "Penetrator").
 
 Every test drives the built FMU through fmpy.  The reference (tests/references.py) is written
 independently of the package: Eq. 50 integrated by scipy's DOP853 at rtol = 1e-13, with scipy's own event

@@ -1,4 +1,4 @@
-"""PogoStick.fmu against the closed-form event times and the energy balance (issue 2).
+"""PogoStick.fmu against the closed-form event times and the energy balance.
 
 Every test drives the built FMU through fmpy. Event times come from the FMU's event log
 (log_events = 1), which reports every event whatever the communication step.

@@ -1,4 +1,4 @@
-"""The FMUs as users meet them (issue 8): a C importer with no Python in it, a plain fmpy script in
+"""The FMUs as users meet them: a C importer with no Python in it, a plain fmpy script in
 a virtual environment without the project, several FMUs in one process, and a clean teardown.
 
 Every scenario runs in a fresh process, so nothing the test session imported can help an FMU.

@@ -1,4 +1,4 @@
-"""Property-based tests (hypothesis) over every FMU's parameters, through the built FMUs (issue 9).
+"""Property-based tests (hypothesis) over every FMU's parameters, through the built FMUs.
 
 * **valid** parameter sets (physical ranges where the leg cannot bottom out and no time scale is
   faster than 1e-4 s, any solver settings within the rules) run to the stop time with finite

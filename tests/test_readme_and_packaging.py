@@ -1,4 +1,4 @@
-"""What users read and install (issue 9 items 11 and 13): the README's commands run in the
+"""What users read and install: the README's commands run in the
 project's venv and say what fmpy really does with a refused step; pyproject.toml's license in the
 form current setuptools takes without a deprecation banner."""
 import importlib.metadata

@@ -71,7 +71,7 @@ class Case:
     stop_time: float = 10.0
     targets: bool = False  # judge this row against benchmark (a)'s targets (else: a row for information)
     compare_to: str = ""  # another case's name: the engine time of this case relative to it ...
-    max_ratio: float = 0.0  # ... must stay at or below this (issue 3: linear PogoStickMem <= 1.3x)
+    max_ratio: float = 0.0  # ... must stay at or below this (linear PogoStickMem <= 1.3x)
 
     def reference_events(self) -> Events:
         return self.reference(self)

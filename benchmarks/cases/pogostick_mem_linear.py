@@ -1,6 +1,6 @@
 """Benchmark case PogoStickMem with a linear law (spring_law 0, gamma 0): the same physics as the
 PogoStick case, through the element composition with the absement state -- the row to hold
-against PogoStick's (issue 3: at most 1.3x its time).  Reference: the closed form, as PogoStick.
+against PogoStick's (at most 1.3x its time).  Reference: the closed form, as PogoStick.
 """
 from __future__ import annotations
 

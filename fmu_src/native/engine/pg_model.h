@@ -1,4 +1,4 @@
-/* pogofmu native engine: what a generated model provides (issue 18).
+/* pogofmu native engine: what a generated model provides.
  *
  * A model's C file (generated at build time from its Python HybridModel by pogofmu.codegen) defines
  * one `const PgModel PG_MODEL`: counts, names, event directions, and one function per pure

@@ -4,7 +4,7 @@ A :class:`Dual` is a value and its tangent (the derivative along a seed directio
 value (:class:`~.trace.Sym`) or a number. Calling a model function with duals in place of its
 states and inputs, inside :func:`~.trace.explore`, records the function's operations *and* those
 of the chain rule; printed as C (:mod:`.cprint`) it is the exact Jacobian-vector product of the
-function at a point — the directional derivatives the native FMUs provide (issue 18), from the
+function at a point — the directional derivatives the native FMUs provide, from the
 same Python model, with no second copy of any equation. Branches of the model (modes, ``max``,
 ``abs``) are decisions on the *values*, so the derivative is that of the branch taken.
 

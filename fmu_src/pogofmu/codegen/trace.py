@@ -1,6 +1,6 @@
 """Tracing a model's pure functions on symbolic values: every path, every operation, in order.
 
-The native FMUs (issue 18) run C generated from the same :class:`~pogofmu.runtime.model.HybridModel`
+The native FMUs run C generated from the same :class:`~pogofmu.runtime.model.HybridModel`
 the Python FMUs run. The generator calls each model function (flow, guards, jumps, outputs,
 parameter rules, domain conditions, scales) with :class:`Sym` values in place of numbers: each
 arithmetic operation on them is recorded as a node, *in the order Python evaluates it* (so the C

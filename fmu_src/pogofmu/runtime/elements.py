@@ -329,7 +329,7 @@ def _reload(x, xdot, xi, q, p):
 # the same lines, but without the cancellation of two forces of ~k1 |x| that left a noise of ~1e-14 k1 |x|
 # on a guard whose slope is only (k1 - k2) xdot.  With k2 close to k1 that noise fired a false
 # upper_plateau right after a reversal (where the guard starts at 0 and rises with x - x_a), and the leg
-# then extended on the plateau (issue 9 item 4).  Right after a reversal (reload) the constant term is
+# then extended on the plateau.  Right after a reversal (reload) the constant term is
 # exactly 0, since r_a was computed by r_upper (r_lower) at x_a itself.
 def _upper_guard(x, xdot, xi, q, p):
     x_a = q["x_a"]

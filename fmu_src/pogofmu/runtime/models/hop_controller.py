@@ -1,4 +1,4 @@
-"""HopController: a hop-height regulator for the pogo stick (issue 5; README "HopController.fmu").
+"""HopController: a hop-height regulator for the pogo stick (README "HopController.fmu").
 
 A feedback law with no state of its own (zero continuous states): it reads the stick's ``y``,
 ``ydot`` and mode ``s`` and returns the thrust ``F_ext`` on the mass.
