@@ -38,6 +38,11 @@ def ensure_venv():
     print("installing pogofmu and its dependencies into .venv", flush=True)
     subprocess.check_call([str(PY), "-m", "pip", "install", "--quiet", "--upgrade", "pip"])
     subprocess.check_call([str(PY), "-m", "pip", "install", "--quiet", "-e", f"{ROOT}[test]"])
+    # the wheels of fmpy and numpy at the installed versions, with their dependencies: the tests'
+    # fmpy-only venv installs from them (--no-index), so no test reaches a package index
+    pins = subprocess.check_output([str(PY), "-c", "import fmpy, numpy; print(f'fmpy=={fmpy.__version__} "
+                                    "numpy=={numpy.__version__}')"], text=True).split()
+    subprocess.check_call([str(PY), "-m", "pip", "download", "--quiet", "-d", str(VENV / "wheels"), *pins])
     STAMP.write_text(want)
 
 

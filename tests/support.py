@@ -279,7 +279,12 @@ def clean_venv():
     if not (venv / ".complete").exists():
         shutil.rmtree(venv, ignore_errors=True)
         subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True)
-        subprocess.run([str(python), "-m", "pip", "install", "--quiet", "--disable-pip-version-check",
+        # from the wheels tasks.py keeps in the project's venv (no package index at test time)
+        wheels = Path(sys.prefix) / "wheels"
+        source = ["--no-index", "--find-links", str(wheels)] if wheels.is_dir() else []
+        if IN_CI:
+            assert source, f"{wheels} missing: tasks.py downloads fmpy's and numpy's wheels when it sets up the venv"
+        subprocess.run([str(python), "-m", "pip", "install", "--quiet", "--disable-pip-version-check", *source,
                         f"fmpy=={fmpy.__version__}", f"numpy=={numpy.__version__}"], check=True)
         (venv / ".complete").write_text("ok")
     return python
