@@ -326,8 +326,9 @@ def test_any_parameters_give_a_result_or_a_clear_message(name):
 # the mass, m ydot' = -r - m g; the SMA's flag as one branch per mode), and integrated by scipy's
 # DOP853 at rtol 1e-12 with terminal events; the FMU runs the same random set at a tight
 # tolerance, and every event's name and time must agree (a 1 % error in a spring constant moves a
-# liftoff by ~1e-3 s; the tolerance is 1e-7 s: the largest disagreement seen is 1.1e-8 s, after
-# 15 events of a stiff random leg in 4 s, at rel_tol 1e-11 against scipy's 1e-12).
+# liftoff by ~1e-3 s; the tolerance is 2e-8 s: the largest disagreement seen is 1.1e-8 s, after
+# 15 events of a stiff random leg in 4 s, at rel_tol 1e-11 against scipy's 1e-12; at least 8
+# random sticks must reach the comparison).
 
 PHYSICS_TIGHT = {"method": 8, "rel_tol": 1e-11}
 PHYSICS_STOP = 4.0  # s: most random drops touch down and lift off within it
@@ -339,6 +340,8 @@ def test_random_valid_sticks_have_the_independent_models_events(name):
     from hypothesis import reject
 
     from support import simulate
+
+    accepted = []
 
     @settings(FUZZ, max_examples=200 if LONG else 12, phases=[Phase.explicit, Phase.reuse, Phase.generate])
     @given(stick_params(name))  # (no shrinking: each example is a run of a few seconds)
@@ -357,9 +360,11 @@ def test_random_valid_sticks_have_the_independent_models_events(name):
         worst = max((abs(a[1] - b[1]) for a, b in zip(inner(got), inner(ref))), default=0.0)
         if os.environ.get("POGOFMU_FUZZ_TRACE"):
             print("PHYSICS", name, len(inner(got)), f"{worst:.2e}")
-        assert worst < 1e-7, (p, worst, got, ref)
+        assert worst < 2e-8, (p, worst, got, ref)
+        accepted.append(worst)
 
     check()
+    assert len(accepted) >= 8, f"only {len(accepted)} random sticks reached the comparison"
 
 
 def test_the_physics_check_catches_a_one_percent_spring_error():
