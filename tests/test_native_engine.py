@@ -35,10 +35,12 @@ def native(tmp_path_factory):
     folder = tmp_path_factory.mktemp("native_engines")
     engines = {}
 
-    def get(name):
+    def get(model):
+        """The native engine of a model (itself, or one of the project's by name)."""
+        name = model if isinstance(model, str) else model.name
         if name not in engines:
             try:
-                engines[name] = NativeEngine(engine_library(name, folder))
+                engines[name] = NativeEngine(engine_library(model, folder))
             except CompileError as exc:
                 pytest.fail(str(exc))
         return engines[name]
@@ -153,3 +155,45 @@ def test_refusals_and_failures_give_the_python_engines_messages(name, native):
         assert diffs == [], (values, diffs)
     # refused at the start, and run to the end (and for a model with states, stopped on the way)
     assert {"init", "ok"} <= outcomes and (not model.states or "advance" in outcomes), outcomes
+
+
+def _ball(jump_keeps_h):
+    """The example ball (a user's model file); its bounce leaves h at 0, or (the variant) as it is."""
+    from pogofmu.build import load_model_file
+    from pogofmu.runtime.model import Event
+    import dataclasses
+
+    from support import EXAMPLES
+
+    model = load_model_file(EXAMPLES / "ball" / "ball.py")[0].model
+    if not jump_keeps_h:
+        return model
+    bounce = model.events[0]
+    kept = dataclasses.replace(bounce, jump=lambda x, q, u, p: ([x[0], -p.e * x[1]], q))
+    return dataclasses.replace(model, name="BallKeepsH", events=(kept,))
+
+
+@pytest.mark.parametrize("case", ["storm of events", "storm within the rounding", "work budget"])
+def test_the_storm_and_the_budget_end_alike_in_both_engines(native, case):
+    """Each end the engines promise (docs/errors.md), required, not only allowed: the same message at
+    the same point in both engines — a ball at its accumulation point (200 events in 1e-6 s, or a
+    bounce back past zero within its own rounding) and a work budget run out."""
+    from pogofmu.runtime.engine import Simulator
+    from pogofmu.runtime.model import ModelError
+
+    model, values, stop, words = {
+        "storm of events": (_ball(False), {}, 5.0, "event storm: 200 events (bounce)"),
+        "storm within the rounding": (_ball(True), {}, 5.0, "event storm: bounce happens again within the rounding"),
+        "work budget": (all_models()["PogoStick"], {"c": 1e4, "max_steps_per_second": 1000.0}, 1.0,
+                        "work budget exhausted"),
+    }[case]
+    p, s = split(model, values)
+    steps = [k * 0.01 for k in range(1, int(round(stop / 0.01)) + 1)]
+    outcome = set()
+    assert both_runs(native(model), model, p, s, steps, outcome=outcome) == []
+    assert outcome == {"advance"}, outcome
+    sim = Simulator(model, {**p, **s})
+    with pytest.raises(ModelError) as exc:
+        for t in steps:
+            sim.advance(t)
+    assert words in str(exc.value), exc.value
