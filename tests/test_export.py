@@ -241,7 +241,7 @@ def test_export_writes_the_four_validated_fmus_laid_out_as_dist(exported):
             assert any(n.startswith("sources/") for n in z.namelist())
     assert not (exported / "out" / "Ball").exists()  # nothing but the FMUs
     assert sorted(p.name for p in (exported / "out").iterdir()) == [
-        "Ball.fmu", "HardStop.fmu", "MemLeg.fmu", "Thermostat.fmu", "fmi3", "native"]
+        "Ball.fmu", "HardStop.fmu", "MemLeg.fmu", "Thermostat.fmu", "fmi3", "native", "pogofmu-build.json"]
 
 
 def test_ball_bounces_at_the_closed_form(exported):

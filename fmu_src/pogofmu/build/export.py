@@ -60,6 +60,12 @@ class Exporter:
             cache = Path(self._tmp.name)
         self.cache = Path(cache)
         self.refusals: List[str] = []
+        # decided once for every FMU of this export (a cross compiler appearing half-way through
+        # must not give some FMUs a Windows binary and others none); recorded in pogofmu-build.json
+        from .native_fmu import mingw_available
+
+        self.windows = mingw_available()
+        self.record = {}
         self._launchers = {}  # FMI version -> the launcher's compilation, started at once (model-independent)
         if any(b == "python" for b, _ in self.kinds):
             from concurrent.futures import ThreadPoolExecutor
@@ -123,14 +129,33 @@ class Exporter:
                 if backend == "python":
                     fmu = build_python_fmu(source, self.out, version, self.launcher(version), self.token_seed)
                 else:
-                    fmu = build_native_fmu(source, self.out, version, self.cache)
+                    fmu = build_native_fmu(source, self.out, version, self.cache, windows=self.windows)
             except (BuildError, ModelFileError):
                 raise
             except Exception as exc:  # noqa: BLE001 - a model that fails while building: one line naming its line
                 raise ModelFileError(describe_exception(exc, source.user_files(), source.where())) from None
             self.log(f"built and validated {_shown(fmu)}")
+            self._record(fmu)
             built.append(fmu)
         return built
+
+    RECORD = "pogofmu-build.json"
+
+    def _record(self, fmu: Path):
+        """``<out>/pogofmu-build.json``: what each FMU of the folder carries (its binaries' platforms),
+        as the build made it, for whoever checks the folder later (the tests do)."""
+        import json
+        import zipfile
+
+        with zipfile.ZipFile(fmu) as z:
+            platforms = sorted({n.split("/")[1] for n in z.namelist() if n.startswith("binaries/") and n.count("/") == 2})
+        path = self.out / self.RECORD
+        try:
+            record = json.loads(path.read_text()) if path.exists() else {}
+        except ValueError:
+            record = {}
+        record[fmu.relative_to(self.out).as_posix()] = {"binaries": platforms, "windows_compiler": self.windows}
+        path.write_text(json.dumps(record, indent=1, sort_keys=True) + "\n")
 
 
 def _shown(path: Path) -> str:

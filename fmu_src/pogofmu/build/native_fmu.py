@@ -19,9 +19,10 @@ def mingw_available() -> bool:
     return mingw_compiler() is not None
 
 
-def build_native_fmu(source, dest: Path, fmi_version: int, cache: Path = None) -> Path:
+def build_native_fmu(source, dest: Path, fmi_version: int, cache: Path = None, windows: bool = None) -> Path:
     """Build and validate the native FMU of ``source``: FMI 2.0 into ``dest/native/<Model>.fmu``,
-    FMI 3.0 into ``dest/native/fmi3/<Model>.fmu``."""
+    FMI 3.0 into ``dest/native/fmi3/<Model>.fmu``; with a Windows binary if ``windows`` (default:
+    where mingw-w64 is installed; an export decides it once for all its FMUs)."""
     from pogofmu.codegen.build import CompileError, native_fmu
 
     from .description import build_description_fmi3, model_description_fmi2, model_description_fmi3
@@ -30,7 +31,7 @@ def build_native_fmu(source, dest: Path, fmi_version: int, cache: Path = None) -
     name = source.model.name
     cls = source.slave_class()
     out_dir = dest / "native" / ("fmi3" if fmi_version == 3 else "")
-    windows = mingw_available()
+    windows = mingw_available() if windows is None else windows
     if not windows:
         warn_once("no mingw-w64 cross compiler (Debian: gcc-mingw-w64-x86-64): the native FMUs get no "
                   "Windows binary (their sources/ still build on any platform)")
