@@ -16,6 +16,8 @@ static int before_side(int falling, double g) { return falling ? g > 0.0 : g < 0
 
 static int falling(const PgModel *md, int k) { return md->event_direction[k] == PG_FALLING; }
 
+#define PG_UNARMED_FLOOR 1e-300 /* fmi3.py UNARMED_FLOOR */
+
 /* _indicators: each event's guard where it is active in mode q, 1 (it cannot cross zero) elsewhere */
 static int indicators(const PgModel *md, const double *x, const double *q, const double *u, const double *p,
                       double *z, PgMsg *m)
@@ -306,6 +308,12 @@ int pg3_get_event_indicators(PgInstance *in, double *z)
     for (int k = 0; k < md->ne; ++k)
         if (!in->st.armed[k] && is_active(md, k, e->q) && before_side(falling(md, k), z[k]))
             in->st.armed[k] = 1; /* seen on the side before its crossing: may fire */
+    /* _reported: an unarmed active indicator on the side before its crossing, never 0 */
+    for (int k = 0; k < md->ne; ++k)
+        if (!in->st.armed[k] && is_active(md, k, e->q)) {
+            double a = fabs(z[k]);
+            z[k] = (falling(md, k) ? 1.0 : -1.0) * (a > PG_UNARMED_FLOOR ? a : PG_UNARMED_FLOOR);
+        }
     return PG_ST_OK;
 }
 

@@ -120,6 +120,24 @@ def _indicators(events, x, q, u, p):
     return [ev.guard(x, q, u, p) if ev.active(q) else 1.0 for ev in events]
 
 
+UNARMED_FLOOR = 1e-300  # the least magnitude an unarmed indicator is reported with
+
+
+def _reported(events, z, armed, q):
+    """The indicators an importer sees: an active event's guard once it is armed; before (a guard
+    exactly at zero after a jump, or on its after side where the engine waits for it to come back)
+    the guard's magnitude on the side before its crossing, at least UNARMED_FLOOR.  So no indicator
+    of a new mode starts at zero — an importer that does not restart its integrator after an event
+    that changed no state (fmusim with CVODE) meets no root at the restart point — and none
+    changes sign before its event may fire."""
+    out = list(z)
+    for k, ev in enumerate(events):
+        if not armed[k] and ev.active(q):
+            a = abs(z[k])
+            out[k] = (1.0 if ev.direction == FALLING else -1.0) * (a if a > UNARMED_FLOOR else UNARMED_FLOOR)
+    return out
+
+
 class Fmi3Slave(HybridSlave):
     """The FMI 3.0 adapter; use :func:`fmi3_class` to derive it for a slave class."""
 
@@ -338,7 +356,7 @@ class Fmi3Slave(HybridSlave):
         for k, (ev, g) in enumerate(zip(events, z)):
             if not armed[k] and ev.active(q) and _before_side(ev.direction == FALLING, g):
                 armed[k] = True  # seen on the side before its crossing: may fire
-        return z
+        return _reported(events, z, armed, q)
 
     def completed_integrator_step(self):
         """(enterEventMode, terminateSimulation).  An armed guard on its after side asks for Event
