@@ -128,7 +128,7 @@ def test_a_native_fmu_is_swept_by_its_own_c_loop_with_the_python_fmus_table(tmp_
     grid = ["--grid", "k=1,80,120", "--grid", "c=0.2,1.0", "--set", "m=1", "--stop-time", "6", "--events"]
     for name, fmu in (("py", fmu_path("PogoStick")), ("native", native)):
         assert _sweep(fmu, *grid, "--scheduler", scheduler, "--out", tmp_path / f"{name}.parquet",
-                      "--timeseries", tmp_path / f"ts-{name}") == 0
+                      "--timeseries", tmp_path / f"ts-{name}") == 1  # two runs fail
     a, b = _rows(tmp_path / "py.parquet"), _rows(tmp_path / "native.parquet")
     assert a == b
     assert sum(r["status"] == "error" for r in a) == 2 and sum(r["status"] == "ok" for r in a) == 4
@@ -162,7 +162,7 @@ def test_failed_runs_are_rows_and_the_others_complete(tmp_path, scheduler):
     on one worker: each is a row with the FMU's message, the runs after them still complete."""
     out = tmp_path / "bad.parquet"
     assert _sweep(fmu_path("PogoStickMem"), "--grid", "beta=5,0", "--grid", "c=0.5,-1", "--stop-time", "6",
-                  "--step", "1e-2", "--outputs", "y", "--chunk-size", "4", "--scheduler", scheduler, "--out", out) == 0
+                  "--step", "1e-2", "--outputs", "y", "--chunk-size", "4", "--scheduler", scheduler, "--out", out) == 1
     rows = {(r["beta"], r["c"]): r for r in _rows(out)}
     bottom = rows[(5.0, 0.5)]
     assert bottom["status"] in ("error", "fatal") and "bottomed out" in bottom["message"], bottom
@@ -188,7 +188,24 @@ def test_bad_options_are_refused_before_anything_runs(tmp_path, capsys):
     assert "normal(mean=100.0, sd=-1.0) breaks the rule sd > 0" in capsys.readouterr().err
     assert _sweep(fmu, "--grid", "method=5,6.5", "--out", out) == 2
     assert "parameter method is an Integer: value 6.5 is not integral" in capsys.readouterr().err
+    assert _sweep(fmu, "--grid", "k=80,120", "--step", "1", "--stop-time", "0.2", "--out", out) == 2
+    err = capsys.readouterr().err
+    assert "--step 1.0: longer than the run" in err and "0.2" in err
     assert not out.exists()
+
+
+def test_the_exit_status_tells_that_runs_failed(tmp_path, scheduler, capsys):
+    """Every run refused by the FMU (no method 7): the table is written, its rows say why, and
+    the command's exit status is 1, not 0; a sweep without a failed run exits 0."""
+    fmu = fmu_path("PogoStick")
+    out = tmp_path / "bad.parquet"
+    assert _sweep(fmu, "--grid", "k=80,120", "--set", "method=7", "--stop-time", "0.1", "--scheduler", scheduler,
+                  "--out", out) == 1
+    rows = _rows(out)
+    assert len(rows) == 2 and all(r["status"] == "error" and "method" in r["message"] for r in rows), rows
+    assert "2 failed" in capsys.readouterr().out
+    assert _sweep(fmu, "--grid", "k=80,120", "--stop-time", "0.1", "--scheduler", scheduler,
+                  "--out", tmp_path / "good.parquet") == 0
 
 
 @pytest.fixture(scope="module")

@@ -187,6 +187,22 @@ def recorded_outputs(md, outputs=None):
     return names + [n for n in SUMMARY_OUTPUTS if n in have and n not in names]
 
 
+def run_span(md, stop_time=None):
+    """``(start, stop)`` of a run: the default experiment's start time (else 0), the stop time
+    given, else the default experiment's (else start + 1 s, fmpy's default)."""
+    ex = md.defaultExperiment
+    start = float(ex.startTime) if ex is not None and ex.startTime is not None else 0.0
+    stop = float(stop_time) if stop_time is not None else (
+        float(ex.stopTime) if ex is not None and ex.stopTime is not None else start + 1.0)
+    return start, stop
+
+
+def default_step(md):
+    """The default experiment's step as it is (fmpy alone would coarsen it to <= 1000 points)."""
+    ex = md.defaultExperiment
+    return float(ex.stepSize) if ex is not None and ex.stepSize is not None else None
+
+
 def _decode(b):
     return b.decode(errors="replace") if b else ""
 
@@ -201,8 +217,7 @@ class Runner:
         self.unzipdir = extract(fmu)
         atexit.register(shutil.rmtree, self.unzipdir, True)
         self.vars = {v.name: v for v in self.md.modelVariables}
-        ex = self.md.defaultExperiment  # its step as it is (fmpy alone would coarsen it to <= 1000 points)
-        self.default_step = float(ex.stepSize) if ex is not None and ex.stepSize is not None else None
+        self.default_step = default_step(self.md)
         self.c_loop = None  # known after the first instance: does the binary bring its own loop?
         self._slaves = threading.local()  # with a C loop: this thread's FMU object, its library kept loaded
 
@@ -264,9 +279,7 @@ class Runner:
         from fmpy.simulation import apply_start_values, settable_in_initialization_mode, settable_in_instantiated
 
         ex = self.md.defaultExperiment
-        start = float(ex.startTime) if ex is not None and ex.startTime is not None else 0.0
-        stop = float(stop_time) if stop_time is not None else (
-            float(ex.stopTime) if ex is not None and ex.stopTime is not None else start + 1.0)
+        start, stop = run_span(self.md, stop_time)
         tolerance = float(ex.tolerance) if ex is not None and ex.tolerance is not None else None
         fmu.setupExperiment(tolerance=tolerance, startTime=start, stopTime=stop)
         rest = apply_start_values(fmu, self.md, dict(start_values), settable=settable_in_instantiated)
@@ -326,7 +339,7 @@ class Runner:
                                    start_values=start, stop_time=settings.stop_time,
                                    output_interval=settings.step or self.default_step, output=record, validate=False)
             self._free(fmu)
-            stop = settings.stop_time if settings.stop_time is not None else float(self.md.defaultExperiment.stopTime)
+            stop = run_span(self.md, settings.stop_time)[1]
             if not math.isclose(res["time"][-1], stop, rel_tol=0, abs_tol=1e-9 * max(1.0, abs(stop))):
                 row.update(status="incomplete", message=f"the run stopped at t = {res['time'][-1]!r} s "
                                                         f"before the stop time {stop!r} s")
@@ -409,6 +422,13 @@ def check_names(md, names, settings: Settings):
     for name, text in (("--stop-time", settings.stop_time), ("--step", settings.step)):
         if text is not None and not (math.isfinite(text) and text > 0):
             raise SweepError(f"{name} {text!r}: must be a finite number > 0 [s]")
+    start, stop = run_span(md, settings.stop_time)
+    if not stop > start:
+        raise SweepError(f"--stop-time {stop!r}: must be later than the start time {start!r} s of {md.modelName}")
+    step = settings.step or default_step(md)
+    if step is not None and step > stop - start:
+        raise SweepError(f"--step {step!r}: longer than the run ({start!r} s to the stop time {stop!r} s); the "
+                         f"communication step must be at most the stop time minus the start time")
 
 
 def check_point_types(md, names, points):
@@ -726,8 +746,7 @@ def run_sweep(sweep: Sweep, client, resume=False, overwrite=False, progress=True
         raise SweepError(f"internal: {table.num_rows} rows for {len(sweep.points)} points in {parts}")
     _write_atomic(table, out, metadata={"pogofmu.sweep": spec})
     shutil.rmtree(parts)
-    statuses = table.column("status").to_pylist()
-    bad = len(statuses) - statuses.count("ok")
+    bad = failed_runs(out)
     log(f"{out}: {table.num_rows} runs ({n_run} run now), {bad} failed" + (
         " (see the status and message columns)" if bad else ""))
     return n_run
@@ -799,11 +818,20 @@ def sweep_main(argv, prog="pogofmu sweep"):
         sweep = Sweep(args.fmu, names, points, settings, args.out, args.timeseries, args.chunk_size)
         if args.workers is not None and args.workers < 1:
             raise SweepError(f"--workers {args.workers}: must be >= 1")
-        return execute(sweep, args.workers, args.scheduler, resume=args.resume, overwrite=args.overwrite,
-                       progress=not args.no_progress)
+        status = execute(sweep, args.workers, args.scheduler, resume=args.resume, overwrite=args.overwrite,
+                         progress=not args.no_progress)
+        return status or (1 if failed_runs(Path(args.out)) else 0)
     except SweepError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+
+
+def failed_runs(out: Path) -> int:
+    """The runs of a written sweep whose status is not ``ok``."""
+    import pyarrow.parquet as pq
+
+    statuses = pq.read_table(out, columns=["status"]).column("status").to_pylist()
+    return len(statuses) - statuses.count("ok")
 
 
 def execute(sweep: Sweep, workers=None, scheduler=None, **kwargs):
