@@ -141,6 +141,41 @@ def test_a_native_fmu_is_swept_by_its_own_c_loop_with_the_python_fmus_table(tmp_
         tb.sort_by([("run_id", "ascending"), ("time", "ascending")]))
 
 
+def test_fmi3_fmus_of_both_backends_give_the_fmi2_table_to_the_bit(tmp_path, scheduler):
+    """An FMI 3.0 FMU is swept as its FMI 2.0 twin (its parameters are Float64 and Int32): the
+    Python-hosted one through fmpy, the native one by its own C loop (pogofmu_fmi3_run_grid); every
+    column of the table (but the wall time), the event lists and the time series are those of
+    dist/PogoStick.fmu, the failed rows too (a leg that bottoms out, k = 1), whose message names
+    the FMI 3.0 function that failed."""
+    from pogofmu.sweep import Runner, Settings
+
+    fmus = {"fmi2": fmu_path("PogoStick"), "fmi3": DIST / "fmi3" / "PogoStick.fmu",
+            "native-fmi3": DIST / "native" / "fmi3" / "PogoStick.fmu"}
+    for name, has_loop in (("fmi3", False), ("native-fmi3", True)):
+        runner = Runner(str(fmus[name]))
+        row, _ = runner.run({"k": 100.0, "method": 8}, Settings(stop_time=0.01))
+        assert row["status"] == "ok" and bool(runner.c_loop) is has_loop, name
+    grid = ["--grid", "k=1,80,120", "--grid", "method=5,8", "--set", "m=1", "--stop-time", "6", "--events"]
+    for name, fmu in fmus.items():
+        assert _sweep(fmu, *grid, "--scheduler", scheduler, "--out", tmp_path / f"{name}.parquet",
+                      "--timeseries", tmp_path / f"ts-{name}") == 1  # the two k = 1 runs fail
+    import pyarrow.dataset as ds
+
+    def series(name):
+        t = ds.dataset(tmp_path / f"ts-{name}", format="parquet", partitioning="hive").to_table()
+        return t.sort_by([("run_id", "ascending"), ("time", "ascending")])
+
+    ref = _rows(tmp_path / "fmi2.parquet")
+    assert sum(r["status"] == "ok" for r in ref) == 4 and all(r["event_t"] for r in ref if r["status"] == "ok")
+    for name in ("fmi3", "native-fmi3"):
+        rows = _rows(tmp_path / f"{name}.parquet")
+        for r in rows:
+            assert "fmi2" not in r["message"]
+            r["message"] = r["message"].replace("fmi3DoStep", "fmi2DoStep")
+        assert rows == ref, name
+        assert series(name).equals(series("fmi2")), name
+
+
 def test_monte_carlo_is_reproducible_from_the_seed(tmp_path, scheduler):
     fmu = fmu_path("PogoStick")
     mc = ["--sample", "k=uniform(60,150)", "--sample", "c=lognormal(-1,0.5)", "--samples", "5",
