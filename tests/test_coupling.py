@@ -18,7 +18,7 @@ import pytest
 from pogofmu import ssp as master
 from pogofmu.closed_loop import apex_of_run, first_apex
 from support import DIST, ROOT, clean_venv
-from test_ssp import ssv_values, variant
+from test_ssp import law, ssv_values, variant
 
 SSP1 = DIST / "SpaceHopper.ssp"  # SSP 1.0, FMI 2.0 FMUs: the rollback path
 SSP2 = DIST / "SpaceHopper-fmi3.ssp"  # SSP 2.0, FMI 3.0 FMUs: the early-return path
@@ -92,6 +92,44 @@ def test_the_first_touchdown_has_its_rows_and_the_controller_sees_it_there(packa
     assert right[0] == left[0] + 1
     grid = t[kind == 0]  # the user's grid stays the grid
     np.testing.assert_allclose(grid, np.arange(61) * 1e-2, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("package", sorted(PACKAGES))
+@pytest.mark.parametrize("h", [1e-3, 1e-2])
+def test_jacobi_with_events_switches_at_the_continuous_loops_instants(package, h):
+    """Moon (thrust saturated through the first extension, so only the switching instants
+    matter): Jacobi with events synchronized has the touchdown, the controller's switch at the
+    bottom of the stroke and the liftoff of the continuous closed loop, its first apex to the
+    FMUs' tolerance as Gauss-Seidel does, and no thrust left in any flight row after the
+    liftoff (the controller sees s = 0 at the liftoff instant, not one step later)."""
+    from pogofmu.closed_loop import first_hop
+
+    p = ssv_values("moon")
+    ref = first_hop(p)
+    res = master.simulate(PACKAGES[package], parameters="moon", stop_time=1.0, step=h, algorithm="jacobi",
+                          echo_log=False)
+    left = res["time"][res["event"] == -1]
+    assert len(left) == 3, left
+    np.testing.assert_allclose(left, [ref["touchdown"], ref["bottom"], ref["liftoff"]], rtol=0, atol=1e-7)
+    assert first_apex_error(res, "moon") <= 1e-7
+    after = (res["time"] >= ref["liftoff"]) & (res["event"] != -1)
+    assert np.all(res["PogoStick.s"][after] == 0) and np.all(res["PogoStick.F_ext"][after] == 0.0)
+
+
+def test_jacobi_with_events_keeps_the_jacobi_delay_between_events():
+    """Earth (the law unsaturated in the extension): between events every grid row's thrust is
+    the law at the previous grid row's state — the Jacobi step, whose inputs are those of the
+    step's start, even though the master probes the controller at each step's end for its switch."""
+    p = ssv_values("earth")
+    res = master.simulate(SSP1, parameters="earth", stop_time=0.6, step=1e-2, algorithm="jacobi", echo_log=False)
+    kind, y, yd, s = res["event"], res["PogoStick.y"], res["PogoStick.ydot"], res["PogoStick.s"]
+    grid = np.flatnonzero(kind == 0)
+    checked = 0
+    for a, b in zip(grid[:-1], grid[1:]):
+        if b == a + 1 and s[a] == s[b] == 1 and yd[a] > 0:  # two grid rows in an extension, no event between
+            assert res["HopController.F_ext"][b] == pytest.approx(law(y[a], yd[a], s[a], p), rel=1e-12, abs=1e-12)
+            checked += 1
+    assert checked >= 5
 
 
 def test_fmi2_rollback_and_fmi3_early_return_agree_on_every_grid_row():
@@ -461,15 +499,18 @@ def test_the_coupling_study_writes_the_table_the_figure_and_the_slopes(tmp_path,
 
     out = tmp_path / "coupling"
     assert cli.main(["study", "coupling", "--out", str(out), "--steps", "1e-2,1e-3", "--bodies", "moon",
-                     "--algorithms", "gauss-seidel,fmi3-early-return,model-exchange", "--quiet",
+                     "--algorithms", "gauss-seidel,fmi3-early-return,fmi2-rollback-jacobi,fmi3-early-return-jacobi,"
+                     "model-exchange", "--quiet",
                      "--ssp", str(SSP1), "--ssp-fmi3", str(SSP2)]) == 0
     printed = capsys.readouterr().out
     with (out / "coupling.csv").open() as f:
         rows = list(csv.DictReader(f))
-    assert len(rows) == 6 and all(r["status"] == "ok" for r in rows)
+    assert len(rows) == 10 and all(r["status"] == "ok" for r in rows)
     err = {(r["algorithm"], float(r["step_s"])): float(r["error_m"]) for r in rows}
     assert 5 < err[("gauss-seidel", 1e-2)] / err[("gauss-seidel", 1e-3)] < 20  # first order
     assert err[("fmi3-early-return", 1e-2)] <= 5e-4 and err[("model-exchange", 1e-2)] <= 1e-6
+    for h in (1e-2, 1e-3):  # saturated thrust: Jacobi with its switches at their instants is exact as well
+        assert err[("fmi2-rollback-jacobi", h)] <= 1e-7 and err[("fmi3-early-return-jacobi", h)] <= 1e-7
     gs_slope = float(next(line for line in printed.splitlines() if "Gauss-Seidel" in line).split()[-1])
     assert 0.9 < gs_slope < 1.1
     assert (out / "coupling.png").read_bytes()[:4] == b"\x89PNG"

@@ -2,8 +2,8 @@
 
 * Windows: ``binaries/win64/<Model>.dll`` (FMI 2.0) and ``binaries/x86_64-windows/<Model>.dll``
   (FMI 3.0), cross-compiled by the build with mingw-w64, need nothing but Windows' own
-  KERNEL32 and msvcrt and export the FMI functions only (and the FMI 2.0 FMU its C stepping loop
-  for the sweeps, ``pogofmu_fmi2_run_grid``); the tests' C hosts
+  KERNEL32 and msvcrt and export the FMI functions only (and their C stepping loop for the
+  sweeps, ``pogofmu_fmi2_run_grid`` / ``pogofmu_fmi3_run_grid``); the tests' C hosts
   (tests/c_host/fmi2_host.c, fmi3_host.c), cross-compiled as well, run every default experiment
   under wine — FMI 2.0 co-simulation, FMI 3.0 co-simulation with event mode and early return, and
   FMI 3.0 model exchange — with the Linux binary's events, their times within 1e-12 s, the outputs
@@ -106,7 +106,7 @@ def test_the_windows_binary_needs_only_windows_own_libraries(name, fmi, tmp_path
     assert imported <= {"KERNEL32.dll", "msvcrt.dll"}, imported
     table = text[text.index("[Ordinal/Name Pointer] Table"):].splitlines()[1:]
     exported = [line.split("]", 1)[1].strip() for line in table if line.strip().startswith("[")]
-    extensions = {"pogofmu_fmi2_run_grid"} if fmi == 2 else set()  # (the sweep's C loop, pogofmu.sweep)
+    extensions = {f"pogofmu_fmi{fmi}_run_grid"}  # (the sweep's C loop, pogofmu.sweep)
     assert len(exported) >= 30 and all(e.startswith(f"fmi{fmi}") or e in extensions for e in exported), exported
     assert extensions <= set(exported)
 

@@ -389,6 +389,8 @@ BAD_INPUT = {
     "stop time nan": (None, ["--stop-time", "nan"], ["stop time", "--stop-time", "nan", "finite"]),
     "stop time inf": (None, ["--stop-time", "inf"], ["stop time", "--stop-time", "inf", "finite"]),
     "step nan": (None, ["--step", "nan"], ["communication step", "--step", "nan", "finite"]),
+    "model exchange without events": (None, ["--algorithm", "model-exchange", "--events", "off"],
+                                      ["--events off", "--algorithm model-exchange", "give one or the other"]),
     "out is a file": (None, ["--out", "{file}"], ["--out", "{file}", "is an existing file"]),
     "out under a file": (None, ["--out", "{file}/sub"], ["--out", "{file}/sub", "cannot be written"]),
     "out unwritable": (None, ["--out", "/proc/self/results"], ["--out", "/proc/self/results", "cannot be written"]),
@@ -423,6 +425,27 @@ def test_bad_user_input_is_refused_before_the_first_step(case, tmp_path, monkeyp
     for w in words:
         assert w in err, err
     assert not out.exists() or not list(out.iterdir())
+
+
+def test_a_step_that_does_not_resolve_a_stated_time_constant_is_warned(tmp_path, capsys):
+    """HopController states tau_E as a time constant (unit s, its description): its sampled loop
+    is stable for h < 2 tau_E with Gauss-Seidel and h < tau_E with Jacobi (docs/ssp-master.md),
+    so a step at or past that limit is warned of, naming the parameter and the value the
+    parameter set gives it; a step within it, or a set with a longer tau_E, is not."""
+    tau = ssv_values("moon")["tau_E"]  # 0.02 s, read from the .ssv as written
+    for step, algorithm, warned in ((2.5 * tau, "gauss-seidel", True), (0.5 * tau, "gauss-seidel", False),
+                                    (1.25 * tau, "jacobi", True), (1.25 * tau, "gauss-seidel", False)):
+        master.simulate(SSP, parameters="moon", stop_time=10 * step, step=step, algorithm=algorithm,
+                        echo_log=False)
+        err = capsys.readouterr().err
+        assert (f"HopController.tau_E = {tau:g} s" in err) is warned, (step, algorithm, err)
+        assert ("does not resolve the time constant" in err) is warned
+    pkg = variant(tmp_path)
+    ssv = pkg / "resources" / "moon.ssv"
+    ssv.write_text(_ssv_edit('name="tau_E"><ssv:Real value="0.02"', 'name="tau_E"><ssv:Real value="0.03"')(
+        ssv.read_text()))
+    master.simulate(pkg, parameters="moon", stop_time=0.5, step=0.05, echo_log=False)
+    assert "time constant" not in capsys.readouterr().err  # 0.05 s < 2 x 0.03 s
 
 
 def test_bad_user_input_on_the_command_line_exits_without_traceback(tmp_path):

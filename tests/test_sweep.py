@@ -128,7 +128,7 @@ def test_a_native_fmu_is_swept_by_its_own_c_loop_with_the_python_fmus_table(tmp_
     grid = ["--grid", "k=1,80,120", "--grid", "c=0.2,1.0", "--set", "m=1", "--stop-time", "6", "--events"]
     for name, fmu in (("py", fmu_path("PogoStick")), ("native", native)):
         assert _sweep(fmu, *grid, "--scheduler", scheduler, "--out", tmp_path / f"{name}.parquet",
-                      "--timeseries", tmp_path / f"ts-{name}") == 0
+                      "--timeseries", tmp_path / f"ts-{name}") == 1  # two runs fail
     a, b = _rows(tmp_path / "py.parquet"), _rows(tmp_path / "native.parquet")
     assert a == b
     assert sum(r["status"] == "error" for r in a) == 2 and sum(r["status"] == "ok" for r in a) == 4
@@ -139,6 +139,41 @@ def test_a_native_fmu_is_swept_by_its_own_c_loop_with_the_python_fmus_table(tmp_
     assert ta.num_rows == tb.num_rows > 4 * 6000
     assert ta.sort_by([("run_id", "ascending"), ("time", "ascending")]).equals(
         tb.sort_by([("run_id", "ascending"), ("time", "ascending")]))
+
+
+def test_fmi3_fmus_of_both_backends_give_the_fmi2_table_to_the_bit(tmp_path, scheduler):
+    """An FMI 3.0 FMU is swept as its FMI 2.0 twin (its parameters are Float64 and Int32): the
+    Python-hosted one through fmpy, the native one by its own C loop (pogofmu_fmi3_run_grid); every
+    column of the table (but the wall time), the event lists and the time series are those of
+    dist/PogoStick.fmu, the failed rows too (a leg that bottoms out, k = 1), whose message names
+    the FMI 3.0 function that failed."""
+    from pogofmu.sweep import Runner, Settings
+
+    fmus = {"fmi2": fmu_path("PogoStick"), "fmi3": DIST / "fmi3" / "PogoStick.fmu",
+            "native-fmi3": DIST / "native" / "fmi3" / "PogoStick.fmu"}
+    for name, has_loop in (("fmi3", False), ("native-fmi3", True)):
+        runner = Runner(str(fmus[name]))
+        row, _ = runner.run({"k": 100.0, "method": 8}, Settings(stop_time=0.01))
+        assert row["status"] == "ok" and bool(runner.c_loop) is has_loop, name
+    grid = ["--grid", "k=1,80,120", "--grid", "method=5,8", "--set", "m=1", "--stop-time", "6", "--events"]
+    for name, fmu in fmus.items():
+        assert _sweep(fmu, *grid, "--scheduler", scheduler, "--out", tmp_path / f"{name}.parquet",
+                      "--timeseries", tmp_path / f"ts-{name}") == 1  # the two k = 1 runs fail
+    import pyarrow.dataset as ds
+
+    def series(name):
+        t = ds.dataset(tmp_path / f"ts-{name}", format="parquet", partitioning="hive").to_table()
+        return t.sort_by([("run_id", "ascending"), ("time", "ascending")])
+
+    ref = _rows(tmp_path / "fmi2.parquet")
+    assert sum(r["status"] == "ok" for r in ref) == 4 and all(r["event_t"] for r in ref if r["status"] == "ok")
+    for name in ("fmi3", "native-fmi3"):
+        rows = _rows(tmp_path / f"{name}.parquet")
+        for r in rows:
+            assert "fmi2" not in r["message"]
+            r["message"] = r["message"].replace("fmi3DoStep", "fmi2DoStep")
+        assert rows == ref, name
+        assert series(name).equals(series("fmi2")), name
 
 
 def test_monte_carlo_is_reproducible_from_the_seed(tmp_path, scheduler):
@@ -162,7 +197,7 @@ def test_failed_runs_are_rows_and_the_others_complete(tmp_path, scheduler):
     on one worker: each is a row with the FMU's message, the runs after them still complete."""
     out = tmp_path / "bad.parquet"
     assert _sweep(fmu_path("PogoStickMem"), "--grid", "beta=5,0", "--grid", "c=0.5,-1", "--stop-time", "6",
-                  "--step", "1e-2", "--outputs", "y", "--chunk-size", "4", "--scheduler", scheduler, "--out", out) == 0
+                  "--step", "1e-2", "--outputs", "y", "--chunk-size", "4", "--scheduler", scheduler, "--out", out) == 1
     rows = {(r["beta"], r["c"]): r for r in _rows(out)}
     bottom = rows[(5.0, 0.5)]
     assert bottom["status"] in ("error", "fatal") and "bottomed out" in bottom["message"], bottom
@@ -188,7 +223,24 @@ def test_bad_options_are_refused_before_anything_runs(tmp_path, capsys):
     assert "normal(mean=100.0, sd=-1.0) breaks the rule sd > 0" in capsys.readouterr().err
     assert _sweep(fmu, "--grid", "method=5,6.5", "--out", out) == 2
     assert "parameter method is an Integer: value 6.5 is not integral" in capsys.readouterr().err
+    assert _sweep(fmu, "--grid", "k=80,120", "--step", "1", "--stop-time", "0.2", "--out", out) == 2
+    err = capsys.readouterr().err
+    assert "--step 1.0: longer than the run" in err and "0.2" in err
     assert not out.exists()
+
+
+def test_the_exit_status_tells_that_runs_failed(tmp_path, scheduler, capsys):
+    """Every run refused by the FMU (no method 7): the table is written, its rows say why, and
+    the command's exit status is 1, not 0; a sweep without a failed run exits 0."""
+    fmu = fmu_path("PogoStick")
+    out = tmp_path / "bad.parquet"
+    assert _sweep(fmu, "--grid", "k=80,120", "--set", "method=7", "--stop-time", "0.1", "--scheduler", scheduler,
+                  "--out", out) == 1
+    rows = _rows(out)
+    assert len(rows) == 2 and all(r["status"] == "error" and "method" in r["message"] for r in rows), rows
+    assert "2 failed" in capsys.readouterr().out
+    assert _sweep(fmu, "--grid", "k=80,120", "--stop-time", "0.1", "--scheduler", scheduler,
+                  "--out", tmp_path / "good.parquet") == 0
 
 
 @pytest.fixture(scope="module")

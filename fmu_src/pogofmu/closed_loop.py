@@ -25,6 +25,12 @@ def thrust_law(y, ydot, s, p):
 def first_apex(p) -> float:
     """First apex height [m] after a drop at rest from ``y_0`` (``p``: the parameter set's values
     ``m, g, k, c, x_i, y_0, h_target, tau_E, K_D, F_max``)."""
+    return first_hop(p)["apex"]
+
+
+def first_hop(p) -> dict:
+    """The first hop after a drop at rest from ``y_0``: the instants of the touchdown, the bottom
+    of the stroke (where the thrust switches on) and the liftoff [s], and the apex [m]."""
     from scipy.integrate import solve_ivp
 
     m, g, k, c, xi = p["m"], p["g"], p["k"], p["c"], p["x_i"]
@@ -36,7 +42,7 @@ def first_apex(p) -> float:
     bottom = lambda t, X: X[1]  # noqa: E731
     bottom.terminal, bottom.direction = True, 1
     s1 = solve_ivp(compression, (0, 10), [xi, v_td], method="DOP853", rtol=1e-12, atol=1e-14, events=bottom)
-    y_b = s1.y_events[0][0][0]
+    y_b, t_b = s1.y_events[0][0][0], s1.t_events[0][0]
 
     def extension(t, X):
         F = p["F_max"] if X[1] <= 0 else thrust_law(X[0], X[1], 1, p)  # ydot -> 0+: the law saturates
@@ -47,7 +53,9 @@ def first_apex(p) -> float:
     s2 = solve_ivp(extension, (0, 10), [y_b, 0.0], method="DOP853", rtol=1e-12, atol=1e-14, events=liftoff,
                    max_step=1e-3)
     v_lo = s2.y_events[0][0][1]
-    return float(xi + v_lo ** 2 / (2 * g))
+    t_td = math.sqrt(2 * (p["y_0"] - xi) / g)
+    return {"touchdown": t_td, "bottom": t_td + float(t_b), "liftoff": t_td + float(t_b + s2.t_events[0][0]),
+            "apex": float(xi + v_lo ** 2 / (2 * g))}
 
 
 def apex_of_run(res, g, component="PogoStick"):

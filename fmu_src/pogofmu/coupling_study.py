@@ -8,7 +8,8 @@ first contact whose held thrust is zero (``y + ydot^2/(2 g)``, exact in flight).
 * ``gauss-seidel`` and ``jacobi`` with a fixed step (``--events off``), and libcosim's
   fixed-step (Jacobi) algorithm where libcosimpy is installed — the masters of today;
 * ``fmi2-rollback`` and ``fmi3-early-return``: the event-synchronized master on the FMI 2.0 and
-  the FMI 3.0 package;
+  the FMI 3.0 package (Gauss–Seidel), ``fmi2-rollback-jacobi`` and ``fmi3-early-return-jacobi``
+  the same with Jacobi between the events;
 * ``model-exchange``: the strongly coupled solution, ``--step`` its output grid only.
 
 Host-side code; never imported inside an FMU.
@@ -35,13 +36,18 @@ ALGORITHMS = {  # name: (package, simulate keywords)
     "libcosim": ("fmi2", None),
     "fmi2-rollback": ("fmi2", dict(events=True)),
     "fmi3-early-return": ("fmi3", dict(events=True)),
+    "fmi2-rollback-jacobi": ("fmi2", dict(algorithm="jacobi", events=True)),
+    "fmi3-early-return-jacobi": ("fmi3", dict(algorithm="jacobi", events=True)),
     "model-exchange": ("fmi3", dict(algorithm="model-exchange")),
 }
 STYLES = {"gauss-seidel": ("o", "-"), "jacobi": ("s", "-"), "libcosim": ("x", "--"), "fmi2-rollback": ("^", "-"),
-          "fmi3-early-return": ("v", "--"), "model-exchange": ("D", "-")}  # (equal curves stay visible)
+          "fmi3-early-return": ("v", "--"), "fmi2-rollback-jacobi": ("<", "-"), "fmi3-early-return-jacobi": (">", "--"),
+          "model-exchange": ("D", "-")}  # (equal curves stay visible)
 LABELS = {"gauss-seidel": "Gauss-Seidel, fixed step", "jacobi": "Jacobi, fixed step",
           "libcosim": "libcosim (Jacobi, fixed step)", "fmi2-rollback": "FMI 2.0 rollback (events synchronized)",
           "fmi3-early-return": "FMI 3.0 early return (events synchronized)",
+          "fmi2-rollback-jacobi": "FMI 2.0 rollback, Jacobi (events synchronized)",
+          "fmi3-early-return-jacobi": "FMI 3.0 early return, Jacobi (events synchronized)",
           "model-exchange": "model exchange (strongly coupled, CVODE)"}
 
 
@@ -153,7 +159,7 @@ def run_study(out: Path, packages: dict, bodies, steps, algorithms, progress=Tru
             w.writerow({k: (repr(v) if isinstance(v, float) else v) for k, v in r.items()})
     slopes = fit_slopes(rows)
     for (body, algo), s in sorted(slopes.items()):
-        print(f"slope {body:6s} {LABELS[algo]:45s} {'-' if s is None else f'{s:.2f}'}")
+        print(f"slope {body:6s} {LABELS[algo]:50s} {'-' if s is None else f'{s:.2f}'}")
     draw(rows, slopes, out / "coupling.png", bodies, algorithms)
     print(f"wrote {out / 'coupling.csv'}, {out / 'coupling.png'}")
     return rows, slopes

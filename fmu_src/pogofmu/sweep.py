@@ -4,9 +4,11 @@
     pogofmu sweep dist/Penetrator.fmu --sample K=lognormal(9.21,0.5) --samples 200 --seed 1 --out soil.parquet
 
 The runs are the shipped FMU artefact simulated by fmpy (``simulate_fmu``) in Dask worker
-processes — or, for an FMI 2.0 FMU whose binary exports ``pogofmu_fmi2_run_grid`` (the native
-FMUs, dist/native/), by that function: fmpy's communication loop written in C over the FMU's own
-FMI functions, the same rows to the bit without fmpy's Python per step (``Runner.run``); a local cluster (``--workers W``, one thread each) or an existing one
+processes — or, for an FMU whose binary exports ``pogofmu_fmi2_run_grid`` / ``pogofmu_fmi3_run_grid``
+(the native FMUs, dist/native/ and dist/native/fmi3/), by that function: fmpy's communication loop
+written in C over the FMU's own FMI functions (native/pg_run_grid.h, once for both versions), the
+same rows to the bit without fmpy's Python per step (``Runner.run``). FMI 2.0 and FMI 3.0 FMUs of
+one model give the same table; a local cluster (``--workers W``, one thread each) or an existing one
 (``--scheduler tcp://host:8786``). The FMU file is sent to the workers once and extracted once
 per worker; each run gets a fresh FMU instance (0.7 ms, while extracting costs ~8 ms a run).
 Runs go in chunks, one Dask task per chunk, so that scheduling costs little against the runs.
@@ -41,6 +43,9 @@ from typing import Dict, List, Optional, Sequence
 from pogofmu.runtime.eventlog import parse_event_log  # the FMU's event records, as data
 
 SUMMARY_OUTPUTS = ("n_events", "t_last_event")  # FMU outputs that get a column of their own
+# the types a sweep sets and records: FMI 2.0's and FMI 3.0's names of a real and of an integer
+REAL_TYPES = ("Real", "Float64", "Float32")
+INTEGER_TYPES = ("Integer", "Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64")
 DISTRIBUTIONS = {  # name -> (numpy Generator method, argument names, rule on the arguments)
     "uniform": ("uniform", ("low", "high"), lambda a, b: a < b, "low < high"),
     "loguniform": (None, ("low", "high"), lambda a, b: 0 < a < b, "0 < low < high"),
@@ -187,6 +192,22 @@ def recorded_outputs(md, outputs=None):
     return names + [n for n in SUMMARY_OUTPUTS if n in have and n not in names]
 
 
+def run_span(md, stop_time=None):
+    """``(start, stop)`` of a run: the default experiment's start time (else 0), the stop time
+    given, else the default experiment's (else start + 1 s, fmpy's default)."""
+    ex = md.defaultExperiment
+    start = float(ex.startTime) if ex is not None and ex.startTime is not None else 0.0
+    stop = float(stop_time) if stop_time is not None else (
+        float(ex.stopTime) if ex is not None and ex.stopTime is not None else start + 1.0)
+    return start, stop
+
+
+def default_step(md):
+    """The default experiment's step as it is (fmpy alone would coarsen it to <= 1000 points)."""
+    ex = md.defaultExperiment
+    return float(ex.stepSize) if ex is not None and ex.stepSize is not None else None
+
+
 def _decode(b):
     return b.decode(errors="replace") if b else ""
 
@@ -201,8 +222,8 @@ class Runner:
         self.unzipdir = extract(fmu)
         atexit.register(shutil.rmtree, self.unzipdir, True)
         self.vars = {v.name: v for v in self.md.modelVariables}
-        ex = self.md.defaultExperiment  # its step as it is (fmpy alone would coarsen it to <= 1000 points)
-        self.default_step = float(ex.stepSize) if ex is not None and ex.stepSize is not None else None
+        self.default_step = default_step(self.md)
+        self.fmi3 = self.md.fmiVersion.startswith("3")
         self.c_loop = None  # known after the first instance: does the binary bring its own loop?
         self._slaves = threading.local()  # with a C loop: this thread's FMU object, its library kept loaded
 
@@ -218,6 +239,9 @@ class Runner:
             if self._grid_loop(fmu) is not None:
                 self._slaves.fmu = fmu
             return fmu
+        if self.fmi3:
+            slave.instantiate(visible=False, loggingOn=True, logMessage=logger)
+            return slave
         from ctypes import byref
 
         from fmpy import calloc, free
@@ -234,17 +258,18 @@ class Runner:
         return slave
 
     def _free(self, fmu):
-        if getattr(self._slaves, "fmu", None) is fmu:
-            fmu.fmi2FreeInstance(fmu.component)  # the instance only: the library stays for the next run
+        if getattr(self._slaves, "fmu", None) is fmu:  # the instance only: the library stays for the next run
+            (fmu.fmi3FreeInstance if self.fmi3 else fmu.fmi2FreeInstance)(fmu.component)
         else:
             fmu.freeInstance()
 
     def _grid_loop(self, fmu):
-        """The FMU binary's ``pogofmu_fmi2_run_grid`` (a ctypes function), or None."""
+        """The FMU binary's ``pogofmu_fmi2_run_grid`` / ``pogofmu_fmi3_run_grid`` (a ctypes
+        function), or None."""
         if self.c_loop is None:
             import ctypes
 
-            fn = getattr(fmu.dll, "pogofmu_fmi2_run_grid", None) if self.md.fmiVersion == "2.0" else None
+            fn = getattr(fmu.dll, f"pogofmu_fmi{3 if self.fmi3 else 2}_run_grid", None)
             if fn is not None:
                 fn.restype = ctypes.c_int
                 fn.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_double,
@@ -253,10 +278,14 @@ class Runner:
             self.c_loop = fn or False
         return self.c_loop or None
 
+    def _c_recordable(self, record):
+        """Whether the C loop records these outputs (reals as 64-bit floats, integers as 32-bit)."""
+        return all(self.vars[n].type in ("Real", "Float64", "Integer", "Int32") for n in record)
+
     def _simulate_in_c(self, loop, fmu, start_values, stop_time, step, record):
-        """What ``simulate_fmu`` does for an FMI 2.0 co-simulation FMU without inputs — set up,
-        start values in both phases, initialize, the loop (here in the FMU's C), terminate — and
-        its result array (the same columns, types and rows)."""
+        """What ``simulate_fmu`` does for a co-simulation FMU without inputs (FMI 3.0: without
+        event mode) — set up, start values in both phases, initialize, the loop (here in the
+        FMU's C), terminate — and its result array (the same columns, types and rows)."""
         import ctypes
 
         import numpy as np
@@ -264,18 +293,20 @@ class Runner:
         from fmpy.simulation import apply_start_values, settable_in_initialization_mode, settable_in_instantiated
 
         ex = self.md.defaultExperiment
-        start = float(ex.startTime) if ex is not None and ex.startTime is not None else 0.0
-        stop = float(stop_time) if stop_time is not None else (
-            float(ex.stopTime) if ex is not None and ex.stopTime is not None else start + 1.0)
+        start, stop = run_span(self.md, stop_time)
         tolerance = float(ex.tolerance) if ex is not None and ex.tolerance is not None else None
-        fmu.setupExperiment(tolerance=tolerance, startTime=start, stopTime=stop)
-        rest = apply_start_values(fmu, self.md, dict(start_values), settable=settable_in_instantiated)
-        fmu.enterInitializationMode()
+        if self.fmi3:
+            rest = apply_start_values(fmu, self.md, dict(start_values), settable=settable_in_instantiated)
+            fmu.enterInitializationMode(tolerance=tolerance, startTime=start, stopTime=stop)
+        else:
+            fmu.setupExperiment(tolerance=tolerance, startTime=start, stopTime=stop)
+            rest = apply_start_values(fmu, self.md, dict(start_values), settable=settable_in_instantiated)
+            fmu.enterInitializationMode()
         apply_start_values(fmu, self.md, rest, settable=settable_in_initialization_mode)
         fmu.exitInitializationMode()
         names = set(record)
-        reals = [v for v in self.md.modelVariables if v.name in names and v.type == "Real"]
-        ints = [v for v in self.md.modelVariables if v.name in names and v.type == "Integer"]
+        reals = [v for v in self.md.modelVariables if v.name in names and v.type in ("Real", "Float64")]
+        ints = [v for v in self.md.modelVariables if v.name in names and v.type in ("Integer", "Int32")]
         rvr = (ctypes.c_uint32 * max(1, len(reals)))(*[v.valueReference for v in reals])
         ivr = (ctypes.c_uint32 * max(1, len(ints)))(*[v.valueReference for v in ints])
         max_rows = int(math.ceil((stop - start) / step * (1 + 1e-9))) + 2
@@ -284,7 +315,7 @@ class Runner:
         status = loop(fmu.component, start, stop, step, rvr, len(reals), ivr, len(ints),
                       out.ctypes.data, max_rows, ctypes.byref(rows))
         if status > 1:
-            raise FMICallException(function="fmi2DoStep", status=status)
+            raise FMICallException(function="fmi3DoStep" if self.fmi3 else "fmi2DoStep", status=status)
         fmu.terminate()
         table = out[:rows.value]
         res = np.empty(rows.value, dtype=[("time", np.float64), *((v.name, np.float64) for v in reals),
@@ -304,12 +335,16 @@ class Runner:
         def logger(component, instance, status, category, message):
             messages.append((status, _decode(category), _decode(message)))
 
+        if self.fmi3:  # fmi3LogMessageCallback: (instanceEnvironment, status, category, message)
+            def logger(environment, status, category, message):  # noqa: F811
+                messages.append((status, _decode(category), _decode(message)))
+
         start = dict(settings.fixed)
         start.update(point)
         if settings.events:
             start["log_events"] = 1
         for name, value in start.items():
-            if self.vars[name].type == "Integer":
+            if self.vars[name].type in INTEGER_TYPES:
                 start[name] = int(value)
         record = recorded_outputs(self.md, settings.outputs)
         row = {"status": "ok", "message": ""}
@@ -318,7 +353,7 @@ class Runner:
         fmu = self._instantiate(logger)
         try:
             loop = self._grid_loop(fmu)
-            if loop is not None and (settings.step or self.default_step):
+            if loop is not None and (settings.step or self.default_step) and self._c_recordable(record):
                 res = self._simulate_in_c(loop, fmu, start, settings.stop_time, settings.step or self.default_step,
                                           record)
             else:
@@ -326,7 +361,7 @@ class Runner:
                                    start_values=start, stop_time=settings.stop_time,
                                    output_interval=settings.step or self.default_step, output=record, validate=False)
             self._free(fmu)
-            stop = settings.stop_time if settings.stop_time is not None else float(self.md.defaultExperiment.stopTime)
+            stop = run_span(self.md, settings.stop_time)[1]
             if not math.isclose(res["time"][-1], stop, rel_tol=0, abs_tol=1e-9 * max(1.0, abs(stop))):
                 row.update(status="incomplete", message=f"the run stopped at t = {res['time'][-1]!r} s "
                                                         f"before the stop time {stop!r} s")
@@ -398,8 +433,9 @@ def check_names(md, names, settings: Settings):
     for n in list(names) + list(settings.fixed):
         if n not in vars_ or vars_[n].causality != "parameter":
             raise SweepError(f"{n!r} is not a parameter of {md.modelName} (parameters: {', '.join(params)})")
-        if vars_[n].type not in ("Real", "Integer"):
-            raise SweepError(f"parameter {n} of {md.modelName} is {vars_[n].type}: only Real and Integer can be swept")
+        if vars_[n].type not in REAL_TYPES + INTEGER_TYPES:
+            raise SweepError(f"parameter {n} of {md.modelName} is {vars_[n].type}: only reals and integers can be "
+                             f"swept ({', '.join(REAL_TYPES + INTEGER_TYPES)})")
     outs = sorted(n for n, v in vars_.items() if v.causality == "output")
     for n in settings.outputs or ():
         if n not in vars_ or vars_[n].causality != "output":
@@ -409,13 +445,20 @@ def check_names(md, names, settings: Settings):
     for name, text in (("--stop-time", settings.stop_time), ("--step", settings.step)):
         if text is not None and not (math.isfinite(text) and text > 0):
             raise SweepError(f"{name} {text!r}: must be a finite number > 0 [s]")
+    start, stop = run_span(md, settings.stop_time)
+    if not stop > start:
+        raise SweepError(f"--stop-time {stop!r}: must be later than the start time {start!r} s of {md.modelName}")
+    step = settings.step or default_step(md)
+    if step is not None and step > stop - start:
+        raise SweepError(f"--step {step!r}: longer than the run ({start!r} s to the stop time {stop!r} s); the "
+                         f"communication step must be at most the stop time minus the start time")
 
 
 def check_point_types(md, names, points):
     """Integer parameters take integral values only (a grid 1:3:3 is fine, 1.5 is not)."""
     vars_ = {v.name: v for v in md.modelVariables}
     for j, n in enumerate(names):
-        if vars_[n].type == "Integer":
+        if vars_[n].type in INTEGER_TYPES:
             bad = [p[j] for p in points if p[j] != int(p[j])]
             if bad:
                 raise SweepError(f"parameter {n} is an Integer: value {bad[0]!r} is not integral")
@@ -425,7 +468,7 @@ def schema(md, names, settings: Settings):
     import pyarrow as pa
 
     vars_ = {v.name: v for v in md.modelVariables}
-    typ = lambda n: pa.int64() if vars_[n].type in ("Integer", "Boolean", "Enumeration") else pa.float64()  # noqa: E731
+    typ = lambda n: pa.int64() if vars_[n].type in INTEGER_TYPES + ("Boolean", "Enumeration") else pa.float64()  # noqa: E731
     fields = [("run_id", pa.int64())] + [(n, typ(n)) for n in names]
     fields += [("status", pa.string()), ("message", pa.string()), ("wall_s", pa.float64())]
     for n in recorded_outputs(md, settings.outputs):
@@ -726,8 +769,7 @@ def run_sweep(sweep: Sweep, client, resume=False, overwrite=False, progress=True
         raise SweepError(f"internal: {table.num_rows} rows for {len(sweep.points)} points in {parts}")
     _write_atomic(table, out, metadata={"pogofmu.sweep": spec})
     shutil.rmtree(parts)
-    statuses = table.column("status").to_pylist()
-    bad = len(statuses) - statuses.count("ok")
+    bad = failed_runs(out)
     log(f"{out}: {table.num_rows} runs ({n_run} run now), {bad} failed" + (
         " (see the status and message columns)" if bad else ""))
     return n_run
@@ -799,11 +841,20 @@ def sweep_main(argv, prog="pogofmu sweep"):
         sweep = Sweep(args.fmu, names, points, settings, args.out, args.timeseries, args.chunk_size)
         if args.workers is not None and args.workers < 1:
             raise SweepError(f"--workers {args.workers}: must be >= 1")
-        return execute(sweep, args.workers, args.scheduler, resume=args.resume, overwrite=args.overwrite,
-                       progress=not args.no_progress)
+        status = execute(sweep, args.workers, args.scheduler, resume=args.resume, overwrite=args.overwrite,
+                         progress=not args.no_progress)
+        return status or (1 if failed_runs(Path(args.out)) else 0)
     except SweepError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+
+
+def failed_runs(out: Path) -> int:
+    """The runs of a written sweep whose status is not ``ok``."""
+    import pyarrow.parquet as pq
+
+    statuses = pq.read_table(out, columns=["status"]).column("status").to_pylist()
+    return len(statuses) - statuses.count("ok")
 
 
 def execute(sweep: Sweep, workers=None, scheduler=None, **kwargs):

@@ -111,9 +111,10 @@ def engine_library(model, folder: Path, cc: Optional[str] = None) -> Path:
 ADAPTER = NATIVE / "adapter"
 ADAPTER_SOURCES = ("pg_backend.c", "pg_instance.c", "pg_instance3.c", "pg_derivatives.c", "pg_handles.c",
                    "pg_sha256.c")
-# the entry files (shared with the Python-hosted FMUs' launcher) and what they share; FMI 2.0 adds
-# the sweep's stepping loop
-FMI_ENTRY = {2: (NATIVE / "fmi2" / "pg_fmi2.c", NATIVE / "fmi2" / "pg_run_grid.c"), 3: (NATIVE / "fmi3" / "pg_fmi3.c",)}
+# the entry files (shared with the Python-hosted FMUs' launcher) and what they share; each adds the
+# sweep's stepping loop (one loop, pg_run_grid.h, over that version's entry points)
+FMI_ENTRY = {v: (NATIVE / f"fmi{v}" / f"pg_fmi{v}.c", NATIVE / f"fmi{v}" / "pg_run_grid.c", NATIVE / "pg_run_grid.h")
+             for v in (2, 3)}
 ENTRY_SHARED = tuple(NATIVE / f for f in ("call_states.h", "pg_backend.h", "pg_logging.h", "pg_logging.c"))
 FMI_HEADERS = {2: ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"),
                3: ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")}

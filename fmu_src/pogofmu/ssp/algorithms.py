@@ -192,6 +192,13 @@ class Synchronizer:
     located by bisecting the whole system's step (every component restored and stepped to the
     midpoint, in update order) to ``tolerance``, and handled as an event at that instant.
 
+    With Jacobi the components step with their inputs held from the step's start, so a switching
+    output seen after the step still answers the inputs of the start: the master *probes* it —
+    the switching component restored, given the inputs of the step's end and stepped again — and
+    puts the component back on its Jacobi step when nothing switched. The event iteration is
+    the same as Gauss–Seidel's: at one instant no time passes, and the components are updated in
+    update order until the connected values settle, whatever the algorithm between the events.
+
     States are saved only where a later component (or the component itself, for a rollback) may
     cut the step short, and only by components that can get and set their state.
     """
@@ -222,6 +229,7 @@ class Synchronizer:
                      f"component after it in the update order is not synchronized with it (it stays at the "
                      f"end of the communication step)")
         self.next_event = {}  # component -> time event it asked for (FMI 3.0 nextEventTime)
+        self.switch_now = None  # Jacobi: the switching outputs at the inputs of the latest point
 
     @staticmethod
     def _may_have_events(inst) -> bool:
@@ -292,13 +300,16 @@ class Synchronizer:
         """Bring every component from ``t`` to ``T``, or to the first event before it; returns
         ``(t_reached, step result of the event or None)``."""
         ex, target, event, stepped = self.ex, T, None, []
-        switch0 = self._switch_values() if self._switch_keys else None
+        jacobi = self.jacobi
+        switch0 = None
+        if self._switch_keys:
+            switch0 = self.switch_now if jacobi and self.switch_now is not None else self._switch_values()
+        self.switch_now = None
         next_event = self.next_event
         if next_event:
             for t_next in next_event.values():  # time events asked for by FMI 3.0 components
                 if t < t_next < target:
                     target = t_next
-        jacobi = self.jacobi
         if jacobi:
             for inst in ex.order:
                 ex.feed(inst)
@@ -334,11 +345,45 @@ class Synchronizer:
             stepped.append(inst)
         if event is None and next_event and target in next_event.values():
             event = StepResult(target, event_at=target, event_mode=True)
-        if event is None and switch0 and self._switch_values() != switch0:
-            located = self._locate_switch(t, target, switch0)
-            if located is not None:
-                target, event = located
+        if event is None and switch0:
+            if jacobi:
+                self.switch_now = self._probe(t, target)
+                if self.switch_now == switch0:
+                    self._unprobe(t, target)
+                    return target, None
+                self.switch_now = None
+            if self._switch_values() != switch0:
+                located = self._locate_switch(t, target, switch0)
+                if located is not None:
+                    target, event = located
         return target, event
+
+    def _probed(self, t):
+        """The switching components a probe from ``t`` can restore."""
+        return [inst for inst in self.switching if inst.must_save and inst.saved_at == t]
+
+    def _probe(self, t, tau):
+        """Jacobi: the switching outputs at ``tau`` answering the inputs at ``tau`` — each
+        switching component restored to ``t``, fed the latest outputs (those at ``tau``) and
+        stepped to ``tau`` again."""
+        ex = self.ex
+        for inst in self._probed(t):
+            inst.restore()
+            ex.feed(inst)
+            if tau > t:
+                inst.do_step(t, tau - t)
+            ex.read(inst)
+        return self._switch_values()
+
+    def _unprobe(self, t, tau):
+        """Back on the Jacobi step: the probed components restored (with the inputs of ``t``
+        they were saved with) and stepped to ``tau``."""
+        ex = self.ex
+        for inst in self._probed(t):
+            inst.restore()
+            if tau > t:
+                inst.do_step(t, tau - t)
+            ex.read(inst)
 
     def _switch_values(self):
         """The latest values of every switching output (feed-through discrete outputs)."""
@@ -348,7 +393,8 @@ class Synchronizer:
     def _redo(self, t, tau):
         """Every component restored to ``t`` and stepped to ``tau`` in update order (Gauss–Seidel:
         each fed from the components before it, at ``tau``; the inputs from later ones are those
-        saved at ``t``)."""
+        saved at ``t``; Jacobi: every input the one saved at ``t``, then the switching outputs
+        probed at ``tau``)."""
         ex, done = self.ex, set()
         for inst in ex.order:
             if inst.must_save and inst.saved_at == t:
@@ -360,6 +406,8 @@ class Synchronizer:
                     inst.do_step(t, tau - t)
                 ex.read(inst)
             done.add(inst.name)
+        if self.jacobi:
+            self._probe(t, tau)
 
     def _locate_switch(self, t, T, switch0):
         """Bisect the system's step for the instant a feed-through discrete output changes; None
@@ -388,11 +436,10 @@ class Synchronizer:
         """FMI 2.0 rollback: every component steps across the event, from just before it to it, in
         update order; each is fed from the components that crossed before it (feed-through of the
         new mode), none from later ones — an input changed just before the event would move the
-        event it is crossing."""
+        event it is crossing. The same with Jacobi: the crossing is the event's iteration."""
         ex, done = self.ex, set()
         for inst in ex.order:
-            if not self.jacobi:
-                ex.feed(inst, only=done)
+            ex.feed(inst, only=done)
             if inst.t < t_event:
                 inst.do_step(inst.t, t_event - inst.t)
             ex.read(inst)

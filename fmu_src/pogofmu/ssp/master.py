@@ -24,6 +24,56 @@ def _warn(text):
     print(text, file=sys.stderr, flush=True)
 
 
+def _seconds(md, var, value):
+    """``value`` of ``var`` in seconds if its unit is a time (``s``, or a unit definition whose base
+    unit is the second), else None."""
+    unit = _fmu_unit(var)
+    if unit == "s":
+        return value
+    for u in md.unitDefinitions or ():
+        b = u.baseUnit
+        if u.name == unit and b is not None and b.s == 1 and not any((b.kg, b.m, b.A, b.K, b.mol, b.cd, b.rad)):
+            return value * (b.factor or 1.0) + (b.offset or 0.0)
+    return None
+
+
+def time_constants(system, selected):
+    """``[(component, parameter, seconds)]``: the parameters the components state as time
+    constants — a time (its unit) that its description calls a time constant; FMI has no
+    attribute for one, so this is all a master can know of a component's dynamics. The value is
+    the selected parameter set's, else the FMU's start value."""
+    out = []
+    for name, comp in system.components.items():
+        ps = selected.get(name)
+        given = {q.name: q.value for q in ps.parameters} if ps is not None else {}
+        for var in comp.model_description.modelVariables:
+            if var.causality != "parameter" or "time constant" not in (var.description or "").lower():
+                continue
+            try:
+                value = float(given.get(var.name, var.start))
+            except (TypeError, ValueError):
+                continue
+            tau = _seconds(comp.model_description, var, value)
+            if tau is not None and tau > 0:
+                out.append((name, var.name, tau))
+    return out
+
+
+def check_step_against_time_constants(system, selected, step, algorithm):
+    """A warning for every stated time constant the communication step does not resolve: a lag of
+    time constant tau whose output is sampled every h and held is stable for h < 2 tau with
+    Gauss–Seidel (``e_{k+1} = (1 - h/tau) e_k``) and h < tau with Jacobi (one step later:
+    ``e_{k+1} = e_k - (h/tau) e_{k-1}``). Model exchange has no communication step."""
+    if algorithm == "model-exchange":
+        return
+    factor, rule = (1.0, "h < tau with Jacobi") if algorithm == "jacobi" else (2.0, "h < 2 tau with Gauss-Seidel")
+    for name, var, tau in time_constants(system, selected):
+        if step >= factor * tau:
+            _warn(f"warning: the communication step {step:g} s does not resolve the time constant "
+                  f"{name}.{var} = {tau:g} s: a loop through it, sampled and held at this step, is unstable "
+                  f"({rule}; docs/ssp-master.md, \"Sampled loop\")")
+
+
 def _check_interface(comp, algorithm):
     """The component's FMU offers what the algorithm needs (checked before anything is written)."""
     md = comp.model_description
@@ -96,6 +146,9 @@ def simulate(ssp, parameters: Optional[str] = None, stop_time: Optional[float] =
         raise SSPError(f"communication step (--step) = {step!r} must be > 0")
     if not event_tolerance > 0:
         raise SSPError(f"event tolerance (--event-tolerance) = {event_tolerance!r} must be > 0")
+    if algorithm == "model-exchange" and not events:
+        raise SSPError("--events off is co-simulation with a fixed communication step; --algorithm model-exchange "
+                       "has no communication step and always locates the events: give one or the other")
     if not (0 < rel_tol < 1 and abs_tol > 0):
         raise SSPError(f"model-exchange tolerances --rel-tol = {rel_tol!r}, --abs-tol = {abs_tol!r} must be "
                        f"0 < rel-tol < 1 and abs-tol > 0")
@@ -115,6 +168,7 @@ def simulate(ssp, parameters: Optional[str] = None, stop_time: Optional[float] =
         n_steps = int(round((t_end - t0) / step))
         if n_steps < 1 or not math.isclose(t0 + n_steps * step, t_end, rel_tol=1e-9, abs_tol=1e-12):
             raise SSPError(f"stop time {t_end} - start time {t0} is not a whole number of steps {step}")
+        check_step_against_time_constants(system, selected, step, algorithm)
         loop = algebraic_loop(system)
         if loop is not None:
             text = (f"algebraic loop {loop_text(loop)}: every output in it depends directly on the input "
