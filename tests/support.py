@@ -216,6 +216,22 @@ class Instance:
             self.fmu.freeInstance()
 
 
+def fmi2_callbacks(messages):
+    """FMI 2.0 callbacks whose logger appends ``(status, category, text)`` to ``messages``; keep the
+    returned object as long as the instance lives.  (Never fmpy's ``defaultCallbacks``: their
+    logger goes through fmpy's native proxy, which keeps one target for the whole process — the
+    logger of the latest ``simulate_fmu(..., logger=...)`` — and calls it after it was freed.)"""
+    from fmpy import calloc, free
+    from fmpy.fmi2 import fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions, \
+        fmi2CallbackLoggerTYPE
+
+    cb = fmi2CallbackFunctions()
+    cb.logger = fmi2CallbackLoggerTYPE(lambda c, i, st, cat, msg: messages.append(_message(st, cat, msg)))
+    cb.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+    cb.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+    return cb
+
+
 def init_failure_text(name, **params):
     """Initialize a fresh instance with ``params``; assert it is refused with fmi2Error and a message,
     that the same instance works again after fmi2Reset with the default parameters (fmi2Error leaves

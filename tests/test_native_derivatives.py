@@ -194,7 +194,10 @@ def test_controller_outputs_with_respect_to_its_inputs_fmi3_and_fmi2():
     vr2 = {v.name: v.valueReference for v in md2.modelVariables}
     cs = FMU2Slave(guid=md2.guid, unzipDirectory=extract(str(path)), modelIdentifier=md2.coSimulation.modelIdentifier,
                    instanceName="dd2")
-    cs.instantiate()
+    from support import fmi2_callbacks
+
+    callbacks = fmi2_callbacks([])
+    cs.instantiate(callbacks=callbacks)
     cs.setupExperiment(startTime=0.0)
     cs.enterInitializationMode()
     cs.exitInitializationMode()

@@ -171,7 +171,10 @@ def test_another_builds_serialized_state_is_refused_naming_the_build(tmp_path):
     assert md.guid != read_model_description(str(fmu_path("PogoStick"))).guid
     fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(str(other)), modelIdentifier=md.coSimulation.modelIdentifier,
                     instanceName="other", fmiCallLogger=None)
-    fmu.instantiate(loggingOn=True, callbacks=None)
+    from support import fmi2_callbacks
+
+    callbacks = fmi2_callbacks([])
+    fmu.instantiate(loggingOn=True, callbacks=callbacks)
     own = Instance("PogoStick", "own").init()
     try:
         fmu.setupExperiment(startTime=0.0)
