@@ -10,7 +10,8 @@ back-calculation anti-windup (docs/segmented-mirror.md).
 The right-hand side is continuous; its kinks, where F_u crosses +-F_max, are events (entering
 and leaving saturation), so model exchange stops there and the saturated output ``sat`` is exact.
 """
-from pogofmu import FALLING, RISING, Event, HybridModel, Parameter, Variable, require_finite, require_positive
+from pogofmu import FALLING, RISING, Event, HybridModel, Parameter, Variable, require, require_finite, \
+    require_positive
 
 
 def unsaturated(x, u, p):
@@ -39,6 +40,7 @@ def outputs(t, x, q, u, p):
 def check(p):
     require_finite(p)
     require_positive(p, "K_p", "K_i", "K_d", "T_f", "T_t", "F_max")
+    require(p.locate_saturation in (0, 1), "locate_saturation", p.locate_saturation, "locate_saturation is 0 or 1")
 
 
 def no_jump(x, q, u, p):
@@ -46,11 +48,12 @@ def no_jump(x, q, u, p):
 
 
 def upper(x, q, u, p):
-    return unsaturated(x, u, p) - p.F_max
+    """The upper kink of the clip; a constant 1 when its location is not asked for."""
+    return unsaturated(x, u, p) - p.F_max if p.locate_saturation == 1 else 1.0
 
 
 def lower(x, q, u, p):
-    return unsaturated(x, u, p) + p.F_max
+    return unsaturated(x, u, p) + p.F_max if p.locate_saturation == 1 else 1.0
 
 
 MODEL = HybridModel(
@@ -66,6 +69,9 @@ MODEL = HybridModel(
         Parameter("T_f", 1.0e-3, "s", "time constant of the derivative's filter"),
         Parameter("T_t", 0.04, "s", "tracking time constant of the anti-windup"),
         Parameter("F_max", 25.0, "N", "largest force of the voice coil"),
+        Parameter("locate_saturation", 1, "", "1: entering and leaving saturation are events; 0: they are "
+                  "not located (a co-simulation whose master would stop the whole system at each kink)",
+                  integer=True),
         Parameter("I_0", 0.0, "m.s", "initial integral"),
         Parameter("z_0", 0.0, "m", "initial filtered piston (the actuator's initial piston)"),
     ),
