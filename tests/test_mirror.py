@@ -216,3 +216,25 @@ def test_one_ring_mirror_phases_after_its_gust_with_actuators_on_their_stops(tmp
     assert np.max(np.abs(final - 5e-4)) < 1e-6
     assert data["Reconstructor.piston_rms"][-1] < 1e-7
     assert (data["event"] != 0).any()  # the stops' contacts are synchronized events of the master
+
+
+def test_controllers_whose_saturation_events_undo_each_other_end_in_one_line_not_a_hang(tmp_path):
+    """With the controllers' saturation events on, two components switched each other back and forth
+    at one instant (t = 0.0417 s): the master wrote event rows without end (4.3 GB of CSV). Now
+    it stops with an event storm naming the instant, exit status 1, one line."""
+    ssp = tmp_path / "m.ssp"
+    assert pogofmu("ssp", "mirror", "--rings", "1", "--out", ssp, cwd=tmp_path).returncode == 0
+    edited = tmp_path / "storm.ssp"
+    with zipfile.ZipFile(ssp) as src, zipfile.ZipFile(edited, "w") as dst:
+        for item in src.infolist():
+            data = src.read(item.filename)
+            if item.filename.endswith(".ssv"):
+                off = '<ssv:Parameter name="locate_saturation"><ssv:Integer value="0"/>'
+                data = data.decode().replace(off, off.replace('"0"', '"1"')).encode()
+            dst.writestr(item, data)
+    proc = subprocess.run([sys.executable, "-m", "pogofmu.cli", "ssp", "run", str(edited), "--step", "1e-3",
+                           "--stop-time", "0.1", "--out", str(tmp_path / "run"), "--quiet"], capture_output=True,
+                          text=True, timeout=600, cwd=tmp_path)
+    assert proc.returncode == 1 and "event storm across the system" in proc.stderr, proc.stderr[-1500:]
+    assert "Traceback" not in proc.stderr and proc.stderr.startswith("error: event storm")  # (then where the rows are)
+    assert sum(f.stat().st_size for f in (tmp_path / "run").glob("*")) < 50e6

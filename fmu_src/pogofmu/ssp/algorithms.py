@@ -515,10 +515,16 @@ def synchronized(ex: Exchange, t0, t_end, step, tolerance=1e-10, jacobi=False, p
         inst.enter_step_mode()
     ex.row(t0)
     t = t0
+    stuck = 0  # events in a row at one instant (two components switching each other back and forth)
     for T in grid_points(t0, t_end, step):
         while t < T:
             t_reached, ev = sync.advance(t, T)
             if ev is not None:
+                stuck = stuck + 1 if t_reached <= t else 0
+                if stuck > MAX_EVENT_ITERATIONS:
+                    raise SSPError(f"event storm across the system: {stuck} events in a row at t = {t!r} s without "
+                                   f"time advancing (components whose events undo each other at one instant, "
+                                   f"e.g. a switch that the other component's answer switches back)")
                 ex.row(t_reached, LEFT)
                 if ev.event_at > t_reached:  # FMI 2.0 rollback: stopped just before the event
                     sync.cross(t_reached, ev.event_at)
