@@ -229,7 +229,8 @@ def generic_breakers(model):
     and a finite value of every float parameter."""
     floats = [p.name for p in model.parameters if not p.integer]
     # (abs_tol too large for the motion is a rule of the models that state their scales: here only its sign)
-    common = [b if b[0] != "abs_tol" else (b[0], st.floats(-1.0, 0.0), b[2]) for b in BREAKERS["common"]]
+    signs_only = ("abs_tol", "max_step") if not model.states else ("abs_tol",)  # (no states: only their signs)
+    common = [b if b[0] not in signs_only else (b[0], st.floats(-1.0, -1e-9), b[2]) for b in BREAKERS["common"]]
     return common + [(f, BAD_NUMBER, (f,)) for f in floats]
 
 

@@ -308,12 +308,10 @@ int pg3_get_event_indicators(PgInstance *in, double *z)
     for (int k = 0; k < md->ne; ++k)
         if (!in->st.armed[k] && is_active(md, k, e->q) && before_side(falling(md, k), z[k]))
             in->st.armed[k] = 1; /* seen on the side before its crossing: may fire */
-    /* _reported: an unarmed active indicator on the side before its crossing, never 0 */
+    /* _reported: an unarmed active indicator exactly 0 is reported on the side before its crossing */
     for (int k = 0; k < md->ne; ++k)
-        if (!in->st.armed[k] && is_active(md, k, e->q)) {
-            double a = fabs(z[k]);
-            z[k] = (falling(md, k) ? 1.0 : -1.0) * (a > PG_UNARMED_FLOOR ? a : PG_UNARMED_FLOOR);
-        }
+        if (!in->st.armed[k] && is_active(md, k, e->q) && z[k] == 0.0)
+            z[k] = falling(md, k) ? PG_UNARMED_FLOOR : -PG_UNARMED_FLOOR;
     return PG_ST_OK;
 }
 

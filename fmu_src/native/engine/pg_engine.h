@@ -17,7 +17,7 @@
 #include "pg_pairs.h"
 
 #define PG_MAX_Q 16
-#define PG_MAX_U 16
+#define PG_MAX_U 64
 #define PG_MAX_P 64
 #define PG_NS 7 /* solver settings: method rel_tol abs_tol max_step initial_step log_events max_steps_per_second */
 #define PG_MAX_EVENTS 16

@@ -32,11 +32,34 @@ class NativeRefusal(BuildError):
     """The native generator cannot follow the model (the Python-hosted FMUs are still written)."""
 
 
+def native_limits() -> dict:
+    """The native engine's fixed sizes (``#define PG_MAX_*`` of its headers, read from them)."""
+    import re
+
+    from pogofmu.codegen.build import NATIVE
+
+    out = {}
+    for header in ("engine/pg_engine.h", "engine/pg_pairs.h", "adapter/pg_instance.h"):
+        for name, value in re.findall(r"#define PG_MAX_(\w+) (\d+)\b", (NATIVE / header).read_text()):
+            out[name] = int(value)
+    return out
+
+
 def native_check(source: ModelSource) -> None:
-    """Trace the model as the native generator does; a construct it cannot follow is a
-    :class:`NativeRefusal` naming the file, the line, the construct and the rewrite."""
-    from pogofmu.codegen.cmodel import generate
+    """Trace the model as the native generator does; a construct it cannot follow, or a model larger
+    than the native engine's sizes, is a :class:`NativeRefusal` naming it and what to do."""
+    from pogofmu.codegen.cmodel import discrete_layout, generate
     from pogofmu.codegen.trace import TraceError
+
+    model, limits = source.model, native_limits()
+    sizes = {"X": ("states", len(model.states)), "U": ("inputs", len(model.inputs)),
+             "P": ("parameters", len(model.parameters)), "EVENTS": ("events", len(model.events)),
+             "Q": ("discrete state entries", len(discrete_layout(model)))}
+    for key, (what, n) in sizes.items():
+        if key in limits and n > limits[key]:
+            raise NativeRefusal(f"no native FMU of {model.name}: {n} {what}, the native engine takes at most "
+                                f"{limits[key]} (PG_MAX_{key} in fmu_src/native); the Python-hosted FMUs have no "
+                                f"such limit")
 
     try:
         generate(source.model)

@@ -124,17 +124,14 @@ UNARMED_FLOOR = 1e-300  # the least magnitude an unarmed indicator is reported w
 
 
 def _reported(events, z, armed, q):
-    """The indicators an importer sees: an active event's guard once it is armed; before (a guard
-    exactly at zero after a jump, or on its after side where the engine waits for it to come back)
-    the guard's magnitude on the side before its crossing, at least UNARMED_FLOOR.  So no indicator
-    of a new mode starts at zero — an importer that does not restart its integrator after an event
-    that changed no state (fmusim with CVODE) meets no root at the restart point — and none
-    changes sign before its event may fire."""
+    """The indicators an importer sees: the guards, but an unarmed active guard that is exactly 0
+    (after a jump) is reported as UNARMED_FLOOR on the side before its crossing.  So no indicator of
+    a new mode starts at zero: an importer that does not restart its integrator after an event that
+    changed no state (fmusim with CVODE) meets no root at the restart point."""
     out = list(z)
     for k, ev in enumerate(events):
-        if not armed[k] and ev.active(q):
-            a = abs(z[k])
-            out[k] = (1.0 if ev.direction == FALLING else -1.0) * (a if a > UNARMED_FLOOR else UNARMED_FLOOR)
+        if not armed[k] and ev.active(q) and z[k] == 0.0:
+            out[k] = UNARMED_FLOOR if ev.direction == FALLING else -UNARMED_FLOOR
     return out
 
 
