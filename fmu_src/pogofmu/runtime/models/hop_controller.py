@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import math
 
+from .. import fmath
 from ..plant import DAMPING, FREE_LENGTH, GRAVITY, MASS, STIFFNESS, known_to_controller
 from ..model import RISING, Event, HybridModel, Parameter, Variable, require, require_finite, \
     require_nonnegative, require_positive
