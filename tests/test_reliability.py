@@ -653,3 +653,86 @@ def test_a_freed_instance_is_refused_not_freed_again(fmu):
     assert proc.returncode == 0, (proc.returncode, proc.stderr[-2000:])
     statuses = json.loads(proc.stdout.strip().splitlines()[-1])
     assert statuses and set(statuses.values()) == {ERROR}, statuses
+
+
+# ---------------------------------------------------------------------------------------------
+# the resource location as importers pass it; the Python an FMU needs, named
+# ---------------------------------------------------------------------------------------------
+
+# folder names a file URI has to percent-encode; importers pass them raw too ("file://" + path)
+AWKWARD_FOLDERS = ["50%ab", "a%20b", "x#y ö 100%"]
+
+
+@pytest.mark.parametrize("folder", AWKWARD_FOLDERS)
+def test_a_raw_resource_location_of_any_folder_name_is_accepted(tmp_path, folder):
+    """The C host passes "file://" + the path unencoded: a folder whose name holds '%' followed by
+    hex digits (not an escape there), '#', a space or non-ASCII loads — and "a%20b" is not taken
+    for a folder "a b" (none exists here)."""
+    target = tmp_path / folder
+    with zipfile.ZipFile(DIST / "PogoStick.fmu") as z:
+        z.extractall(target)
+    proc = _c_host_run(tmp_path, target)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert len(proc.stdout.splitlines()) == 11
+
+
+@pytest.mark.parametrize("folder", AWKWARD_FOLDERS)
+def test_an_fmi3_resource_path_is_a_path_not_a_uri(folder, tmp_path):
+    """FMI 3.0 passes resourcePath as a file system path: '%' in it is a plain character."""
+    target = tmp_path / folder
+    with zipfile.ZipFile(DIST / "fmi3" / "PogoStick.fmu") as z:
+        z.extractall(target)
+    inst = RawInstance("", 3, "cs", unzip_dir=str(target))
+    try:
+        inst.reach(STEP)
+    finally:
+        inst.close()
+
+
+def test_a_wrong_resource_location_names_the_argument_and_what_was_tried(tmp_path):
+    import ctypes
+
+    target = tmp_path / "fmu"
+    with zipfile.ZipFile(DIST / "PogoStick.fmu") as z:
+        z.extractall(target)
+    inst = RawInstance("", 2, unzip_dir=str(target))
+    try:
+        from fmpy.fmi2 import fmi2CallbackFunctions
+
+        location = f"file://{tmp_path}/no%20such/resources".encode()
+        fn = _fn(inst, "fmi2Instantiate", ctypes.c_void_p)
+        fn.argtypes = [ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p, ctypes.c_char_p,
+                       ctypes.POINTER(fmi2CallbackFunctions), ctypes.c_int, ctypes.c_int]
+        assert fn(b"wrong", 1, inst.fmu.guid.encode(), location, ctypes.byref(inst._cb), 0, 0) is None
+        text = inst.last().replace("%%", "%")  # (an FMI 2.0 log message is a printf format)
+        assert f"fmuResourceLocation = '{location.decode()}'" in text, text
+        assert f"{tmp_path}/no such/resources/pogofmu_launch.txt" in text, text  # decoded, as a URI
+        assert f"{tmp_path}/no%20such/resources/pogofmu_launch.txt" in text, text  # as given
+    finally:
+        inst.close()
+
+
+OLD_PYTHONS = sorted(str(p) for p in (Path.home() / ".pyenv/versions").glob("3.[89].*/bin/python3"))
+
+
+@pytest.mark.skipif(not OLD_PYTHONS, reason="no CPython 3.8 or 3.9 (pyenv) on this machine")
+@pytest.mark.parametrize("python", OLD_PYTHONS[:2])
+def test_a_host_running_an_older_cpython_is_told_the_fmu_needs_3_10(python, tmp_path):
+    """A ctypes importer under CPython 3.8/3.9: the FMU's code would run in that interpreter (one
+    per process), so the message names the host's own version as the reason and what to use
+    instead — not a library to choose, which cannot help in a process that runs Python already."""
+    target = tmp_path / "fmu"
+    with zipfile.ZipFile(DIST / "PogoStick.fmu") as z:
+        z.extractall(target)
+    proc = subprocess.run([python, str(ROOT / "tests" / "_ctypes_host.py"), str(target), "PogoStick"],
+                          capture_output=True, text=True, timeout=60, env={"PATH": "/usr/bin:/bin"})
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    lines = proc.stdout.splitlines()
+    version = subprocess.run([python, "-c", "import platform; print(platform.python_version())"],
+                             capture_output=True, text=True).stdout.strip()
+    assert lines[0] == "NULL", proc.stdout
+    text = "\n".join(lines[1:])
+    assert f"this process runs CPython {version}" in text and "the host's own interpreter" in text, text
+    assert "CPython 3.10 to 3.13" in text and "native" in text, text
+    assert "POGOFMU_PYTHON_LIB" not in text, text
+
