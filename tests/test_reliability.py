@@ -736,3 +736,98 @@ def test_a_host_running_an_older_cpython_is_told_the_fmu_needs_3_10(python, tmp_
     assert "CPython 3.10 to 3.13" in text and "native" in text, text
     assert "POGOFMU_PYTHON_LIB" not in text, text
 
+
+# ---------------------------------------------------------------------------------------------
+# one call's work is bounded by a parameter: max_steps_per_call
+# ---------------------------------------------------------------------------------------------
+
+def _set_reals(inst, **values):
+    import ctypes
+
+    for name, value in values.items():
+        vr = (ctypes.c_uint32 * 1)(inst.vars[name].valueReference)
+        v = (ctypes.c_double * 1)(value)
+        status = inst.raw("fmi2SetReal", vr, 1, v) if inst.fmi == 2 else inst.raw("fmi3SetFloat64", vr, 1, v, 1)
+        assert status == 0, inst.last()
+
+
+def _bounded_call(backend, fmi, h, **settings):
+    """Initialize with `settings`, take one step of `h` s; the status, the message, the seconds."""
+    import time
+
+    inst = RawInstance(backend, fmi)
+    try:
+        _set_reals(inst, **settings)
+        inst.enter_initialization()
+        inst.exit_initialization()
+        start = time.perf_counter()
+        status, _ = inst.do_step(h)
+        return status, inst.last(), time.perf_counter() - start, inst
+    except BaseException:
+        inst.close()
+        raise
+
+
+@pytest.mark.parametrize("fmi", [2, 3])
+def test_a_step_needing_more_than_max_steps_per_call_is_refused_at_once(fmi):
+    """step_size/max_step = 1e4 internal steps at least, max_steps_per_call = 1000: refused before
+    any work, naming the parameter, its value and how to raise it; the instance goes on with a
+    shorter step.  The same text from both backends."""
+    texts = []
+    for backend in BACKENDS:
+        status, text, seconds, inst = _bounded_call(backend, fmi, 100.0, max_steps_per_call=1000.0)
+        try:
+            assert status == ERROR and seconds < 1.0, (status, text, seconds)
+            assert "max_steps_per_call = 1000" in text and "raise the parameter max_steps_per_call" in text, text
+            inst.t = 0.0  # the refused step moved nothing
+            assert inst.do_step(1e-2)[0] == 0, inst.last()
+        finally:
+            inst.close()
+        texts.append(text)
+    assert texts[0] == texts[1], texts
+
+
+@pytest.mark.parametrize("fmi", [2, 3])
+def test_a_call_that_takes_more_than_max_steps_per_call_ends_naming_it(fmi):
+    """max_step = 0 (unbounded: nothing to refuse beforehand) and a stiff leg (c = 3e4, ~1e4
+    internal steps per second of contact) in one step of 2 s: the call stops after 2000 internal
+    steps with Error naming max_steps_per_call, where it stopped and how to go on — identically on
+    both backends (the engines count the same steps); with the parameter raised the same step
+    completes."""
+    texts = []
+    for backend in BACKENDS:
+        status, text, seconds, inst = _bounded_call(backend, fmi, 2.0, c=3e4, max_step=0.0, max_steps_per_call=2000.0)
+        try:
+            assert status == ERROR, (status, text)
+            assert "max_steps_per_call = 2000 internal steps taken in one call" in text, text
+            assert "raise the parameter max_steps_per_call" in text and "shorter communication steps" in text, text
+        finally:
+            inst.close()
+        texts.append(text)
+        status, text, _, inst = _bounded_call(backend, fmi, 2.0, c=3e4, max_step=0.0, max_steps_per_call=1e6)
+        inst.close()
+        assert status == 0, text
+    assert texts[0] == texts[1], texts
+
+
+def test_max_steps_per_call_is_a_parameter_with_a_rule():
+    from support import assert_parameter_rejected
+
+    assert_parameter_rejected("PogoStick", {"max_steps_per_call": 0.5}, "max_steps_per_call",
+                              "1 <= max_steps_per_call < inf")
+
+
+@pytest.mark.parametrize("backend", BACKENDS, ids=["python", "native"])
+def test_fmi2_cancel_step_is_refused_naming_the_rule(backend):
+    """FMI 2.0 §4.2.2: fmi2CancelStep only stops an asynchronous fmi2DoStep that returned fmi2Pending;
+    these FMUs declare canRunAsynchronuously = false and never return it, so a call is Error naming
+    the rule (the instance goes on)."""
+    inst = RawInstance(backend, 2)
+    try:
+        inst.reach(STEP)
+        assert inst.raw("fmi2CancelStep") == ERROR
+        text = inst.last()
+        assert "fmi2CancelStep refused" in text and "fmi2Pending" in text and "max_steps_per_call" in text, text
+        assert inst.do_step()[0] == 0, inst.last()
+    finally:
+        inst.close()
