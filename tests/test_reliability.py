@@ -656,3 +656,181 @@ def test_a_freed_instance_is_refused_not_freed_again(fmu):
     assert proc.returncode == 0, (proc.returncode, proc.stderr[-2000:])
     statuses = json.loads(proc.stdout.strip().splitlines()[-1])
     assert statuses and set(statuses.values()) == {ERROR}, statuses
+
+
+# ---------------------------------------------------------------------------------------------
+# the resource location as importers pass it; the Python an FMU needs, named
+# ---------------------------------------------------------------------------------------------
+
+# folder names a file URI has to percent-encode; importers pass them raw too ("file://" + path)
+AWKWARD_FOLDERS = ["50%ab", "a%20b", "x#y ö 100%"]
+
+
+@pytest.mark.parametrize("folder", AWKWARD_FOLDERS)
+def test_a_raw_resource_location_of_any_folder_name_is_accepted(tmp_path, folder):
+    """The C host passes "file://" + the path unencoded: a folder whose name holds '%' followed by
+    hex digits (not an escape there), '#', a space or non-ASCII loads — and "a%20b" is not taken
+    for a folder "a b" (none exists here)."""
+    target = tmp_path / folder
+    with zipfile.ZipFile(DIST / "PogoStick.fmu") as z:
+        z.extractall(target)
+    proc = _c_host_run(tmp_path, target)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert len(proc.stdout.splitlines()) == 11
+
+
+@pytest.mark.parametrize("folder", AWKWARD_FOLDERS)
+def test_an_fmi3_resource_path_is_a_path_not_a_uri(folder, tmp_path):
+    """FMI 3.0 passes resourcePath as a file system path: '%' in it is a plain character."""
+    target = tmp_path / folder
+    with zipfile.ZipFile(DIST / "fmi3" / "PogoStick.fmu") as z:
+        z.extractall(target)
+    inst = RawInstance("", 3, "cs", unzip_dir=str(target))
+    try:
+        inst.reach(STEP)
+    finally:
+        inst.close()
+
+
+def test_a_wrong_resource_location_names_the_argument_and_what_was_tried(tmp_path):
+    import ctypes
+
+    target = tmp_path / "fmu"
+    with zipfile.ZipFile(DIST / "PogoStick.fmu") as z:
+        z.extractall(target)
+    inst = RawInstance("", 2, unzip_dir=str(target))
+    try:
+        from fmpy.fmi2 import fmi2CallbackFunctions
+
+        location = f"file://{tmp_path}/no%20such/resources".encode()
+        fn = _fn(inst, "fmi2Instantiate", ctypes.c_void_p)
+        fn.argtypes = [ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p, ctypes.c_char_p,
+                       ctypes.POINTER(fmi2CallbackFunctions), ctypes.c_int, ctypes.c_int]
+        assert fn(b"wrong", 1, inst.fmu.guid.encode(), location, ctypes.byref(inst._cb), 0, 0) is None
+        text = inst.last().replace("%%", "%")  # (an FMI 2.0 log message is a printf format)
+        assert f"fmuResourceLocation = '{location.decode()}'" in text, text
+        assert f"{tmp_path}/no such/resources/pogofmu_launch.txt" in text, text  # decoded, as a URI
+        assert f"{tmp_path}/no%20such/resources/pogofmu_launch.txt" in text, text  # as given
+    finally:
+        inst.close()
+
+
+OLD_PYTHONS = sorted(str(p) for p in (Path.home() / ".pyenv/versions").glob("3.[89].*/bin/python3"))
+
+
+@pytest.mark.skipif(not OLD_PYTHONS, reason="no CPython 3.8 or 3.9 (pyenv) on this machine")
+@pytest.mark.parametrize("python", OLD_PYTHONS[:2])
+def test_a_host_running_an_older_cpython_is_told_the_fmu_needs_3_10(python, tmp_path):
+    """A ctypes importer under CPython 3.8/3.9: the FMU's code would run in that interpreter (one
+    per process), so the message names the host's own version as the reason and what to use
+    instead — not a library to choose, which cannot help in a process that runs Python already."""
+    target = tmp_path / "fmu"
+    with zipfile.ZipFile(DIST / "PogoStick.fmu") as z:
+        z.extractall(target)
+    proc = subprocess.run([python, str(ROOT / "tests" / "_ctypes_host.py"), str(target), "PogoStick"],
+                          capture_output=True, text=True, timeout=60, env={"PATH": "/usr/bin:/bin"})
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    lines = proc.stdout.splitlines()
+    version = subprocess.run([python, "-c", "import platform; print(platform.python_version())"],
+                             capture_output=True, text=True).stdout.strip()
+    assert lines[0] == "NULL", proc.stdout
+    text = "\n".join(lines[1:])
+    assert f"this process runs CPython {version}" in text and "the host's own interpreter" in text, text
+    assert "CPython 3.10 to 3.13" in text and "native" in text, text
+    assert "POGOFMU_PYTHON_LIB" not in text, text
+
+
+# ---------------------------------------------------------------------------------------------
+# one call's work is bounded by a parameter: max_steps_per_call
+# ---------------------------------------------------------------------------------------------
+
+def _set_reals(inst, **values):
+    import ctypes
+
+    for name, value in values.items():
+        vr = (ctypes.c_uint32 * 1)(inst.vars[name].valueReference)
+        v = (ctypes.c_double * 1)(value)
+        status = inst.raw("fmi2SetReal", vr, 1, v) if inst.fmi == 2 else inst.raw("fmi3SetFloat64", vr, 1, v, 1)
+        assert status == 0, inst.last()
+
+
+def _bounded_call(backend, fmi, h, **settings):
+    """Initialize with `settings`, take one step of `h` s; the status, the message, the seconds."""
+    import time
+
+    inst = RawInstance(backend, fmi)
+    try:
+        _set_reals(inst, **settings)
+        inst.enter_initialization()
+        inst.exit_initialization()
+        start = time.perf_counter()
+        status, _ = inst.do_step(h)
+        return status, inst.last(), time.perf_counter() - start, inst
+    except BaseException:
+        inst.close()
+        raise
+
+
+@pytest.mark.parametrize("fmi", [2, 3])
+def test_a_step_needing_more_than_max_steps_per_call_is_refused_at_once(fmi):
+    """step_size/max_step = 1e4 internal steps at least, max_steps_per_call = 1000: refused before
+    any work, naming the parameter, its value and how to raise it; the instance goes on with a
+    shorter step.  The same text from both backends."""
+    texts = []
+    for backend in BACKENDS:
+        status, text, seconds, inst = _bounded_call(backend, fmi, 100.0, max_steps_per_call=1000.0)
+        try:
+            assert status == ERROR and seconds < 1.0, (status, text, seconds)
+            assert "max_steps_per_call = 1000" in text and "raise the parameter max_steps_per_call" in text, text
+            inst.t = 0.0  # the refused step moved nothing
+            assert inst.do_step(1e-2)[0] == 0, inst.last()
+        finally:
+            inst.close()
+        texts.append(text)
+    assert texts[0] == texts[1], texts
+
+
+@pytest.mark.parametrize("fmi", [2, 3])
+def test_a_call_that_takes_more_than_max_steps_per_call_ends_naming_it(fmi):
+    """max_step = 0 (unbounded: nothing to refuse beforehand) and a stiff leg (c = 3e4, ~1e4
+    internal steps per second of contact) in one step of 2 s: the call stops after 2000 internal
+    steps with Error naming max_steps_per_call, where it stopped and how to go on — identically on
+    both backends (the engines count the same steps); with the parameter raised the same step
+    completes."""
+    texts = []
+    for backend in BACKENDS:
+        status, text, seconds, inst = _bounded_call(backend, fmi, 2.0, c=3e4, max_step=0.0, max_steps_per_call=2000.0)
+        try:
+            assert status == ERROR, (status, text)
+            assert "max_steps_per_call = 2000 internal steps taken in one call" in text, text
+            assert "raise the parameter max_steps_per_call" in text and "shorter communication steps" in text, text
+        finally:
+            inst.close()
+        texts.append(text)
+        status, text, _, inst = _bounded_call(backend, fmi, 2.0, c=3e4, max_step=0.0, max_steps_per_call=1e6)
+        inst.close()
+        assert status == 0, text
+    assert texts[0] == texts[1], texts
+
+
+def test_max_steps_per_call_is_a_parameter_with_a_rule():
+    from support import assert_parameter_rejected
+
+    assert_parameter_rejected("PogoStick", {"max_steps_per_call": 0.5}, "max_steps_per_call",
+                              "1 <= max_steps_per_call < inf")
+
+
+@pytest.mark.parametrize("backend", BACKENDS, ids=["python", "native"])
+def test_fmi2_cancel_step_is_refused_naming_the_rule(backend):
+    """FMI 2.0 §4.2.2: fmi2CancelStep only stops an asynchronous fmi2DoStep that returned fmi2Pending;
+    these FMUs declare canRunAsynchronuously = false and never return it, so a call is Error naming
+    the rule (the instance goes on)."""
+    inst = RawInstance(backend, 2)
+    try:
+        inst.reach(STEP)
+        assert inst.raw("fmi2CancelStep") == ERROR
+        text = inst.last()
+        assert "fmi2CancelStep refused" in text and "fmi2Pending" in text and "max_steps_per_call" in text, text
+        assert inst.do_step()[0] == 0, inst.last()
+    finally:
+        inst.close()

@@ -9,7 +9,6 @@
 #include "pg_sha256.h"
 #include "pg_support.h"
 
-#define MAX_INTERNAL_STEPS_PER_CALL 1e8
 #define STATE_FORMAT "pogofmu-native-state-2"
 
 /* ---- messages ------------------------------------------------------------------------------ */
@@ -389,7 +388,7 @@ int pg_inst_setup_experiment(PgInstance *in, double start, int stop_defined, dou
 static double fast_step_limit(const PgInstance *in)
 {
     if (in->fmu->model->nx) {
-        double limit = MAX_INTERNAL_STEPS_PER_CALL * in->st.sim.max_step;
+        double limit = in->st.sim.s[PG_S_MAX_STEPS_PER_CALL] * in->st.sim.max_step;
         return limit < INFINITY ? limit : -1.0;
     }
     return 1e300;
@@ -496,15 +495,17 @@ static int step_problem(PgInstance *in, double t, double h, PgMsg *m)
         return 1;
     }
     double min_steps = in->fmu->model->nx ? h / e->max_step : 0.0;
-    if (min_steps > MAX_INTERNAL_STEPS_PER_CALL) {
+    double budget = e->s[PG_S_MAX_STEPS_PER_CALL];
+    if (min_steps > budget) {
         pg_msg_str(m, "communication step size step_size = ");
         pg_msg_value(m, h, 'f', "r");
-        pg_msg_str(m, " violates the rule: one step may take at most 1e+08 internal steps, and this one needs at least "
-                      "step_size/max_step = ");
+        pg_msg_str(m, " violates the rule: one step may take at most max_steps_per_call = ");
+        pg_msg_value(m, budget, 'f', "g");
+        pg_msg_str(m, " internal steps, and this one needs at least step_size/max_step = ");
         pg_msg_value(m, min_steps, 'f', ".3g");
         pg_msg_str(m, " (max_step = ");
         pg_msg_value(m, e->max_step, 'f', "r");
-        pg_msg_str(m, " s); use shorter communication steps");
+        pg_msg_str(m, " s); use shorter communication steps, or raise the parameter max_steps_per_call");
         return 1;
     }
     if (end > st->t_stop * (1 + 1e-12) + 1e-12) {

@@ -1047,8 +1047,28 @@ static int apply_pending_event(PgEngine *e)
 }
 
 /* _run */
+/* _call_budget_error */
+static int call_budget_error(PgEngine *e, double t_target)
+{
+    PgMsg *m = &e->msg;
+    pg_msg_clear(m);
+    pg_msg_str(m, "max_steps_per_call = ");
+    pg_msg_value(m, e->s[PG_S_MAX_STEPS_PER_CALL], 'f', "g");
+    pg_msg_str(m, " internal steps taken in one call, from t = ");
+    pg_msg_value(m, e->t_out, 'f', ".10g");
+    pg_msg_str(m, " s to t = ");
+    pg_msg_value(m, e->t, 'f', ".10g");
+    pg_msg_str(m, " s of a call up to t = ");
+    pg_msg_value(m, t_target, 'f', ".10g");
+    pg_msg_str(m, " s. To change: use shorter communication steps, or raise the parameter max_steps_per_call "
+                  "to let one call take longer");
+    return PG_RAISE;
+}
+
+/* _run: at most max_steps_per_call step attempts (accepted and rejected) in one run */
 static int run(PgEngine *e, double t_target, int apply_events)
 {
+    double limit = (double)(e->n_steps + e->n_rejected) + e->s[PG_S_MAX_STEPS_PER_CALL];
     for (;;) {
         if (e->has_pending) {
             if (!apply_events) return PG_OK;
@@ -1059,6 +1079,7 @@ static int run(PgEngine *e, double t_target, int apply_events)
             }
         }
         if (t_target <= e->t) return PG_OK;
+        if ((double)(e->n_steps + e->n_rejected) >= limit) return call_budget_error(e, t_target);
         int rc = step(e, t_target);
         if (rc) return at_time(e, rc, "t = ", e->t, " s");
     }

@@ -19,12 +19,13 @@
 #define PG_MAX_Q 16
 #define PG_MAX_U 64
 #define PG_MAX_P 64
-#define PG_NS 7 /* solver settings: method rel_tol abs_tol max_step initial_step log_events max_steps_per_second */
+#define PG_NS 8 /* solver settings: method rel_tol abs_tol max_step initial_step log_events max_steps_per_second
+                  max_steps_per_call (the order of SOLVER_PARAMETERS in engine/settings.py) */
 #define PG_MAX_EVENTS 16
 #define PG_RECENT 200 /* max(zeno_max_events, STORM_EVENTS) */
 
 enum { PG_S_METHOD, PG_S_REL_TOL, PG_S_ABS_TOL, PG_S_MAX_STEP, PG_S_INITIAL_STEP, PG_S_LOG_EVENTS,
-       PG_S_MAX_STEPS_PER_SECOND };
+       PG_S_MAX_STEPS_PER_SECOND, PG_S_MAX_STEPS_PER_CALL };
 
 typedef struct PgSeg {
     double t0, t1;

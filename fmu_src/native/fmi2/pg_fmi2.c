@@ -408,7 +408,15 @@ fmi2Status fmi2CancelStep(fmi2Component c)
 {
     CHECK(c);
     REQUIRE(fmi2CancelStep, "fmi2CancelStep");
-    return unsupported(INST, "fmi2CancelStep (fmi2DoStep never returns fmi2Pending)");
+    /* FMI 2.0 §4.2.2: fmi2CancelStep stops an asynchronous step, one whose fmi2DoStep returned
+     * fmi2Pending; these FMUs declare canRunAsynchronuously = false and every fmi2DoStep returns
+     * when its work is done, so no call of it is in the standard's sequence. */
+    emit(INST, ST_ERROR, "logStatusError",
+         "fmi2CancelStep refused: it applies only while an asynchronous fmi2DoStep is pending (after fmi2DoStep "
+         "returned fmi2Pending, FMI 2.0 section 4.2.2); this FMU's fmi2DoStep is synchronous "
+         "(canRunAsynchronuously = false) and never returns fmi2Pending. One call's work is bounded by the "
+         "parameter max_steps_per_call instead");
+    return fmi2Error;
 }
 
 fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status *value)

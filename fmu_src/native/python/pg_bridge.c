@@ -25,6 +25,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "pg_backend.h"
 #include "python_embed.h" /* CPython, resolved at run time */
@@ -393,21 +394,22 @@ static int from_buffer(Inst *in, const VR vr[], size_t n, char kind, void *out)
 
 /* ---- instantiation ----------------------------------------------------------------------- */
 
-/* resources folder from an FMI 2 URI (file:///a%20b/resources, file:/..., file://localhost/...)
- * or an FMI 3 path; trailing separators removed.  malloc'd. */
-static char *resources_path(const char *location)
+/* ---- the resources folder -------------------------------------------------------------------
+ * FMI 2.0 passes fmuResourceLocation as a URI (file:///a%20b/resources, file:/..., file://localhost/...),
+ * FMI 3.0 resourcePath as a path.  Importers differ: several pass "file://" + the path unencoded, so a
+ * folder named "50%ab" or "a%20b" is not percent-encoded there.  The candidates, in order: the URI
+ * decoded (what the standard says), then the text as given; the first holding the launch file is the
+ * FMU's.  '%' counts as an escape only before two hex digits.  malloc'd; trailing '/' removed. */
+static int hex_digit(char c) { return (c >= '0' && c <= '9') || ((c | 32) >= 'a' && (c | 32) <= 'f'); }
+
+static char *trimmed_copy(const char *p, int decode)
 {
-    if (!location) return NULL;
-    const char *p = location;
-    if (strncmp(p, "file://localhost/", 17) == 0) p += 16;
-    else if (strncmp(p, "file:///", 8) == 0) p += 7;
-    else if (strncmp(p, "file:/", 6) == 0) p += 5;
     char *out = malloc(strlen(p) + 1), *q = out;
     if (!out) return NULL;
     for (; *p; ++p) {
-        unsigned hex;
-        if (p[0] == '%' && p[1] && p[2] && sscanf(p + 1, "%2x", &hex) == 1) {
-            *q++ = (char)hex;
+        if (decode && p[0] == '%' && hex_digit(p[1]) && hex_digit(p[2])) {
+            char hex[3] = {p[1], p[2], '\0'};
+            *q++ = (char)strtol(hex, NULL, 16);
             p += 2;
         } else {
             *q++ = *p;
@@ -416,6 +418,51 @@ static char *resources_path(const char *location)
     while (q > out + 1 && q[-1] == '/') --q;
     *q = '\0';
     return out;
+}
+
+static int launch_file_readable(const char *resources)
+{
+    char path[PATH_MAX + 32];
+    if (snprintf(path, sizeof path, "%s/pogofmu_launch.txt", resources) >= (int)sizeof path) return 0;
+    return access(path, R_OK) == 0;
+}
+
+static char *resources_path(Inst *in, const char *location)
+{
+    if (!location || !*location) {
+        emit(in, ST_ERROR, "logStatusError", in->fmi == 3 ? "resourcePath = NULL: the FMU's Python code lives in resources/"
+                                                          : "fmuResourceLocation = NULL: the FMU's Python code lives in resources/");
+        return NULL;
+    }
+    const char *p = location;
+    int uri = strncmp(p, "file:", 5) == 0;
+    if (strncmp(p, "file://localhost/", 17) == 0) p += 16;
+    else if (strncmp(p, "file:///", 8) == 0) p += 7;
+    else if (strncmp(p, "file:/", 6) == 0) p += 5;
+    char *tried[2] = {trimmed_copy(p, uri), uri ? trimmed_copy(p, 0) : NULL};
+    int n = uri && tried[1] && strcmp(tried[0], tried[1]) != 0 ? 2 : 1;
+    for (int k = 0; k < n; ++k) {
+        if (tried[k] && launch_file_readable(tried[k])) {
+            free(tried[1 - k]);
+            return tried[k];
+        }
+    }
+    size_t size = 3 * strlen(location) + 600;
+    char *msg = malloc(size);
+    if (msg && tried[0]) {
+        const char *arg = in->fmi == 3 ? "resourcePath" : "fmuResourceLocation";
+        int len = snprintf(msg, size, "cannot read %s/pogofmu_launch.txt%s", tried[0],
+                           n == 2 ? " (the location read as a percent-encoded URI)" : "");
+        if (n == 2) len += snprintf(msg + len, size - (size_t)len, " nor %s/pogofmu_launch.txt (read as given)", tried[1]);
+        snprintf(msg + len, size - (size_t)len, ": %s = '%s' is not this FMU's resources folder (%s)", arg, location,
+                 in->fmi == 3 ? "FMI 3.0: the path of the extracted FMU's resources/ folder"
+                              : "FMI 2.0: the extracted FMU's resources/ folder as a file URI, e.g. file:///path/resources");
+        emit(in, ST_ERROR, "logStatusError", msg);
+    }
+    free(msg);
+    free(tried[0]);
+    free(tried[1]);
+    return NULL;
 }
 
 /* The instantiation token recorded at build time must match the one the importer read from the
@@ -592,9 +639,8 @@ static void read_interface(Inst *in)
 static Inst *instantiate(Inst *in, const char *location, const char *token, int visible,
                          const char *mode, int event_mode_used, int early_return_allowed)
 {
-    char *resources = resources_path(location);
+    char *resources = resources_path(in, location);
     if (!resources) {
-        emit(in, ST_ERROR, "logStatusError", "no resource location given: the FMU's Python code lives in resources/");
         pgb_free(in);
         return NULL;
     }
@@ -606,7 +652,14 @@ static Inst *instantiate(Inst *in, const char *location, const char *token, int 
     int python = ensure_python(resources);
     if (python <= 0) {
         char *msg = malloc(sizeof python_report + 512);
-        if (msg && python < 0) {
+        if (msg && python == -2) {
+            snprintf(msg, sizeof python_report + 512,
+                     "this FMU's Python code runs in the CPython of the process that loads it, and this process runs "
+                     "CPython %s (the host's own interpreter, e.g. the Python of a ctypes or fmpy importer): the FMU "
+                     "needs CPython 3.10 to 3.13. Run the importer under CPython 3.10 or newer (a host without Python "
+                     "of its own loads a libpython3.10+ itself), or use the native FMU of this model (dist/native/), "
+                     "which needs no Python", python_report);
+        } else if (msg && python < 0) {
             snprintf(msg, sizeof python_report + 512,
                      "the FMU's bootstrap resources/pogofmu_boot.py cannot be run (the FMU's resources folder is "
                      "incomplete or unreadable: extract the FMU again):\n%s", python_report);

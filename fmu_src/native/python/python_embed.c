@@ -284,7 +284,8 @@ static int load_boot(const char *resources)
 }
 
 /* Make sure an interpreter runs and the boot code is loaded: 1; 0 no usable interpreter, -1 the
- * boot code cannot be read or run; python_report says what was tried or what failed. */
+ * boot code cannot be read or run, -2 the host's own CPython (its version in python_report) is too
+ * old; python_report says what was tried or what failed. */
 int ensure_python(const char *resources)
 {
     pthread_mutex_lock(&boot_lock);
@@ -292,12 +293,23 @@ int ensure_python(const char *resources)
         const char *missing = NULL;
         const char *env = getenv("POGOFMU_PYTHON_LIB");
         python_report[0] = '\0';
+        const char *(*host_version)(void) = NULL;
+        int (*host_running)(void) = NULL;
+        *(void **)&host_version = dlsym(RTLD_DEFAULT, "Py_GetVersion");
+        *(void **)&host_running = dlsym(RTLD_DEFAULT, "Py_IsInitialized");
+        int minor;
+        if (host_version && host_running && host_running() && !version_ok(host_version(), &minor)) {
+            /* the host runs a CPython of its own (one per process): the FMU's code would run in it,
+             * and no other libpython can be started beside it */
+            snprintf(python_report, sizeof python_report, "%.*s", (int)strcspn(host_version(), " "), host_version());
+            pthread_mutex_unlock(&boot_lock);
+            return -2;
+        }
         if (dlsym(RTLD_DEFAULT, "Py_IsInitialized") && resolve(RTLD_DEFAULT, &missing)) {
-            int minor;
             int fd = lock_interpreter_start(*(void **)&py.Py_GetVersion);
             if (!version_ok(py.Py_GetVersion(), &minor)) {
-                report("  the host's CPython is %.*s, need >= 3.10\n", (int)strcspn(py.Py_GetVersion(), " "),
-                       py.Py_GetVersion());
+                report("  the CPython linked into this process is %.*s, need >= 3.10\n",
+                       (int)strcspn(py.Py_GetVersion(), " "), py.Py_GetVersion());
             } else if (py.Py_IsInitialized()) {
                 python_ready = 1;
             } else {

@@ -97,7 +97,8 @@ extern char python_report[4096];  /* what was tried, for the error message */
 extern PyObject *boot;            /* globals of pogofmu_boot.py (compiled once per process) */
 
 /* Make sure an interpreter runs and the boot code is loaded: 1; 0 no usable interpreter, -1 the
- * boot code cannot be read or run; python_report says what was tried or what failed. */
+ * boot code cannot be read or run, -2 the process runs a CPython of its own older than 3.10 (its
+ * version in python_report); python_report says what was tried or what failed. */
 int ensure_python(const char *resources);
 
 #endif

@@ -60,7 +60,6 @@ from .status import ERROR, FATAL, OK, WARNING, log_category
 
 __all__ = ["HybridSlave", "FMUError", "FmiVariable", "fmi2_variables", "LOG_CATEGORIES"]
 
-MAX_INTERNAL_STEPS_PER_CALL = 1e8  # a communication step needing more is refused before any work
 _STATE_FORMAT = "pogofmu-fmu-state-3"
 # the package this module was imported as: "_pogofmu_<Model>_<hash>" inside an FMU (one name per
 # build of one model, see build_fmu.py), "pogofmu" from the source tree
@@ -448,9 +447,9 @@ class HybridSlave:
 
     def _fast_step_limit(self):
         """Largest step the fast path of do_step takes without the detailed checks: one that surely
-        needs no more than MAX_INTERNAL_STEPS_PER_CALL internal steps (and is finite)."""
+        needs no more than max_steps_per_call internal steps of max_step (and is finite)."""
         if type(self).model.states:
-            limit = MAX_INTERNAL_STEPS_PER_CALL * self._sim.max_step
+            limit = self._sim.solver.max_steps_per_call * self._sim.max_step
             return limit if limit < math.inf else -1.0  # unbounded max_step: always the detailed check
         return 1e300
 
@@ -489,11 +488,12 @@ class HybridSlave:
             return (f"communication step size step_size = {step_size!r} violates the rule: the end of "
                     f"the step, currentCommunicationPoint + step_size, must be finite")
         min_steps = step_size / sim.max_step if type(self).model.states else 0.0
-        if min_steps > MAX_INTERNAL_STEPS_PER_CALL:
+        budget = sim.solver.max_steps_per_call
+        if min_steps > budget:
             return (f"communication step size step_size = {step_size!r} violates the rule: one step may "
-                    f"take at most {MAX_INTERNAL_STEPS_PER_CALL:.0e} internal steps, and this one needs at "
+                    f"take at most max_steps_per_call = {budget:g} internal steps, and this one needs at "
                     f"least step_size/max_step = {min_steps:.3g} (max_step = {sim.max_step!r} s); use "
-                    f"shorter communication steps")
+                    f"shorter communication steps, or raise the parameter max_steps_per_call")
         if end > self._t_stop * (1 + 1e-12) + 1e-12:
             return (f"communication step size step_size = {step_size!r} violates the rule: the step must "
                     f"end at or before stopTime = {self._t_stop!r} (it ends at {end!r})")

@@ -20,6 +20,9 @@ SOLVER_PARAMETERS = (
               "and keep the full event history", integer=True),
     Parameter("max_steps_per_second", 1e5, "1/s", "work budget: most internal steps per second of simulated "
               "time (counted over windows of 1 s); more end the run with an error naming the stiffness"),
+    Parameter("max_steps_per_call", 1e6, "", "most internal steps (accepted and rejected) one call may take "
+              "(fmi2DoStep, fmi3DoStep): a step that needs more at max_step is refused at once, one that takes "
+              "more ends in an error; bounds how long one call blocks its caller"),
 )
 SOLVER_PARAMETER_NAMES = tuple(par.name for par in SOLVER_PARAMETERS)
 REL_TOL_MAX = 1e-3  # looser relative tolerances do not control the error (ode45's default)
@@ -79,6 +82,8 @@ def check_solver_parameters(s: Params, has_states: bool = True):
             f"max_step = 0 or max_step >= 2/max_steps_per_second = {2 / budget:.3g} s (a smaller max_step "
             f"alone takes more than half the work budget of {budget:.3g} internal steps per simulated second; "
             f"raise max_steps_per_second to allow it)")
+    require(s.max_steps_per_call >= 1 and s.max_steps_per_call < math.inf, "max_steps_per_call",
+            s.max_steps_per_call, "1 <= max_steps_per_call < inf")
     require(s.log_events in (0, 1), "log_events", s.log_events, "log_events is 0 or 1")
     require(s.initial_step >= 0 and fmath.isfinite(s.initial_step), "initial_step", s.initial_step,
             "0 <= initial_step < inf (0: automatic)")

@@ -154,6 +154,7 @@ class Simulator:
         self._budget = float(s.max_steps_per_second) * BUDGET_WINDOW
         self._win_t0, self._win_n, self._warned = self.t, 0, False
         self._warn_n = BUDGET_WARN_FRACTION * self._budget
+        self._call_budget = float(s.max_steps_per_call)
         # guards exactly at zero fire if the motion leaves them towards their after side: at the start,
         # and after a jump every guard but the one of the event just handled (that one stays disarmed)
         self._at_start = True
@@ -399,7 +400,10 @@ class Simulator:
     def _run(self, t_target, apply_events):
         """Step until the integrator reaches ``t_target`` — applying every located event's jump on
         the way (``apply_events``), or stopping at the first one, its jump left pending; an
-        arithmetic failure in the model becomes a :class:`DomainError` naming the time."""
+        arithmetic failure in the model becomes a :class:`DomainError` naming the time.  One run
+        takes at most ``max_steps_per_call`` step attempts (accepted and rejected): the bound on how
+        long one call of an importer blocks, whatever its communication step."""
+        limit = self.n_steps + self.n_rejected + self._call_budget
         try:
             while True:
                 if self.pending is not None:
@@ -410,6 +414,8 @@ class Simulator:
                         continue
                 if t_target <= self.t:
                     return
+                if self.n_steps + self.n_rejected >= limit:
+                    raise self._call_budget_error(t_target)
                 self._step(t_target)
         except (ArithmeticError, ValueError) as exc:
             if isinstance(exc, ModelError):
@@ -525,6 +531,13 @@ class Simulator:
                 f"(mean step {elapsed / n:.3g} s); the run stops at max_steps_per_second = "
                 f"{self.solver.max_steps_per_second:g} steps per simulated second. "
                 f"{self._stiffness_text()}")
+
+    def _call_budget_error(self, t_target):
+        return ModelError(
+            f"max_steps_per_call = {self.solver.max_steps_per_call:g} internal steps taken in one call, "
+            f"from t = {self.t_out:.10g} s to t = {self.t:.10g} s of a call up to t = {t_target:.10g} s. "
+            f"To change: use shorter communication steps, or raise the parameter max_steps_per_call "
+            f"to let one call take longer")
 
     def _stiffness_text(self):
         parts = []
