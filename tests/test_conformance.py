@@ -218,9 +218,11 @@ def test_libcosimpy_agrees_with_fmpy(name):
     got = run_libcosim(name, stop, step, outputs)
     assert got.pop("_ok")
     for out in outputs:
-        # (libcosim's communication points are sums of steps, fmpy's multiples: the integrator restarts at
-        # points an ulp apart where an input is held; 1e-11 absolute covers it)
-        assert got[out] == pytest.approx(float(ref.res[out][-1]), rel=1e-9, abs=1e-11), out
+        # (libcosim's communication points are sums of steps, fmpy's multiples: where a run restarts its
+        # integrator at them the two agree to the solver's tolerance, not to the bit — the mirror
+        # actuator's stops and gust: 2e-8 relative at rel_tol 1e-6; the project's models to 1e-9)
+        rel = 1e-7 if name.startswith("examples/") else 1e-9
+        assert got[out] == pytest.approx(float(ref.res[out][-1]), rel=rel, abs=1e-12), out
 
 
 @pytest.mark.parametrize("name", FMUS + EXAMPLES)
