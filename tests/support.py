@@ -216,6 +216,13 @@ class Instance:
             self.fmu.freeInstance()
 
 
+def run_pogofmu(*args, cwd, timeout):
+    """The ``pogofmu`` command of the project's venv (``python -m pogofmu.cli``), run in ``cwd`` as a
+    user runs it in their folder: the finished process, its output captured."""
+    return subprocess.run([sys.executable, "-m", "pogofmu.cli", *map(str, args)], cwd=cwd, capture_output=True,
+                          text=True, timeout=timeout)
+
+
 def fmi2_callbacks(messages):
     """FMI 2.0 callbacks whose logger appends ``(status, category, text)`` to ``messages``; keep the
     returned object as long as the instance lives.  (Never fmpy's ``defaultCallbacks``: their

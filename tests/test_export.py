@@ -10,15 +10,13 @@ from __future__ import annotations
 
 import math
 import subprocess
-import sys
 import textwrap
 import zipfile
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-from support import parse_event_log
+from support import parse_event_log, run_pogofmu
 
 CS2, CS3, ME3 = "FMI 2.0 CS", "FMI 3.0 CS event mode", "FMI 3.0 ME"
 
@@ -179,9 +177,7 @@ USER_MODELS = {"ball.py": BALL, "hard_stop.py": HARD_STOP, "thermostat.py": THER
 
 
 def pogofmu(*args, cwd):
-    """The ``pogofmu`` command of the project's venv, run in the user's folder."""
-    return subprocess.run([sys.executable, "-m", "pogofmu.cli", *map(str, args)], cwd=cwd, capture_output=True,
-                          text=True, timeout=600)
+    return run_pogofmu(*args, cwd=cwd, timeout=600)
 
 
 @pytest.fixture(scope="module")

@@ -8,22 +8,19 @@ from __future__ import annotations
 
 import math
 import shutil
-import subprocess
-import sys
 import zipfile
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from support import parse_event_log
+from support import parse_event_log, run_pogofmu
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "segmented_mirror"
 
 
 def pogofmu(*args, cwd):
-    return subprocess.run([sys.executable, "-m", "pogofmu.cli", *map(str, args)], cwd=cwd, capture_output=True,
-                          text=True, timeout=900)
+    return run_pogofmu(*args, cwd=cwd, timeout=900)
 
 
 @pytest.fixture(scope="module")
@@ -232,9 +229,8 @@ def test_controllers_whose_saturation_events_undo_each_other_end_in_one_line_not
                 off = '<ssv:Parameter name="locate_saturation"><ssv:Integer value="0"/>'
                 data = data.decode().replace(off, off.replace('"0"', '"1"')).encode()
             dst.writestr(item, data)
-    proc = subprocess.run([sys.executable, "-m", "pogofmu.cli", "ssp", "run", str(edited), "--step", "1e-3",
-                           "--stop-time", "0.1", "--out", str(tmp_path / "run"), "--quiet"], capture_output=True,
-                          text=True, timeout=600, cwd=tmp_path)
+    proc = run_pogofmu("ssp", "run", edited, "--step", "1e-3", "--stop-time", "0.1", "--out", tmp_path / "run",
+                       "--quiet", cwd=tmp_path, timeout=600)
     assert proc.returncode == 1 and "event storm across the system" in proc.stderr, proc.stderr[-1500:]
     assert "Traceback" not in proc.stderr and proc.stderr.startswith("error: event storm")  # (then where the rows are)
     assert sum(f.stat().st_size for f in (tmp_path / "run").glob("*")) < 50e6

@@ -209,7 +209,7 @@ def check_behaviour(model, files: Iterable) -> None:
     files = list(files)
     p = model.params()
     try:
-        _call(files, model, "check", model.check, p)
+        _call(files, model, "check", model.check_parameters, p)  # the rules the engine applies
     except ParameterError as exc:
         par = _rule_breaker(exc, model)
         where = _at(par, model) if par is not None else _at(model, model)

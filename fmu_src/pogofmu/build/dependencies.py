@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 from typing import Dict, List, Set, Tuple
 
+from pogofmu.memo import once_per_model
 from pogofmu.runtime.engine import Simulator
 
 SAMPLES_PER_RUN = 400
@@ -98,11 +99,7 @@ def probe(model) -> Tuple[Dict[str, Set[str]], Dict[str, Set[str]]]:
                 if _differs(v, base[name]):
                     on_states[name].add(var.name)
         for j, var in enumerate(model.inputs):
-            # a small step, and (for outputs that switch at a threshold, such as a phase at a velocity
-            # crossing 0) the input's opposite and zero
-            candidates = [1.0 - u[j]] if var.name in integer_inputs else \
-                [u[j] + 1e-6 * max(1.0, abs(u[j])), -u[j], 0.0 if u[j] != 0.0 else 1.0]
-            for up in candidates:
+            for up in _input_moves(var, u[j], integer_inputs):
                 uu = list(u)
                 uu[j] = up
                 try:
@@ -113,6 +110,14 @@ def probe(model) -> Tuple[Dict[str, Set[str]], Dict[str, Set[str]]]:
                     if _differs(v, base[name]):
                         on_inputs[name].add(var.name)
     return on_states, on_inputs
+
+
+def _input_moves(var, value, integer_inputs):
+    """The values an input is moved to: a small step, and (for outputs that switch at a threshold,
+    such as a phase at a velocity crossing 0) the input's opposite and zero; an integer's other value."""
+    if var.name in integer_inputs:
+        return [1.0 - value]
+    return [value + 1e-6 * max(1.0, abs(value)), -value, 0.0 if value != 0.0 else 1.0]
 
 
 def check_feedthrough(model, on_inputs) -> None:
@@ -132,6 +137,7 @@ def check_feedthrough(model, on_inputs) -> None:
         raise DependencyError(f"{model.name}: " + "; ".join(problems))
 
 
+@once_per_model
 def structure(model):
     """Everything the model structure needs: ``{"output:<name>" | "der:<state>" |
     "indicator:<event>": (states, inputs)}`` with the feed-through of the outputs as declared."""
@@ -170,6 +176,7 @@ def _valid(model, values):
     return p
 
 
+@once_per_model
 def initial_dependencies(model) -> Dict[str, Set[str]]:
     """For every initial unknown (``output:<name>``, ``state:<name>``, ``der:<name>``) the knowns it
     was seen to depend on at initialization: the model's parameters (its initial state derives from
@@ -198,28 +205,24 @@ def initial_dependencies(model) -> Dict[str, Set[str]]:
                 continue
             for name in base:
                 deps.setdefault(name, set())
+
+            def note(known, p_moved, u_moved):
+                """Add ``known`` to every quantity that changes at the moved point."""
+                if p_moved is None:
+                    return
+                try:
+                    got = _initial_quantities(model, p_moved, u_moved)
+                except (ArithmeticError, ValueError):
+                    return
+                for name, val in got.items():
+                    if _differs(val, base.get(name)):
+                        deps.setdefault(name, set()).add(known)
+
             for par in model.parameters:
                 v = values[par.name]
                 for vp in ((v + 1, v - 1) if par.integer else (v + 1e-6 * max(1.0, abs(v)), -v, 2 * v + 1.0)):
-                    p2 = _valid(model, dict(values, **{par.name: vp}))
-                    if p2 is None:
-                        continue
-                    try:
-                        got = _initial_quantities(model, p2, u)
-                    except (ArithmeticError, ValueError):
-                        continue
-                    for name, val in got.items():
-                        if _differs(val, base.get(name)):
-                            deps.setdefault(name, set()).add(par.name)
+                    note(par.name, _valid(model, dict(values, **{par.name: vp})), u)
             for j, var in enumerate(model.inputs):
-                for up in ([1.0 - u[j]] if var.name in model.integer_inputs else
-                           [u[j] + 1e-6 * max(1.0, abs(u[j])), -u[j], 0.0 if u[j] != 0.0 else 1.0]):
-                    uu = tuple(up if k == j else a for k, a in enumerate(u))
-                    try:
-                        got = _initial_quantities(model, p, uu)
-                    except (ArithmeticError, ValueError):
-                        continue
-                    for name, val in got.items():
-                        if _differs(val, base.get(name)):
-                            deps.setdefault(name, set()).add(var.name)
+                for up in _input_moves(var, u[j], model.integer_inputs):
+                    note(var.name, p, tuple(up if k == j else a for k, a in enumerate(u)))
     return deps

@@ -88,19 +88,22 @@ class Exporter:
         from .native_fmu import mingw_available
 
         self.windows = mingw_available()
-        self.record = {}
-        self._launchers = {}  # FMI version -> the launcher's compilation, started at once (model-independent)
-        if any(b == "python" for b, _ in self.kinds):
-            from concurrent.futures import ThreadPoolExecutor
+        self._launchers = {}  # FMI version -> the launcher's compilation (model-independent)
+        self._pool = None
 
-            from .python_fmu import compile_launcher
+    def _start_launchers(self):
+        """Start compiling the launchers of every Python-hosted kind, in the background, while the
+        first model is checked and its native FMUs compile (only an export needs them, not --check)."""
+        if self._launchers or not any(b == "python" for b, _ in self.kinds):
+            return
+        from concurrent.futures import ThreadPoolExecutor
 
-            self._pool = ThreadPoolExecutor(max_workers=2)
-            for _, version in self.kinds:
-                if version not in self._launchers:
-                    self._launchers[version] = self._pool.submit(compile_launcher, version, self.cache)
-        else:
-            self._pool = None
+        from .python_fmu import compile_launcher
+
+        self._pool = ThreadPoolExecutor(max_workers=2)
+        for _, version in self.kinds:
+            if version not in self._launchers:
+                self._launchers[version] = self._pool.submit(compile_launcher, version, self.cache)
 
     def launcher(self, version: int):
         return self._launchers[version].result()
@@ -137,6 +140,7 @@ class Exporter:
         from .native_fmu import build_native_fmu
         from .python_fmu import build_python_fmu, c_compiler
 
+        self._start_launchers()
         refusal = self.check(source)
         if refusal:
             self.refusals.append(refusal)
@@ -245,11 +249,9 @@ def main(argv=None, prog="pogofmu export") -> int:
     try:
         if args.check:
             refusals = []
-            n = 0
             with Exporter(Path(tempfile.gettempdir()), fmi, backends, log=lambda *_: None) as ex:
                 for f in args.files:
                     for s in load_model_file(f, names=args.model, requires=args.requires):
-                        n += 1
                         r = ex.check(s)
                         if r:
                             refusals.append(r)

@@ -32,17 +32,14 @@ from .errors import BuildError
 
 PACKAGE = Path(__file__).resolve().parents[1]  # fmu_src/pogofmu
 RUNTIME = PACKAGE / "runtime"  # the code that goes into every FMU, staged as a whole
-from pogofmu.codegen.build import NATIVE  # noqa: E402 (the C layer, in a clone or an installed wheel)
+from pogofmu.codegen.build import NATIVE, c_compiler  # noqa: E402,F401 (the C layer, in a clone or a wheel; the
+#                                                       system compiler, one lookup for both kinds of FMU)
 
 
 def fmi_headers() -> Path:
     import fmpy
 
     return Path(fmpy.__file__).parent / "c-code"
-
-
-def c_compiler():
-    return os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc") or shutil.which("clang")
 
 
 def launcher_sources(fmi_version: int):

@@ -15,6 +15,7 @@ from __future__ import annotations
 import sys
 from typing import Dict, List, Tuple
 
+from pogofmu.memo import once_per_model
 from pogofmu.runtime.engine import SOLVER_PARAMETERS
 from pogofmu.runtime.engine.settings import check_solver_parameters, domain_slack
 from pogofmu.runtime.model import HybridModel, Params
@@ -291,8 +292,10 @@ class ModelWriter:
         return "\n".join(head + self.functions + tail)
 
 
+@once_per_model
 def generate(model: HybridModel) -> str:
-    """The C source of ``model`` (``PG_MODEL``)."""
+    """The C source of ``model`` (``PG_MODEL``); a model is traced once (an export checks it, then
+    builds its FMI 2.0 and 3.0 FMUs from the same C)."""
     return ModelWriter(model).write()
 
 

@@ -239,10 +239,6 @@ def generate(rings: int, out: Path, fmi: int = 2, backend: str = "python", log=l
     return out
 
 
-def one_line(text) -> str:
-    return " | ".join(line.strip() for line in str(text).strip().splitlines() if line.strip())
-
-
 def main(argv=None, prog="pogofmu ssp mirror") -> int:
     ap = argparse.ArgumentParser(prog=prog, description="generate the SSP system of a segmented mirror: 1 + 3R(R+1) "
                                  "segments on a hexagonal grid, an actuator and a PID controller each, and one "
@@ -254,6 +250,7 @@ def main(argv=None, prog="pogofmu ssp mirror") -> int:
     ap.add_argument("--out", required=True, metavar="FILE.ssp", help="the package to write")
     args = ap.parse_args(argv)
     from pogofmu.build import BuildError, ModelFileError
+    from pogofmu.build.export import one_line
 
     start = time.perf_counter()
     out = Path(args.out)
