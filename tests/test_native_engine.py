@@ -197,3 +197,14 @@ def test_the_storm_and_the_budget_end_alike_in_both_engines(native, case):
         for t in steps:
             sim.advance(t)
     assert words in str(exc.value), exc.value
+
+
+def test_the_pairs_c_file_is_what_the_generator_writes():
+    """fmu_src/native/engine/pg_pairs.c is generated from the tableaux (pogofmu.codegen.cpairs) and
+    kept in the repository, so that the engine compiles from its C files alone: regenerating it
+    gives the same text (an edited tableau without a regenerated file fails here)."""
+    from pogofmu.codegen.build import ENGINE
+    from pogofmu.codegen.cpairs import generate
+
+    assert (ENGINE / "pg_pairs.c").read_text() == generate(), \
+        "regenerate it: python -m pogofmu.codegen.cpairs > fmu_src/native/engine/pg_pairs.c"

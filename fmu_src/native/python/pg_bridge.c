@@ -27,6 +27,8 @@
 #include <string.h>
 #include <unistd.h>
 
+#include <dlfcn.h>
+
 #include "pg_backend.h"
 #include "python_embed.h" /* CPython, resolved at run time */
 
@@ -636,6 +638,15 @@ static void read_interface(Inst *in)
 
 /* Create the Python slave.  `mode` is passed to _launcher_attach: "cs" or "me"; for FMI 3 CS the
  * event-mode and early-return grants as well.  On failure the reason is logged and NULL returned. */
+/* The file of this library: it carries the engine (pg_binding.c), which the FMU's Python code runs
+ * through ctypes. */
+static const char *own_path(void)
+{
+    Dl_info info;
+    if (dladdr((void *)&own_path, &info) && info.dli_fname) return info.dli_fname;
+    return "";
+}
+
 static Inst *instantiate(Inst *in, const char *location, const char *token, int visible,
                          const char *mode, int event_mode_used, int early_return_allowed)
 {
@@ -680,7 +691,8 @@ static Inst *instantiate(Inst *in, const char *location, const char *token, int 
     GIL g = py.PyGILState_Ensure();
     char *error = NULL;
     PyObject *load = py.PyDict_GetItemString(boot, "load"); /* borrowed */
-    PyObject *args = build("(y)", resources); /* bytes: the file system's own, in any locale */
+    /* bytes: the file system's own, in any locale */
+    PyObject *args = build("(yy)", resources, own_path());
     PyObject *cls = (load && args) ? py.PyObject_CallObject(load, args) : NULL;
     PyObject *kwargs = cls ? build("{s:s,s:s,s:N,s:s}", "instance_name", in->name, "resources", resources,
                                    "visible", py.PyBool_FromLong(visible), "fmi_binary", "pogofmu") : NULL;

@@ -84,16 +84,19 @@ class BootError(Exception):
     fmi_status = 3
 
 
-def load(resources):
+def load(resources, engine=None):
     """The slave class of the FMU whose resources folder is ``resources`` (a path as str or as the
-    file system's bytes: any locale)."""
+    file system's bytes: any locale); ``engine``: the library that carries the engine (the launcher
+    itself)."""
     if isinstance(resources, bytes):
         resources = os.fsdecode(resources)
+    if isinstance(engine, bytes):
+        engine = os.fsdecode(engine)
     with _process_lock():
-        return _load(resources)
+        return _load(resources, engine)
 
 
-def _load(resources):
+def _load(resources, engine=None):
     try:
         conf = read_launch_file(resources)
         package, module, cls = conf["package"][0], conf["module"][0], conf["class"][0]
@@ -111,6 +114,8 @@ def _load(resources):
     if package in sys.modules:
         _repoint_package(package, package_dir)
     _import_from_file(package, os.path.join(package_dir, "__init__.py"), package_dir)
+    if engine:
+        importlib.import_module(package + ".engine.cengine").use_library(engine)
     slave = _import_from_file(module, os.path.join(resources, module + ".py"))
     cls = getattr(slave, cls)
     if conf.get("fmi", ["2"])[0] == "3":  # the same slave file, behind the FMI 3.0 adapter

@@ -32,7 +32,7 @@ from .errors import BuildError
 
 PACKAGE = Path(__file__).resolve().parents[1]  # fmu_src/pogofmu
 RUNTIME = PACKAGE / "runtime"  # the code that goes into every FMU, staged as a whole
-from pogofmu.codegen.build import NATIVE, c_compiler  # noqa: E402,F401 (the C layer, in a clone or a wheel; the
+from pogofmu.codegen.build import BINDING_SOURCES, CFLAGS, ENGINE, NATIVE, c_compiler  # noqa: E402,F401 (the C layer, in a clone or a wheel; the
 #                                                       system compiler, one lookup for both kinds of FMU)
 
 
@@ -47,7 +47,8 @@ def launcher_sources(fmi_version: int):
     native FMUs are built from, ``fmu_src/native/fmi2/pg_fmi2.c`` or ``fmi3/pg_fmi3.c``), the log
     filter, and the Python backend (``native/python/``: the bridge, the embedding of CPython)."""
     return [NATIVE / f"fmi{fmi_version}" / f"pg_fmi{fmi_version}.c", NATIVE / "pg_logging.c",
-            NATIVE / "python" / "pg_bridge.c", NATIVE / "python" / "python_embed.c"]
+            NATIVE / "python" / "pg_bridge.c", NATIVE / "python" / "python_embed.c",
+            *(ENGINE / s for s in BINDING_SOURCES)]
 
 
 _WARNED = set()
@@ -61,20 +62,21 @@ def warn_once(text: str) -> None:
 
 def compile_launcher(fmi_version: int, cache: Path):
     """Compile the Python-hosted FMUs' binary for FMI 2 or 3 (:func:`launcher_sources`) into
-    ``cache``, keyed by the hash of sources, headers and flags.  Returns the library's path, or None
-    (with a warning) without a C compiler."""
+    ``cache``, keyed by the hash of sources, headers and flags.  Returns the library's path.  The
+    launcher carries the engine (the engine's C files with ``pg_binding.c``, compiled with the
+    engine's own flags: no fused multiply-add), so a C compiler is needed."""
     cc = c_compiler()
     sources = launcher_sources(fmi_version)
-    flags = ["-std=c11", "-O2", "-fPIC", "-shared", "-fvisibility=hidden", "-Wall", "-Wextra",
-             "-Wno-unused-parameter", f"-I{fmi_headers()}", f"-I{NATIVE}", f"-I{NATIVE / 'python'}"]
-    libs = ["-ldl", "-lpthread"]
+    flags = ["-std=c11", "-O2", "-ffp-contract=off", "-fno-strict-aliasing", "-fPIC", "-shared",
+             "-fvisibility=hidden", "-Wall", "-Wextra", "-Wno-unused-parameter", f"-I{fmi_headers()}",
+             f"-I{NATIVE}", f"-I{NATIVE / 'python'}", f"-I{ENGINE}"]
+    libs = ["-ldl", "-lpthread", "-lm"]
     if cc is None:
-        warn_once("no C compiler found (set CC): the FMUs get pythonfmu's Linux binary instead of the "
-                  "project's launcher and run only inside a Python process (fmpy, libcosimpy), not in a C "
-                  "importer")
-        return None
+        raise BuildError("no C compiler found (cc, gcc or clang; or set CC): the Python-hosted FMUs' launcher "
+                         "carries the engine, which is C")
     digest = hashlib.sha256(" ".join([cc] + flags + libs).encode())
-    for part in sorted({*sources, *NATIVE.glob("*.[ch]"), *(NATIVE / "python").glob("*.[ch]")}):  # sources, headers
+    for part in sorted({*sources, *NATIVE.glob("*.[ch]"), *(NATIVE / "python").glob("*.[ch]"),
+                        *ENGINE.glob("*.[ch]")}):  # sources, headers
         digest.update(part.name.encode() + b"\0" + part.read_bytes())
     for header in sorted(fmi_headers().glob(f"fmi{fmi_version}*.h")):
         digest.update(header.read_bytes())
@@ -87,14 +89,6 @@ def compile_launcher(fmi_version: int, cache: Path):
             raise BuildError(f"compiling the FMUs' launcher failed ({cc}):\n{proc.stderr}")
         os.replace(tmp, out)
     return out
-
-
-def pythonfmu_binaries():
-    """pythonfmu's binaries per platform folder (used for the platforms the launcher does not serve)."""
-    import pythonfmu
-
-    base = Path(pythonfmu.__file__).parent / "resources" / "binaries"
-    return {p.parent.name: p for ext in ("dll", "so", "dylib") for p in sorted(base.glob(f"*/*.{ext}"))}
 
 
 def python_libraries():
@@ -188,17 +182,15 @@ def check_isolated_import(stage_dir: Path, source):
                          f"{last}")
 
 
-def build_python_fmu(source, dest: Path, fmi_version: int, launcher: Optional[Path], token_seed: str = "") -> Path:
-    """Build and validate the Python-hosted FMU of ``source`` around ``launcher`` (:func:`compile_launcher`;
-    None: no C compiler): FMI 2.0 co-simulation into ``dest/<Model>.fmu``, FMI 3.0 (model exchange
+def build_python_fmu(source, dest: Path, fmi_version: int, launcher: Path, token_seed: str = "") -> Path:
+    """Build and validate the Python-hosted FMU of ``source`` around ``launcher`` (:func:`compile_launcher`,
+    which carries the engine): FMI 2.0 co-simulation into ``dest/<Model>.fmu``, FMI 3.0 (model exchange
     and co-simulation) into ``dest/fmi3/<Model>.fmu``."""
     from .description import model_description_fmi2, model_description_fmi3
     from .package import documentation, validate, write_zip
 
     name = source.model.name
     cls = source.slave_class()
-    if launcher is None and fmi_version == 3:
-        raise BuildError(f"{name}: an FMI 3.0 FMU needs the launcher, and no C compiler was found (set CC)")
     with tempfile.TemporaryDirectory(prefix="pogofmu_build_") as tmp:
         stage_dir = Path(tmp)
         package, module, token = stage(source, stage_dir, fmi_version, token_seed)
@@ -207,10 +199,8 @@ def build_python_fmu(source, dest: Path, fmi_version: int, launcher: Optional[Pa
                    for p in sorted(stage_dir.rglob("*")) if p.is_file() and "__pycache__" not in p.parts]
     if fmi_version == 2:
         members.append(("modelDescription.xml", model_description_fmi2(cls, token), False))
-        # the launcher for Linux; pythonfmu's Windows binaries are not shipped: they would need a
-        # Windows CPython that no test here can give them (Windows: the native FMUs)
-        binaries = {"linux64": launcher} if launcher is not None else \
-            {k: v for k, v in pythonfmu_binaries().items() if k == "linux64"}
+        # the launcher for Linux (it carries the engine; Windows: the native FMUs)
+        binaries = {"linux64": launcher}
     else:
         # the launcher only: pythonfmu's Windows binaries speak FMI 2.0 (no FMI 3.0 Windows binary)
         members.append(("modelDescription.xml", model_description_fmi3(cls, token), False))

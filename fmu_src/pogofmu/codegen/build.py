@@ -84,26 +84,55 @@ def model_library(model, folder: Path, cc: Optional[str] = None) -> Path:
     return compile_c([src, ENGINE / "pg_support.c"], out, include=[ENGINE], cc=cc)
 
 
-def write_pairs_source(folder: Path) -> Path:
-    """``<folder>/pg_pairs.c``, generated from the Python engine's tableaux."""
-    from .cpairs import generate
-
-    folder.mkdir(parents=True, exist_ok=True)
-    path = folder / "pg_pairs.c"
-    text = generate()
-    if not path.exists() or path.read_text() != text:
-        path.write_text(text)
-    return path
+# the engine's C files (pg_pairs.c is generated from the tableaux by pogofmu.codegen.cpairs and kept
+# in the repository; a test regenerates it); pg_binding.c is what the Python binding calls
+ENGINE_SOURCES = ("pg_engine.c", "pg_pairs.c", "pg_support.c")
+BINDING_SOURCES = (*ENGINE_SOURCES, "pg_binding.c")
 
 
-ENGINE_SOURCES = ("pg_engine.c", "pg_support.c")
+def cache_dir() -> Path:
+    """Where compiled engine libraries are kept between runs: ``POGOFMU_CACHE``, else the user's
+    cache folder (``XDG_CACHE_HOME`` or ``~/.cache`` on Linux, ``LOCALAPPDATA`` on Windows) /pogofmu."""
+    given = os.environ.get("POGOFMU_CACHE")
+    if given:
+        return Path(given)
+    if os.name == "nt" and os.environ.get("LOCALAPPDATA"):
+        return Path(os.environ["LOCALAPPDATA"]) / "pogofmu" / "cache"
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "pogofmu"
+
+
+def host_engine_library(cc: Optional[str] = None) -> Path:
+    """The engine as a shared library for this machine (its ``pgb_*`` functions exported), compiled
+    once per version of its sources, flags and compiler into :func:`cache_dir`: what the host-side
+    tools run a Python model's simulation with (:mod:`pogofmu.runtime.engine.cengine`)."""
+    import hashlib
+    import sys
+
+    compiler = c_compiler(cc)
+    if compiler is None:
+        raise CompileError("no C compiler found (cc, gcc or clang; or set CC): the engine is C and is compiled "
+                           "once on first use")
+    flags = [*CFLAGS, "-shared", "-fPIC", "-fvisibility=hidden"]
+    digest = hashlib.sha256(" ".join([compiler, *flags, sys.platform]).encode())
+    for path in sorted({*(ENGINE / s for s in BINDING_SOURCES), *ENGINE.glob("*.h")}):
+        digest.update(path.name.encode() + b"\0" + path.read_bytes())
+    folder = cache_dir()
+    suffix = ".dll" if os.name == "nt" else ".dylib" if sys.platform == "darwin" else ".so"
+    out = folder / f"pogofmu_engine_{digest.hexdigest()[:16]}{suffix}"
+    if not out.exists():
+        folder.mkdir(parents=True, exist_ok=True)
+        tmp = out.with_name(f"{out.stem}.{os.getpid()}.tmp{suffix}")
+        compile_c([ENGINE / s for s in BINDING_SOURCES], tmp, include=[ENGINE], cc=compiler,
+                  extra=["-fvisibility=hidden"])
+        os.replace(tmp, out)
+    return out
 
 
 def engine_library(model, folder: Path, cc: Optional[str] = None) -> Path:
     """A shared library of the native engine with the model's generated C (``PG_MODEL`` and the
     ``pg_engine_*`` functions exported), for tests that drive the engine directly."""
     model = _model(model)
-    srcs = [write_model_source(model, folder), write_pairs_source(folder), *(ENGINE / s for s in ENGINE_SOURCES)]
+    srcs = [write_model_source(model, folder), *(ENGINE / s for s in ENGINE_SOURCES)]
     out = folder / f"lib{model.name}_engine.so"
     return compile_c(srcs, out, include=[ENGINE], cc=cc)
 
@@ -134,7 +163,6 @@ def stage_sources(model, fmi: int, folder: Path, fmi_headers: Path):
 
     folder.mkdir(parents=True, exist_ok=True)
     write_model_source(model, folder)
-    write_pairs_source(folder)
     copied = [*(ENGINE / s for s in ENGINE_SOURCES), *ENGINE.glob("*.h"), *(ADAPTER / s for s in ADAPTER_SOURCES),
               *ADAPTER.glob("*.h"), *FMI_ENTRY[fmi], *ENTRY_SHARED,
               *(fmi_headers / h for h in FMI_HEADERS[fmi])]

@@ -1,16 +1,15 @@
-"""The hybrid engine: embedded Runge-Kutta integration with exact state-event location.
+"""The hybrid engine: the C engine (``fmu_src/native/engine/``) run for a Python model.
 
-* :mod:`.pairs` — the Runge-Kutta pairs (DOPRI5, DOP853) and their generated code;
-* :mod:`.settings` — the solver's settings, their rules, the domain slack;
-* :mod:`.simulator` — the :class:`Simulator` that integrates any model and locates its events;
-* :mod:`.snapshot` — a simulator's state as plain data (serialized FMU states).
+* :mod:`.cengine` — the :class:`Simulator`: the C engine (explicit Runge-Kutta pairs with error
+  control, exact state-event location, restarts, the work budget, event storms, domain conditions)
+  with the model's Python functions called back; its snapshots as plain data;
+* :mod:`.settings` — the solver's settings, their rules, the domain slack (the C engine receives
+  them as the model's ``check_settings``);
+* :mod:`.tableaux` — the Runge-Kutta tableaux the C pairs (``pg_pairs.c``) are generated from.
 """
-from .pairs import DOP853, DOPRI5, METHODS
+from .cengine import EventRecord, Simulator, snapshot_from_data, snapshot_to_data
 from .settings import (SOLVER_PARAMETER_NAMES, SOLVER_PARAMETERS, check_solver_parameters, solver_defaults,
                        solver_parameters, split_parameters)
-from .simulator import EventRecord, Simulator
-from .snapshot import snapshot_from_data, snapshot_to_data
 
-__all__ = ["DOP853", "DOPRI5", "METHODS", "SOLVER_PARAMETER_NAMES", "SOLVER_PARAMETERS", "EventRecord",
-           "Simulator", "check_solver_parameters", "snapshot_from_data", "snapshot_to_data", "solver_defaults",
-           "solver_parameters", "split_parameters"]
+__all__ = ["SOLVER_PARAMETER_NAMES", "SOLVER_PARAMETERS", "EventRecord", "Simulator", "check_solver_parameters",
+           "snapshot_from_data", "snapshot_to_data", "solver_defaults", "solver_parameters", "split_parameters"]

@@ -1,0 +1,654 @@
+"""The engine, in C (``fmu_src/native/engine/``), for a model written in Python.
+
+There is one engine: the C one (``pg_engine.c``: the Runge-Kutta pairs, error control, event
+location, restarts, the work budget, event storms, domain conditions and every message).  The
+native FMUs link it with their model's generated C.  Everything else — the Python-hosted FMUs and
+the host-side tools (default experiments, studies, the dependency probes of the exporter, the
+tests) — runs the same engine through this binding, with the model's Python functions (flow,
+guards, activity, jumps, outputs, domain, rules, scales) called back through ctypes.  A
+:class:`Simulator` is the engine for one run.
+
+Where the library comes from:
+
+* inside a Python-hosted FMU, the FMU's launcher carries the engine (its ``pgb_*`` functions); the
+  bootstrap names the launcher (:func:`use_library`);
+* on the host, ``pogofmu.codegen.build.host_engine_library`` compiles it once per version of its
+  sources into the user's cache folder (``POGOFMU_CACHE``, else the platform's cache folder).
+
+The library is loaded with the GIL kept (``ctypes.PyDLL``): the callbacks run Python anyway, and a
+run is one thread's.
+
+Errors: the engine returns a message; a model function's own exception comes back as itself (a
+:class:`ParameterError` stays one, a bug in a model stays a ``TypeError`` with its traceback), an
+engine refusal becomes the :class:`ModelError` subclass its text names (event storm:
+:class:`ZenoError`; leaving the domain and floating-point failures: :class:`DomainError`).
+"""
+from __future__ import annotations
+
+import ctypes as C
+import math
+import struct
+import threading
+from dataclasses import dataclass
+from typing import List, Optional
+
+from ..model import FALLING, DomainError, HybridModel, ModelError, ParameterError, Params, ZenoError
+from .settings import SOLVER_PARAMETERS, check_solver_parameters, domain_slack, split_parameters
+
+PG_OK, PG_RAISE, PG_ARITH = 0, 1, 2
+PG_ZERO_DIVISION, PG_OVERFLOW, PG_DOMAIN = 1, 2, 3
+PG_MSG_MAX = 2048
+PG_MAX_X, PG_MAX_Q, PG_MAX_U, PG_MAX_P, PG_MAX_EVENTS = 32, 16, 64, 64, 16  # pg_pairs.h, pg_engine.h
+PG_MAX_SCALES, PG_MAX_SCALE_NAMES = 16, 6  # pg_model.h
+_READ_HEAD = 11  # the scalars before the vectors in pgb_read
+D = C.POINTER(C.c_double)
+
+
+class PgMsg(C.Structure):
+    _fields_ = [("text", C.c_char * PG_MSG_MAX), ("len", C.c_size_t), ("arith", C.c_int)]
+
+
+class PgScale(C.Structure):
+    _fields_ = [("label", C.c_char_p), ("names", C.c_char_p * PG_MAX_SCALE_NAMES), ("n_names", C.c_int),
+                ("value", C.c_double)]
+
+
+class PgEvent(C.Structure):
+    _fields_ = [("time", C.c_double), ("index", C.c_int), ("x_before", C.c_double * PG_MAX_X),
+                ("x_after", C.c_double * PG_MAX_X)]
+
+
+MSG = C.POINTER(PgMsg)
+P = C.c_void_p  # the callbacks take addresses (plain ints): a ctypes pointer object per argument costs twice as much
+FN = {
+    "check_settings": C.CFUNCTYPE(C.c_int, P, P),
+    "check": C.CFUNCTYPE(C.c_int, P, P),
+    "initial": C.CFUNCTYPE(C.c_int, P, P, P, P),
+    "flow": C.CFUNCTYPE(C.c_int, C.c_double, P, P, P, P, P, P),
+    "guard": C.CFUNCTYPE(C.c_int, C.c_int, P, P, P, P, P, P),
+    "active": C.CFUNCTYPE(C.c_int, C.c_int, P, P, P),
+    "jump": C.CFUNCTYPE(C.c_int, C.c_int, P, P, P, P, P, P, P),
+    "outputs": C.CFUNCTYPE(C.c_int, C.c_double, P, P, P, P, P, P),
+    "domain": C.CFUNCTYPE(C.c_int, C.c_double, P, P, P, P, P, P),
+    "time_scales": C.CFUNCTYPE(C.c_int, P, P, P, P),
+    "error_scales": C.CFUNCTYPE(C.c_int, P, P, P, P),
+    "flow_jvp": C.CFUNCTYPE(C.c_int, C.c_double, P, P, P, P, P, P, P, P),
+    "outputs_jvp": C.CFUNCTYPE(C.c_int, C.c_double, P, P, P, P, P, P, P, P),
+}
+STRS = C.POINTER(C.c_char_p)
+_FUNCTIONS = ("check_settings", "check", "initial", "flow", "guard", "active", "jump", "outputs", "domain",
+              "time_scales", "error_scales", "flow_jvp", "outputs_jvp")
+
+
+class PgModel(C.Structure):
+    """``PgModel`` of pg_model.h."""
+    _fields_ = [("name", C.c_char_p), *((n, C.c_int) for n in ("nx", "nq", "nu", "np", "ns", "ny", "ne")),
+                ("state_names", STRS), ("q_names", STRS), ("q_kinds", C.c_char_p), ("input_names", STRS),
+                ("parameter_names", STRS), ("parameter_kinds", C.c_char_p), ("output_names", STRS),
+                ("event_names", STRS), ("event_direction", C.POINTER(C.c_byte)),
+                ("has_time_scales", C.c_int), ("has_error_scales", C.c_int),
+                *((n, FN[n]) for n in _FUNCTIONS)]
+
+
+EVENT_HOOK = C.CFUNCTYPE(None, C.c_void_p, C.c_void_p, C.POINTER(PgEvent), C.c_long)
+WARN_HOOK = C.CFUNCTYPE(None, C.c_void_p, C.c_char_p)
+
+# ---- the library --------------------------------------------------------------------------------
+_LIB = None
+_LIB_PATH: Optional[str] = None
+_LIB_LOCK = threading.Lock()
+
+
+def use_library(path) -> None:
+    """Run the engine of the library at ``path`` (the FMU's launcher, named by its bootstrap)."""
+    global _LIB_PATH, _LIB
+    with _LIB_LOCK:
+        if _LIB is None or _LIB_PATH != str(path):
+            _LIB_PATH, _LIB = str(path), None
+
+
+def _find_library() -> str:
+    try:  # on the host: the project's build code compiles the engine once
+        from pogofmu.codegen.build import host_engine_library
+    except ImportError:
+        raise ModelError("the engine library is not available: this copy of the runtime was loaded without its "
+                         "FMU's launcher (run the FMU through its binary)") from None
+    return str(host_engine_library())
+
+
+def library():
+    global _LIB, _LIB_PATH
+    if _LIB is not None:
+        return _LIB
+    with _LIB_LOCK:
+        if _LIB is None:
+            path = _LIB_PATH or _find_library()
+            lib = C.PyDLL(path)
+            lib.pgb_sizeof.restype = C.c_size_t
+            lib.pgb_message.restype = C.c_char_p
+            lib.pgb_message.argtypes = [C.c_void_p]
+            lib.pgb_init.argtypes = [C.c_void_p, C.c_void_p, D, D, D, C.c_double, C.c_double, C.c_int, C.c_double,
+                                     C.c_int, EVENT_HOOK, WARN_HOOK]
+            lib.pgb_rebind.argtypes = [C.c_void_p, C.c_void_p, EVENT_HOOK, WARN_HOOK]
+            lib.pgb_rebind.restype = None
+            lib.pgb_advance.argtypes = [C.c_void_p, C.c_double, D]
+            lib.pgb_advance_to_event.argtypes = [C.c_void_p, C.c_double, C.POINTER(C.c_int), D]
+            lib.pgb_set_input.argtypes = [C.c_void_p, D]
+            lib.pgb_apply_event.argtypes = [C.c_void_p, C.c_int, C.c_double, D]
+            lib.pgb_restart_at.argtypes = [C.c_void_p, C.c_double, D, D]
+            lib.pgb_event_due.argtypes = [C.c_void_p]
+            lib.pgb_read.argtypes = [C.c_void_p, D]
+            lib.pgb_read.restype = None
+            lib.pgb_last_event.argtypes = [C.c_void_p, D, D]
+            lib.pgb_last_event.restype = None
+            _LIB_PATH, _LIB = path, lib
+    return _LIB
+
+
+# ---- a model's static description ---------------------------------------------------------------
+def _strings(names):
+    raw = [n.encode() for n in names]
+    arr = (C.c_char_p * max(len(raw), 1))(*raw)
+    return arr, raw
+
+
+def _doubles(values, n=None):
+    n = len(values) if n is None else n
+    a = (C.c_double * max(n, 1))()
+    for i, v in enumerate(values):
+        a[i] = float(v)
+    return a
+
+
+def discrete_layout(model: HybridModel, p=None):
+    """The slots of the discrete state ``q``: ``(key, 'i' or 'f')`` in the order of the model's initial
+    ``q`` (the native generator's layout)."""
+    _, q = model.initial(model.params() if p is None else p)
+    return tuple((k, "i" if isinstance(v, int) and not isinstance(v, (bool, float)) else "f") for k, v in q.items())
+
+
+class _Static:
+    """The constant part of a PgModel (names, counts, directions), built once per model."""
+
+    def __init__(self, model: HybridModel, layout):
+        self.model = model
+        self.layout = layout
+        self.keep = []
+        m = self.struct = PgModel()
+        self.keep.append(model.name.encode())
+        m.name = self.keep[-1]
+        m.nx, m.nq, m.nu, m.np = len(model.states), len(layout), len(model.inputs), len(model.parameters)
+        m.ns, m.ny, m.ne = len(SOLVER_PARAMETERS), len(model.outputs), len(model.events)
+        for field, names in (("state_names", [v.name for v in model.states]), ("q_names", [k for k, _ in layout]),
+                             ("input_names", [v.name for v in model.inputs]),
+                             ("parameter_names", [par.name for par in model.parameters]),
+                             ("output_names", [v.name for v in model.outputs]),
+                             ("event_names", [ev.name for ev in model.events])):
+            arr, raw = _strings(names)
+            self.keep += [arr, raw]
+            setattr(m, field, arr)
+        for field, text in (("q_kinds", "".join(kind for _, kind in layout)),
+                            ("parameter_kinds", "".join("i" if par.integer else "f" for par in model.parameters))):
+            self.keep.append(text.encode())
+            setattr(m, field, self.keep[-1])
+        directions = (C.c_byte * max(len(model.events), 1))(*[-1 if ev.direction == FALLING else 1
+                                                                for ev in model.events])
+        self.keep.append(directions)
+        m.event_direction = directions
+        m.has_time_scales = int(model.time_scales is not None)
+        m.has_error_scales = int(model.error_scales is not None)
+
+
+_STATICS = {}
+
+
+def _static(model: HybridModel, p) -> _Static:
+    entry = _STATICS.get(id(model))
+    if entry is None or entry.model is not model:
+        entry = _STATICS[id(model)] = _Static(model, discrete_layout(model, p))
+    return entry
+
+
+def _write_text(msg: PgMsg, text: str) -> None:
+    raw = text.encode("utf-8", "replace")[:PG_MSG_MAX - 1]
+    msg.text = raw
+    msg.len = len(raw)
+
+
+def _arith_kind(exc) -> int:
+    if isinstance(exc, ZeroDivisionError):
+        return PG_ZERO_DIVISION
+    if isinstance(exc, OverflowError):
+        return PG_OVERFLOW
+    return PG_DOMAIN
+
+
+def _error_class(text: str):
+    """The ModelError subclass an engine refusal belongs to (the engine's texts, pg_engine.c)."""
+    if text.startswith("event storm"):
+        return ZenoError
+    if text.startswith(("the trajectory left", "floating-point", "the state became non-finite", "the rate d")):
+        return DomainError
+    if text.startswith("cannot go back in time"):
+        return ValueError
+    if " violates the rule: " in text or " violate the rule: " in text:
+        return ParameterError
+    return ModelError
+
+
+@dataclass
+class EventRecord:
+    """One handled event: when, which, and the state just before and after its jump."""
+
+    time: float
+    name: str
+    index: int
+    x_before: list
+    x_after: list
+
+
+class Simulator:
+    """The engine integrating one :class:`HybridModel` from ``t0`` on.
+
+    ``p`` holds the model's parameters (missing ones take their defaults) and may hold solver
+    settings too (an FMU's parameter table holds both); ``solver`` overrides settings
+    (:mod:`.settings`).  ``self.p`` is the model's own parameters, the only ones its functions see;
+    ``self.solver`` the settings.
+
+    Event bookkeeping in constant memory: ``n_events``, ``last_event`` (an :class:`EventRecord` or
+    None); the full history ``events`` only with ``keep_history`` (default: the setting
+    ``log_events = 1``), and then ``new_events`` collects the events a caller has not taken yet (the
+    FMI adapter logs and clears them after every call).  ``new_warnings`` collects warning texts (the
+    work budget) the same way.
+    """
+
+    def __init__(self, model: HybridModel, p=None, u=None, t0: float = 0.0, t_stop: float = math.inf,
+                 zeno_max_events: int = 200, zeno_window: float = 1e-6, keep_history: Optional[bool] = None,
+                 solver=None):
+        p, s = split_parameters(model, {} if p is None else p, solver)
+        self.model, self.p, self.solver = model, p, s
+        self.u = tuple(float(v.start) for v in model.inputs) if u is None else tuple(float(v) for v in u)
+        keep = bool(s.log_events) if keep_history is None else bool(keep_history)
+        self._history: Optional[List[EventRecord]] = [] if keep else None
+        self.new_events: List[EventRecord] = []
+        self.new_warnings: List[str] = []
+        lib = library()
+        self._engine = C.create_string_buffer(lib.pgb_sizeof())
+        self._attach()
+        svals = [s[par.name] for par in SOLVER_PARAMETERS]
+        pvals = [p[par.name] for par in model.parameters]
+        for name, v in zip([par.name for par in SOLVER_PARAMETERS] + [par.name for par in model.parameters],
+                           svals + pvals):
+            if not isinstance(v, (int, float)) or isinstance(v, complex):
+                raise ParameterError(f"parameter {name} = {v!r} violates the rule: {name} must be a number")
+        rc = lib.pgb_init(self._engine, C.byref(self._struct), _doubles(pvals),
+                          _doubles(svals), _doubles(self.u, len(model.inputs)), float(t0), float(t_stop),
+                          int(zeno_max_events), float(zeno_window), int(keep), self._on_event, self._on_warning)
+        self._check(rc)
+        self._read()
+
+    # ---- the callbacks ------------------------------------------------------------------------
+    def _attach(self):
+        """This run's PgModel: the model's constant description and callbacks into this object."""
+        model = self.model
+        static = _static(model, self.p)
+        self._static = static
+        self._layout = static.layout
+        self._nx, self._nq, self._nu = len(model.states), len(static.layout), len(model.inputs)
+        self._X, self._Q = C.c_double * max(self._nx, 1), C.c_double * max(self._nq, 1)
+        self._qbytes = 8 * self._nq
+        self._qfmt = f"={self._nq}d"
+        self._U, self._ubytes, self._ukey, self._uc = C.c_double * max(self._nu, 1), 8 * self._nu, None, self.u
+        self._guards = [ev.guard for ev in model.events]
+        self._buf = (C.c_double * (_READ_HEAD + 2 * self._nx + 2 * self._nq + self._nu))()
+        self._slack = domain_slack(self.solver)
+        self._exc = None
+        self._qkey = None
+        self._qdict = None
+        self._bound = None
+        st = self._struct = PgModel()
+        C.pointer(st)[0] = static.struct  # the constant fields
+        self._callbacks = cbs = {name: FN[name](getattr(self, "_cb_" + name)) for name in _FUNCTIONS[:11]}
+        for name, fn in cbs.items():
+            setattr(st, name, fn)
+        self._on_event = EVENT_HOOK(self._cb_event)
+        self._on_warning = WARN_HOOK(self._cb_warning)
+        return static
+
+    def _fail(self, exc, m) -> int:
+        """A Python exception inside a callback: kept, to be raised again as itself."""
+        msg = PgMsg.from_address(m)
+        if isinstance(exc, (ArithmeticError, ValueError)) and not isinstance(exc, ModelError):
+            self._exc = None
+            msg.arith = _arith_kind(exc)
+            detail = exc.args[-1] if exc.args and isinstance(exc.args[-1], str) else str(exc)
+            _write_text(msg, detail)
+            return PG_ARITH
+        self._exc = exc
+        _write_text(msg, str(exc) if isinstance(exc, ModelError) else f"{type(exc).__name__}: {exc}")
+        return PG_RAISE
+
+    def _q(self, q, u=None):
+        """The discrete state at address ``q`` as the model's dict and the inputs at address ``u`` as
+        a tuple (``self._uc``), cached while they do not change.  The inputs are read from the engine:
+        an input change redoes the step taken ahead with the old inputs before it binds the new."""
+        key = C.string_at(q, self._qbytes) if self._nq else b""
+        if u is not None and self._nu:
+            ukey = C.string_at(u, self._ubytes)
+            if ukey != self._ukey:
+                self._ukey, self._uc, self._bound = ukey, tuple(self._U.from_address(u)[:self._nu]), None
+        if key != self._qkey:
+            values = self._Q.from_address(q)[:self._nq] if self._nq else []
+            self._qdict = {k: (int(v) if kind == "i" else v) for (k, kind), v in zip(self._layout, values)}
+            self._qkey = key
+            self._bound = None
+        return self._qdict
+
+    def _fun_for(self, qd):
+        if self._bound is None:
+            model, u, p = self.model, self._uc, self.p
+            if model.bind is not None:
+                self._bound = model.bind(qd, u, p)
+            else:
+                flow = model.flow
+                self._bound = lambda t, x: flow(t, x, qd, u, p)
+        return self._bound
+
+    def _cb_check_settings(self, s, m):
+        try:
+            check_solver_parameters(self.solver, has_states=bool(self.model.states))
+            return PG_OK
+        except BaseException as exc:
+            return self._fail(exc, m)
+
+    def _cb_check(self, p, m):
+        try:
+            self.model.check_parameters(self.p)
+            return PG_OK
+        except BaseException as exc:
+            return self._fail(exc, m)
+
+    def _put_state(self, what, x_addr, q_addr, x_new, q_new):
+        """Write a state the model returned (checked against the model's sizes and keys)."""
+        x_new = [float(v) for v in x_new]
+        if len(x_new) != self._nx:
+            raise ModelError(f"{self.model.name}: {what} returned {len(x_new)} states, not {self._nx}")
+        keys = [k for k, _ in self._layout]
+        if list(q_new) != keys:
+            raise ModelError(f"{self.model.name}: {what} returned a discrete state with keys {list(q_new)}, not {keys}")
+        if self._nx:
+            self._X.from_address(x_addr)[:] = x_new
+        if self._nq:
+            self._Q.from_address(q_addr)[:] = [float(q_new[k]) for k in keys]
+
+    def _cb_initial(self, p, x, q, m):
+        try:
+            x0, q0 = self.model.initial(self.p)
+            self._put_state("initial", x, q, x0, q0)
+            return PG_OK
+        except BaseException as exc:
+            return self._fail(exc, m)
+
+    def _cb_flow(self, t, x, q, u, p, dx, m):
+        try:
+            f = self._fun_for(self._q(q, u))(t, self._X.from_address(x)[:self._nx])
+            if self._nx:
+                self._X.from_address(dx)[:] = f
+            return PG_OK
+        except BaseException as exc:
+            return self._fail(exc, m)
+
+    def _cb_guard(self, k, x, q, u, p, g, m):
+        try:
+            C.c_double.from_address(g).value = self._guards[k](self._X.from_address(x)[:self._nx], self._q(q, u), self._uc, self.p)
+            return PG_OK
+        except BaseException as exc:
+            return self._fail(exc, m)
+
+    def _cb_active(self, k, q, on, m):
+        try:
+            C.c_int.from_address(on).value = 1 if self.model.events[k].active(self._q(q)) else 0
+            return PG_OK
+        except BaseException as exc:
+            return self._fail(exc, m)
+
+    def _cb_jump(self, k, x, q, u, p, x_new, q_new, m):
+        try:
+            ev = self.model.events[k]
+            x2, q2 = ev.jump(self._X.from_address(x)[:self._nx], self._q(q, u), self._uc, self.p)
+            self._put_state(f"the jump of {ev.name}", x_new, q_new, x2, q2)
+            return PG_OK
+        except BaseException as exc:
+            return self._fail(exc, m)
+
+    def _cb_outputs(self, t, x, q, u, p, y, m):
+        try:
+            out = self.model.output_fn(t, self._X.from_address(x)[:self._nx], self._q(q, u), self._uc, self.p)
+            ys = (C.c_double * max(len(self.model.outputs), 1)).from_address(y)
+            for i, v in enumerate(self.model.outputs):
+                ys[i] = float(out[v.name])
+            return PG_OK
+        except BaseException as exc:
+            return self._fail(exc, m)
+
+    def _cb_domain(self, t, x, q, u, p, s, m):
+        try:
+            text = self.model.domain(t, self._X.from_address(x)[:self._nx], self._q(q, u), self._uc, self.p, self._slack)
+            if text is None:
+                return PG_OK
+            _write_text(PgMsg.from_address(m), str(text))
+            return PG_RAISE
+        except BaseException as exc:
+            return self._fail(exc, m)
+
+    def _scales(self, fn, out, n, m):
+        try:
+            rows = list(fn(self.p))[:PG_MAX_SCALES]
+            table = (PgScale * PG_MAX_SCALES).from_address(out)
+            keep = self._scale_keep = []
+            for i, (label, names, value) in enumerate(rows):
+                sc = table[i]
+                keep.append(str(label).encode())
+                sc.label = keep[-1]
+                names = list(names)[:PG_MAX_SCALE_NAMES]
+                for j, name in enumerate(names):
+                    keep.append(str(name).encode())
+                    sc.names[j] = keep[-1]
+                sc.n_names = len(names)
+                sc.value = float(value)
+            C.c_int.from_address(n).value = len(rows)
+            return PG_OK
+        except BaseException as exc:
+            return self._fail(exc, m)
+
+    def _cb_time_scales(self, p, out, n, m):
+        return self._scales(self.model.time_scales, out, n, m)
+
+    def _cb_error_scales(self, p, out, n, m):
+        return self._scales(self.model.error_scales, out, n, m)
+
+    def _cb_event(self, ctx, engine, ev, number):
+        if self._history is None:
+            return
+        e = ev[0]
+        record = EventRecord(e.time, self.model.events[e.index].name, e.index, list(e.x_before[:self._nx]),
+                             list(e.x_after[:self._nx]))
+        self._history.append(record)
+        self.new_events.append(record)
+
+    def _cb_warning(self, ctx, text):
+        self.new_warnings.append(text.decode("utf-8", "replace"))
+
+    # ---- calls ----------------------------------------------------------------------------
+    def _check(self, rc):
+        if rc == PG_OK:
+            self._exc = None
+            return
+        text = library().pgb_message(self._engine).decode("utf-8", "replace")
+        exc, self._exc = self._exc, None
+        if exc is not None and (not isinstance(exc, ModelError) or str(exc) == text):
+            raise exc
+        raise _error_class(text)(text)
+
+    def _read(self, filled=False):
+        """Take the engine's served values into this object's attributes (``filled``: the call that
+        just returned wrote them into the buffer already)."""
+        nx, nq = self._nx, self._nq
+        buf = self._buf
+        if not filled:
+            library().pgb_read(self._engine, buf)
+        v = buf[:]
+        self.t_out, self.t, self.h, self.max_step = v[0], v[1], v[2], v[3]
+        n_events = int(v[4])
+        self.n_steps, self.n_rejected = int(v[5]), int(v[6])
+        self._due = bool(v[10])
+        o = _READ_HEAD
+        self.x_out = v[o:o + nx]
+        self.q_out = self._qdict_of(v[o + nx:o + nx + nq])
+        o += nx + nq
+        self.x = v[o:o + nx]
+        self.q = self._qdict_of(v[o + nx:o + nx + nq])
+        if n_events != getattr(self, "n_events", -1) or (v[7] and getattr(self, "last_event", None) is None):
+            self.n_events = n_events
+            if v[7]:
+                xb, xa = (C.c_double * max(nx, 1))(), (C.c_double * max(nx, 1))()
+                library().pgb_last_event(self._engine, xb, xa)
+                i = int(v[9])
+                self.last_event = EventRecord(v[8], self.model.events[i].name, i, xb[:nx], xa[:nx])
+            else:
+                self.last_event = None
+
+    def _qdict_key(self, qd):
+        return struct.pack(self._qfmt, *(float(qd[k]) for k, _ in self._layout))
+
+    def _qdict_of(self, values):
+        key = struct.pack(self._qfmt, *values)
+        if key == self._qkey:
+            return self._qdict
+        return {k: (int(v) if kind == "i" else v) for (k, kind), v in zip(self._layout, values)}
+
+    @property
+    def events(self) -> List[EventRecord]:
+        """The full event history (only with ``keep_history`` / ``log_events = 1``)."""
+        if self._history is None:
+            raise RuntimeError("the full event history is kept only with log_events = 1 (or keep_history=True); "
+                               "n_events and last_event are always available")
+        return self._history
+
+    @property
+    def event_due(self) -> bool:
+        """A located event's jump is pending at the time served last (after :meth:`advance_to_event`)."""
+        return self._due
+
+    @property
+    def fun(self):
+        """The flow in the current mode and inputs, ``f(t, x)`` (FMI 3.0 model exchange's derivatives)."""
+        qd = self.q
+        if qd is not self._qdict or self._uc != self.u:
+            self._qkey, self._qdict, self._bound = self._qdict_key(qd), qd, None
+            self._ukey, self._uc = None, self.u
+        return self._fun_for(qd)
+
+    def advance(self, t_target: float):
+        """Integrate to ``t_target`` (handling every event on the way); return ``(x, q)`` there."""
+        self._check(library().pgb_advance(self._engine, float(t_target), self._buf))
+        self._read(True)
+        return self.x_out, self.q_out
+
+    def advance_to_event(self, t_target: float) -> bool:
+        """Like :meth:`advance`, but stop at the first event on the way, *before* its jump: True when
+        an event lies in ``(t_out, t_target]`` (``t_out`` is then its exact time, the jump pending
+        until the next :meth:`advance`); the step sequence is that of :meth:`advance`."""
+        stopped = C.c_int()
+        self._check(library().pgb_advance_to_event(self._engine, float(t_target), C.byref(stopped), self._buf))
+        self._read(True)
+        return bool(stopped.value)
+
+    def set_input(self, u):
+        """Change the inputs from the latest communication time on."""
+        u = tuple(float(v) for v in u)
+        if u == self.u:
+            return
+        old = self.u
+        self.u, self._bound = u, None
+        rc = library().pgb_set_input(self._engine, _doubles(u, self._nu))
+        if rc != PG_OK:
+            text = library().pgb_message(self._engine).decode("utf-8", "replace")
+            if text.startswith("input ") and " violates the rule: " in text:
+                self.u = old  # (refused before anything changed)
+        self._check(rc)
+        self._read()
+
+    def apply_event(self, index: int, t: float, x) -> list:
+        """Apply the jump of event ``index`` at time ``t`` to the state ``x`` located by someone else
+        (an FMI 3.0 model-exchange importer's solver); returns the new continuous state."""
+        self._check(library().pgb_apply_event(self._engine, int(index), float(t), _doubles(x, self._nx)))
+        self._read()
+        return self.x
+
+    def restart_at(self, t: float, x, u) -> None:
+        """Go on from the state ``x`` at time ``t`` given from outside (an FMI 3.0 model-exchange
+        importer's solver) with the inputs ``u``: the step taken ahead and any located event are
+        dropped."""
+        u = tuple(float(v) for v in u)
+        self.u, self._bound = u, None
+        self._check(library().pgb_restart_at(self._engine, float(t), _doubles(x, self._nx), _doubles(u, self._nu)))
+        self._read()
+
+    def domain_problem(self, t: float, x) -> Optional[str]:
+        """The model's domain condition at ``(t, x)`` in the current mode: None or its text."""
+        return self.model.domain(t, x, self.q, self.u, self.p, self._slack)
+
+    # ---- snapshots ----------------------------------------------------------------------------
+    def snapshot(self):
+        """A copy of the whole engine state (for fmi2GetFMUstate): the engine's bytes and this
+        object's lists."""
+        return {"model": self.model, "p": self.p, "solver": self.solver, "u": self.u,
+                "engine": self._engine.raw,
+                "history": None if self._history is None else list(self._history),
+                "new_events": list(self.new_events), "new_warnings": list(self.new_warnings)}
+
+    def restore(self, snap):
+        fresh = getattr(self, "_engine", None) is None or getattr(self, "model", None) is not snap["model"]
+        self.model, self.p, self.solver, self.u = snap["model"], snap["p"], snap["solver"], tuple(snap["u"])
+        self._history = None if snap["history"] is None else list(snap["history"])
+        self.new_events, self.new_warnings = list(snap["new_events"]), list(snap["new_warnings"])
+        lib = library()
+        if fresh:
+            self._engine = C.create_string_buffer(lib.pgb_sizeof())
+            self._attach()
+        raw = snap["engine"]
+        if len(raw) != len(self._engine.raw):
+            raise ModelError(f"the engine state has {len(raw)} bytes, not {len(self._engine.raw)}: it was taken "
+                             f"from another build of the engine")
+        C.memmove(self._engine, raw, len(raw))
+        lib.pgb_rebind(self._engine, C.byref(self._struct), self._on_event, self._on_warning)
+        self._qkey = self._qdict = self._bound = self._ukey = None
+        self._uc = self.u
+        self.n_events = -1
+        self.last_event = None
+        self._read()
+
+
+def snapshot_to_data(snap: dict) -> dict:
+    """Plain data (JSON-able) of a :meth:`Simulator.snapshot`."""
+    return {"params": snap["p"].as_dict(), "solver": snap["solver"].as_dict(), "u": list(snap["u"]),
+            "engine": snap["engine"].hex(),
+            "history": None if snap["history"] is None else [_event_data(e) for e in snap["history"]],
+            "new_events": [_event_data(e) for e in snap["new_events"]], "new_warnings": list(snap["new_warnings"])}
+
+
+def _event_data(e: EventRecord):
+    return [e.time, e.name, e.index, list(e.x_before), list(e.x_after)]
+
+
+def snapshot_from_data(model: HybridModel, data: dict) -> dict:
+    """The :meth:`Simulator.snapshot` that :func:`snapshot_to_data` was made from."""
+    return {"model": model, "p": Params(dict(data["params"])), "solver": Params(dict(data["solver"])),
+            "u": tuple(data["u"]), "engine": bytes.fromhex(data["engine"]),
+            "history": None if data["history"] is None else [EventRecord(*e) for e in data["history"]],
+            "new_events": [EventRecord(*e) for e in data["new_events"]], "new_warnings": list(data["new_warnings"])}
+
+
+__all__ = ["EventRecord", "Simulator", "discrete_layout", "library", "snapshot_from_data", "snapshot_to_data",
+           "use_library"]
