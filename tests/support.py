@@ -125,9 +125,9 @@ def simulate(name, start_values=None, stop_time=None, output_interval=None, inpu
 
 
 def reference_events(params=None):
-    """The basic stick's events in closed form (40-digit roots, pogofmu.closed_form), default drop
+    """The basic stick's events in closed form (40-digit roots, pogofmu.references.closed_form), default drop
     unless ``params`` says otherwise: dicts with index, name, time, y, ydot."""
-    from pogofmu.closed_form import events_as_floats
+    from pogofmu.references.closed_form import events_as_floats
 
     return events_as_floats(params)
 

@@ -2,7 +2,7 @@
 rollback, FMI 3.0 early return) and its strongly coupled model exchange.
 
 References independent of the master and the FMUs: the continuous-time closed loop
-(pogofmu.closed_loop: the thrust law inside a scipy ODE at rtol 1e-12), the free fall to the first
+(pogofmu.references.closed_loop: the thrust law inside a scipy ODE at rtol 1e-12), the free fall to the first
 touchdown in closed form, the SSP 2.0 schemas (ssp/schema/ssp-2.0), the fixed-step master
 (which libcosim confirms, tests/test_ssp.py), and perturbations of each FMU's inputs.
 """
@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from pogofmu import ssp as master
-from pogofmu.closed_loop import apex_of_run, first_apex
+from pogofmu.references.closed_loop import apex_of_run, first_apex
 from support import DIST, ROOT, clean_venv
 from test_ssp import law, ssv_values, variant
 
@@ -102,7 +102,7 @@ def test_jacobi_with_events_switches_at_the_continuous_loops_instants(package, h
     bottom of the stroke and the liftoff of the continuous closed loop, its first apex to the
     FMUs' tolerance as Gauss-Seidel does, and no thrust left in any flight row after the
     liftoff (the controller sees s = 0 at the liftoff instant, not one step later)."""
-    from pogofmu.closed_loop import first_hop
+    from pogofmu.references.closed_loop import first_hop
 
     p = ssv_values("moon")
     ref = first_hop(p)
@@ -469,7 +469,7 @@ def test_both_synchronized_paths_in_a_fresh_venv_without_the_project():
         "import json, sys\n"
         f"sys.path.insert(0, {str(ROOT / 'fmu_src')!r})\n"
         "from pogofmu.ssp import simulate\n"
-        "from pogofmu.closed_loop import apex_of_run\n"
+        "from pogofmu.references.closed_loop import apex_of_run\n"
         "out = {}\n"
         f"for key, pkg in {json.dumps({k: str(v) for k, v in PACKAGES.items()})}.items():\n"
         "    res = simulate(pkg, parameters='moon', stop_time=2.0, step=1e-3, echo_log=False)\n"

@@ -143,8 +143,8 @@ def test_without_thrust_the_apex_decays(tmp_path):
 # ---------------------------------------------------------------------------------------------
 
 def continuous_first_apex(p):
-    """The continuous-time closed loop (pogofmu.closed_loop: the law inside a scipy ODE)."""
-    from pogofmu.closed_loop import first_apex
+    """The continuous-time closed loop (pogofmu.references.closed_loop: the law inside a scipy ODE)."""
+    from pogofmu.references.closed_loop import first_apex
 
     return first_apex(p)
 
@@ -199,7 +199,7 @@ def test_coupling_delay(algorithm, lag):
 
 def run_libcosim_ssp(path, step, times, variables, timeout=300):
     payload = json.dumps({"ssp": str(path), "step": step, "times": list(times), "variables": variables})
-    proc = subprocess.run([sys.executable, "-m", "pogofmu.libcosim_runner", payload], capture_output=True, text=True,
+    proc = subprocess.run([sys.executable, "-m", "pogofmu.ssp.libcosim_runner", payload], capture_output=True, text=True,
                           timeout=timeout)
     assert proc.returncode == 0, f"libcosimpy failed ({proc.returncode}): {proc.stderr[-2000:]}"
     out = json.loads(proc.stdout.strip().splitlines()[-1])
