@@ -545,6 +545,7 @@ def test_csv_stream_memory_does_not_grow_with_the_run(tmp_path):
         tracemalloc.stop()
         return p
 
+    peak(1_000)  # warm-up: what the first stream allocates once (imports, caches) is in neither figure
     small, big = peak(10_000), peak(100_000)
     assert big - small < 0.5e6, (small, big)
     with (tmp_path / "r100000.csv").open() as f:
@@ -582,7 +583,9 @@ def test_run_command_memory_is_flat_in_the_run_length(tmp_path):
     def peak(n):
         cmd = [sys.executable, "-m", "pogofmu.ssp", "run", str(SSP), "--stop-time", repr(n * 1e-3), "--quiet",
                "--out", str(tmp_path / str(n))]
-        return peak_rss(cmd, tmp_path)[0]
+        # the smaller of two fresh processes: what can disturb a peak (a late collection, an arena
+        # the allocator keeps) only adds, while 0.7 kB per kept row would show in both
+        return min(peak_rss(cmd, tmp_path)[0] for _ in range(2))
 
     short, long = peak(2_000), peak(20_000)
     assert long - short < 5.0, (short, long)
