@@ -304,8 +304,8 @@ NATIVE = [f"native/{n}" for n in MIXED]
                          ids=["same FMU x4", "five FMUs", "seven", "native and Python-hosted, ten"])
 def test_first_instantiations_from_pthreads_in_a_c_host_without_python(names, tmp_path):
     """A pthreads C host with an empty environment: the threads call fmi2Instantiate of the same or of
-    different FMUs at once (each library used to start the interpreter under its own lock: SIGSEGV,
-    SIGABRT). 8 fresh processes each, every thread ends with the value the FMU computes alone."""
+    different FMUs at once (libraries that each start the interpreter under a lock of their own
+    crash here: SIGSEGV, SIGABRT). 8 fresh processes each, every thread ends with the value the FMU computes alone."""
     from fmpy import read_model_description
 
     host = compile_c_host(ROOT / "tests" / "c_host" / "fmi2_threads.c", tmp_path / "fmi2_threads")

@@ -1,4 +1,4 @@
-"""SpaceHopper.ssp (issue 5): PogoStick + HopController composed in SSP, run by two masters.
+"""SpaceHopper.ssp: PogoStick + HopController composed in SSP, run by two masters.
 
 References are independent of the code under test: the SSP 1.0 XSD schemas shipped with fmpy,
 the closed-form flight parabola (apex = y + ydot^2/(2 g)), the control law re-implemented here
@@ -364,7 +364,7 @@ def test_command_line_run_writes_csv_plot_and_progress(tmp_path):
 
 
 # ---------------------------------------------------------------------------------------------
-# issue 9, item 8: every user input checked before the first step, never a traceback
+# every user input checked before the first step, never a traceback
 # ---------------------------------------------------------------------------------------------
 
 def _ssv_edit(old, new):
@@ -399,8 +399,8 @@ BAD_INPUT = {
 
 @pytest.mark.parametrize("case", sorted(BAD_INPUT))
 def test_bad_user_input_is_refused_before_the_first_step(case, tmp_path, monkeypatch, capsys):
-    """Issue 9 item 8: each bad input ends in one message naming it, exit status 1, no traceback,
-    before any FMU steps (no progress line, no CSV; before the fix --out failed after the run)."""
+    """Each bad input ends in one message naming it, exit status 1, no traceback, before any FMU
+    steps (no progress line, no CSV: a bad --out must not cost the user a whole run)."""
     edit, args, words = BAD_INPUT[case]
     pkg = variant(tmp_path)
     if edit:
@@ -498,7 +498,7 @@ def test_a_run_failing_midway_keeps_its_rows_as_incomplete_not_as_the_result(tmp
 
 
 # ---------------------------------------------------------------------------------------------
-# issue 9, item 10: results streamed to disk, the figure decimated, the memory flat
+# results streamed to disk, the figure decimated, the memory flat
 # ---------------------------------------------------------------------------------------------
 
 def test_envelope_keeps_every_slice_min_and_max():
@@ -573,7 +573,7 @@ def test_run_command_streams_the_same_rows_as_the_in_memory_result(tmp_path):
 
 
 def test_run_command_memory_is_flat_in_the_run_length(tmp_path):
-    """Issue 9 item 10 end to end: the peak RSS of the real command (fresh process each, CSV and
+    """End to end: the peak RSS of the real command (fresh process each, CSV and
     figure included) for 20 000 steps is within 5 MB of that for 2 000 steps; keeping every row
     and plotting it all, as before, cost ~0.7 kB per step (13 MB here, 858 MB at 10^6 steps).
     benchmarks/bench_soak.py measures 10^4 .. 10^6 steps."""

@@ -1,4 +1,4 @@
-"""`pogofmu sweep` and `pogofmu study` (issue 11): Dask sweeps of the built FMUs, Parquet rows.
+"""`pogofmu sweep` and `pogofmu study`: Dask sweeps of the built FMUs, Parquet rows.
 
 References: direct fmpy runs of the same FMU (support.simulate), numpy's documented generator
 for the Monte Carlo draws, the closed-form events (pogofmu.references.closed_form) and

@@ -205,7 +205,7 @@ class Component:
         the saved FMU state and makes those calls again — the same calls from the same state, so
         the same state to the bit (the standard's promise for fmi2SetFMUstate/fmi3SetFMUState).
         A master that may have to go back saves before every step, and goes back only at events
-        (issue 17: "save only what is needed"; a save of a Python-hosted FMU costs ~20 µs)."""
+        (saving only what is needed: a save of a Python-hosted FMU costs ~20 µs)."""
         j = self._journal
         if j is not None and len(j) < 2 * REPLAY_STEPS:
             self._mark = len(j)
