@@ -18,7 +18,6 @@ from __future__ import annotations
 import ctypes
 import math
 import sys
-import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Dict, List, Optional
@@ -507,9 +506,3 @@ class Fmi3ModelExchange(_Fmi3):
         """(enterEventMode, terminateSimulation)."""
         enter, terminate = self.fmu.completedIntegratorStep()
         return bool(enter), bool(terminate)
-
-
-def source_fmi_version(path: Path) -> str:
-    """The fmiVersion of the FMU at ``path`` (read from its modelDescription.xml)."""
-    with zipfile.ZipFile(path) as z:
-        return ET.fromstring(z.read("modelDescription.xml")).get("fmiVersion", "")
