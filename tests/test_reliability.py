@@ -15,6 +15,7 @@ from pathlib import Path
 
 import pytest
 
+from pogofmu.fmpy_raw import raw_call
 from support import DIST, fmu_path
 
 POGOFMU = Path(sys.executable).with_name("pogofmu")
@@ -362,7 +363,7 @@ def test_fmi3_first_instantiations_from_pthreads_in_a_c_host_without_python(name
 
 def _raw(fmu, name, *args):
     """The FMU's own function, its status returned (fmpy's wrappers raise on Error)."""
-    return fmu._functions[name](fmu.component, *args)
+    return raw_call(fmu, name, *args)
 
 
 def _fmi2(name="PogoStick"):

@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Dict, List, Optional
 from xml.etree import ElementTree as ET
 
+from pogofmu.fmpy_raw import raw_function
 from pogofmu.runtime.status import status_name
 
 from .package import SSPError
@@ -140,7 +141,7 @@ class Component:
         n = len(vrs)
         vr_arr = (ctypes.c_uint32 * n)(*vrs)
         buf = (ctype * n)()
-        fget, fset = self.fmu._functions[names[0]], self.fmu._functions[names[1]]
+        fget, fset = raw_function(self.fmu, names[0]), raw_function(self.fmu, names[1])
         comp, fmi3 = self.fmu.component, self.fmi == 3
 
         def get():
@@ -282,8 +283,8 @@ class Fmi2CoSimulation(Component):
         self.can_save = bool(md.coSimulation.canGetAndSetFMUstate)
         self.counts_events = self.events is not None and "n_events" in self.variables \
             and "t_last_event" in self.variables
-        self._do_step = self.fmu._functions["fmi2DoStep"]
-        self._get_state = self.fmu._functions["fmi2GetFMUstate"] if self.can_save else None
+        self._do_step = raw_function(self.fmu, "fmi2DoStep")
+        self._get_state = raw_function(self.fmu, "fmi2GetFMUstate") if self.can_save else None
 
     def _set(self, kind, vrs, values):
         f = {"real": self.fmu.setReal, "int": self.fmu.setInteger, "boolean": self.fmu.setBoolean,
@@ -378,7 +379,7 @@ class _Fmi3(Component):
             self._state = self.fmu.getFMUState()
             self._state_ref = ctypes.byref(self._state)
         else:
-            status = self.fmu._functions["fmi3GetFMUState"](self.fmu.component, self._state_ref)
+            status = raw_function(self.fmu, "fmi3GetFMUState")(self.fmu.component, self._state_ref)
             if status > 1:
                 raise _call_failed("fmi3GetFMUState", status)
 
@@ -410,7 +411,7 @@ class Fmi3CoSimulation(_Fmi3):
         # fmi3DoStep called directly, its four results in buffers made once
         self._flags = [ctypes.c_bool(), ctypes.c_bool(), ctypes.c_bool(), ctypes.c_double()]
         self._flag_refs = [ctypes.byref(f) for f in self._flags]
-        self._do_step = self.fmu._functions["fmi3DoStep"]
+        self._do_step = raw_function(self.fmu, "fmi3DoStep")
 
     def exit_initialization(self, t0):
         self.fmu.exitInitializationMode()  # then in Event Mode when eventModeUsed (the master iterates)
