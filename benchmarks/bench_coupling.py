@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Benchmark (f): the cost of exact events in the SSP master (issue "event-exact system simulation").
+"""Benchmark (f): the cost of exact events in the SSP master.
 
 The SpaceHopper on the Moon, 30 s at a communication step of 1 ms, run by ``pogofmu.ssp.simulate``
 on the built packages (dist/): for each package the fixed-step Gauss–Seidel master (``events=False``)

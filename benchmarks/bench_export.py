@@ -12,7 +12,7 @@ The bouncing ball of docs/writing-models.md (examples/ball/ball.py), exported as
 
 Each command runs as a whole process, ``--repeat`` rounds (default 5) in rotated order, the best
 wall time of each counts (the commands run on one core at a time but for the compiler jobs).
-Printed: the seconds of each and the ratios; the target (issue of the exporter): the four FMUs
+Printed: the seconds of each and the ratios; the target: the four FMUs
 in at most 10 s on this 2-core machine.
 """
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """The tests' independent references: models of the FMUs' equations written here with scipy,
-not calling the project's code (closed forms are in pogofmu.closed_form and in the tests that
+not calling the project's code (closed forms are in pogofmu.references.closed_form and in the tests that
 use them). One module, so that no test imports another test for its reference.
 
 * :func:`scipy_mem` — the mem-stick (PogoStickMem) from the default drop;

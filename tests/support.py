@@ -13,6 +13,7 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from pogofmu.fmpy_raw import raw_call
 from pogofmu.runtime.eventlog import parse_event_log  # noqa: F401  (the tests read the FMUs' event log with it)
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -125,9 +126,9 @@ def simulate(name, start_values=None, stop_time=None, output_interval=None, inpu
 
 
 def reference_events(params=None):
-    """The basic stick's events in closed form (40-digit roots, pogofmu.closed_form), default drop
+    """The basic stick's events in closed form (40-digit roots, pogofmu.references.closed_form), default drop
     unless ``params`` says otherwise: dicts with index, name, time, y, ydot."""
-    from pogofmu.closed_form import events_as_floats
+    from pogofmu.references.closed_form import events_as_floats
 
     return events_as_floats(params)
 
@@ -367,7 +368,7 @@ class RawInstance:
         self.t = 0.0
 
     def raw(self, name, *args):
-        return self.fmu._functions[name](self.fmu.component, *args)
+        return raw_call(self.fmu, name, *args)
 
     def last(self):
         return self.messages[-1][1] if self.messages else ""

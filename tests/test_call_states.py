@@ -22,6 +22,7 @@ from hypothesis import HealthCheck, settings
 from hypothesis import strategies as st
 from hypothesis.stateful import RuleBasedStateMachine, precondition, rule
 
+from pogofmu.fmpy_raw import raw_call
 from support import BACKENDS, DIST, ROOT, RawInstance
 
 EXAMPLES = int(os.environ.get("POGOFMU_STATEFUL_EXAMPLES", "10"))
@@ -99,7 +100,7 @@ class Machine(RuleBasedStateMachine):
         self.fmu = self.make()
 
     def raw(self, name, *args):
-        return self.fmu._functions[name](self.fmu.component, *args)
+        return raw_call(self.fmu, name, *args)
 
     def fn(self, name):
         return f"fmi{self.FMI}{name}"

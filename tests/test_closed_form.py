@@ -1,4 +1,4 @@
-"""pogofmu.closed_form, the reference the engine and the FMUs are held against, checked itself.
+"""pogofmu.references.closed_form, the reference the engine and the FMUs are held against, checked itself.
 
 Two independent references: the 20-digit table carried in tests/data (computed outside this
 project, see its header), and scipy's DOP853 at rtol 1e-13 integrating the basic stick's
@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from pogofmu.closed_form import basic_events, events_as_floats
+from pogofmu.references.closed_form import basic_events, events_as_floats
 
 DATA = Path(__file__).resolve().parent / "data" / "pogo_basic_events.csv"
 

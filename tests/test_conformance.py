@@ -230,15 +230,15 @@ def test_master_script_writes_results_and_every_figure(name, tmp_path):
     """The fmpy master script: time series, event table and each figure the model asks for
     (force-deflection loops, time histories; its outputs against time if it names none), drawn
     from outputs that exist, for the project's models and a user's alike."""
-    from pogofmu import master
+    from pogofmu import experiments
 
     folder = DIST / name.rpartition("/")[0] if "/" in name else DIST
     stem = name.rpartition("/")[2]
-    master.run(folder, tmp_path, [stem])
-    model = master.model_of(folder / f"{stem}.fmu")
+    experiments.run(folder, tmp_path, [stem])
+    model = experiments.model_of(folder / f"{stem}.fmu")
     assert model is not None and model.name == stem
     recorded = {v.name for v in model.all_outputs()} | ({v.name for v in model.inputs} if model.default_input else set())
-    plots = model.plots or master.default_plots(model)
+    plots = model.plots or experiments.default_plots(model)
     signals = [n for fig in plots for panel in fig for n in (panel[1:4] if panel[0] == "vs" else panel)]
     assert signals and all(n in recorded for n in signals), signals
     out = tmp_path / stem

@@ -2,7 +2,7 @@
 rollback, FMI 3.0 early return) and its strongly coupled model exchange.
 
 References independent of the master and the FMUs: the continuous-time closed loop
-(pogofmu.closed_loop: the thrust law inside a scipy ODE at rtol 1e-12), the free fall to the first
+(pogofmu.references.closed_loop: the thrust law inside a scipy ODE at rtol 1e-12), the free fall to the first
 touchdown in closed form, the SSP 2.0 schemas (ssp/schema/ssp-2.0), the fixed-step master
 (which libcosim confirms, tests/test_ssp.py), and perturbations of each FMU's inputs.
 """
@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from pogofmu import ssp as master
-from pogofmu.closed_loop import apex_of_run, first_apex
+from pogofmu.references.closed_loop import apex_of_run, first_apex
 from support import DIST, ROOT, clean_venv
 from test_ssp import law, ssv_values, variant
 
@@ -62,17 +62,44 @@ def test_the_fmi3_system_is_an_ssp_2_0_package_valid_against_its_schemas():
 # convergence: the first apex against the continuous closed loop
 # ---------------------------------------------------------------------------------------------
 
+# The figures of README.md and docs/ssp-master.md (`pogofmu study coupling`), bounded at about 4x:
+# where the thrust saturates over the first extension (Moon, Ceres) the synchronized master is exact
+# to the FMUs' own rel_tol = 1e-6 at any step; model exchange to CVODE's 1e-10 (README: "1e-9 m").
+STOP = {"moon": 2.1, "earth": 0.9, "ceres": 6.0}  # [s] past the first apex, a whole number of every step
+SYNCHRONIZED = {"moon": 5.4e-9, "ceres": 4.2e-9}  # [m] measured, any step
+EARTH_SYNCHRONIZED = {1e-2: 3.5e-3, 1e-3: 3.8e-4}  # [m] the sampled law's first-order error, measured
+MODEL_EXCHANGE = 1e-9  # [m] the README's figure (measured: Moon 7.3e-10, Earth 4.3e-10, Ceres 2.7e-10)
+
+
 @pytest.mark.parametrize("package", sorted(PACKAGES))
-def test_synchronized_first_apex_converges_to_the_continuous_loop(package):
-    """Moon, drop from 1.2 m: within 5e-4 m at h = 1e-2 s and 5e-6 m at 1e-3 s (fixed step: 1.9e-2
-    and 1.9e-3 m, which the same test measures as a control)."""
-    for h, bound in ((1e-2, 5e-4), (1e-3, 5e-6)):
-        synced = master.simulate(PACKAGES[package], parameters="moon", stop_time=2.0, step=h, echo_log=False)
-        fixed = master.simulate(PACKAGES[package], parameters="moon", stop_time=2.0, step=h, events=False,
+@pytest.mark.parametrize("body", sorted(SYNCHRONIZED))
+def test_synchronized_first_apex_is_exact_to_the_fmus_tolerance_where_the_thrust_saturates(package, body):
+    """Moon and Ceres, drop from 1.2 m: the first apex within 4x its figure at h = 1e-2 and 1e-3 s
+    (fixed step: 1e-2 m and 1e-3 m, which the same test measures as a control; losing the
+    input-crossing bisection costs 6.5e-4 m)."""
+    for h in (1e-2, 1e-3):
+        synced = master.simulate(PACKAGES[package], parameters=body, stop_time=STOP[body], step=h, echo_log=False)
+        fixed = master.simulate(PACKAGES[package], parameters=body, stop_time=STOP[body], step=h, events=False,
                                 echo_log=False)
-        err, err_fixed = first_apex_error(synced, "moon"), first_apex_error(fixed, "moon")
-        assert err <= bound, (package, h, err)
-        assert err_fixed > 100 * err, (package, h, err, err_fixed)  # the control can fail the test
+        err, err_fixed = first_apex_error(synced, body), first_apex_error(fixed, body)
+        assert err <= 4 * SYNCHRONIZED[body], (package, body, h, err)
+        assert err_fixed > 1e4 * err, (package, body, h, err, err_fixed)  # the control can fail the test
+
+
+@pytest.mark.parametrize("package", sorted(PACKAGES))
+def test_synchronized_first_apex_on_the_earth_is_the_sampled_laws_first_order_error(package):
+    """Earth (the law unsaturated in the extension, sampled once per step): the figures of the
+    table to 10 %, first order between the steps, below the fixed-step master's error."""
+    errs = {}
+    for h, figure in EARTH_SYNCHRONIZED.items():
+        synced = master.simulate(PACKAGES[package], parameters="earth", stop_time=STOP["earth"], step=h,
+                                 echo_log=False)
+        fixed = master.simulate(PACKAGES[package], parameters="earth", stop_time=STOP["earth"], step=h,
+                                events=False, echo_log=False)
+        errs[h] = first_apex_error(synced, "earth")
+        assert errs[h] <= 1.1 * figure, (package, h, errs[h])
+        assert first_apex_error(fixed, "earth") > 1.5 * errs[h], (package, h)
+    assert 5 < errs[1e-2] / errs[1e-3] < 20
 
 
 @pytest.mark.parametrize("package", sorted(PACKAGES))
@@ -102,7 +129,7 @@ def test_jacobi_with_events_switches_at_the_continuous_loops_instants(package, h
     bottom of the stroke and the liftoff of the continuous closed loop, its first apex to the
     FMUs' tolerance as Gauss-Seidel does, and no thrust left in any flight row after the
     liftoff (the controller sees s = 0 at the liftoff instant, not one step later)."""
-    from pogofmu.closed_loop import first_hop
+    from pogofmu.references.closed_loop import first_hop
 
     p = ssv_values("moon")
     ref = first_hop(p)
@@ -111,7 +138,7 @@ def test_jacobi_with_events_switches_at_the_continuous_loops_instants(package, h
     left = res["time"][res["event"] == -1]
     assert len(left) == 3, left
     np.testing.assert_allclose(left, [ref["touchdown"], ref["bottom"], ref["liftoff"]], rtol=0, atol=1e-7)
-    assert first_apex_error(res, "moon") <= 1e-7
+    assert first_apex_error(res, "moon") <= 4 * SYNCHRONIZED["moon"]
     after = (res["time"] >= ref["liftoff"]) & (res["event"] != -1)
     assert np.all(res["PogoStick.s"][after] == 0) and np.all(res["PogoStick.F_ext"][after] == 0.0)
 
@@ -148,18 +175,22 @@ def test_fmi2_rollback_and_fmi3_early_return_agree_on_every_grid_row():
 # model exchange: the strongly coupled solution
 # ---------------------------------------------------------------------------------------------
 
-def test_model_exchange_reaches_the_continuous_loop_on_the_earth_at_any_output_step():
-    """Earth (F_max = 20 N: the sampled law is what limits co-simulation, 3.6e-3 m at 5e-3 s):
-    the first apex within 1e-6 m at output steps 5e-3 and 1e-2 s."""
+@pytest.mark.parametrize("body", sorted(STOP))
+def test_model_exchange_reaches_the_continuous_loop_at_any_output_step(body):
+    """Every body (on the Earth, F_max = 20 N, the sampled law is what limits co-simulation: 3.5e-3 m
+    at 1e-2 s): the first apex within 3x the README's 1e-9 m at output steps 5e-3 and 1e-2 s, the
+    same solution on both grids."""
+    g = ssv_values(body)["g"]
     apexes = {}
     for h in (5e-3, 1e-2):
-        res = master.simulate(SSP2, parameters="earth", stop_time=1.0, step=h, algorithm="model-exchange",
+        res = master.simulate(SSP2, parameters=body, stop_time=STOP[body], step=h, algorithm="model-exchange",
                               echo_log=False)
-        assert first_apex_error(res, "earth") <= 1e-6, (h, first_apex_error(res, "earth"))
-        apexes[h] = apex_of_run(res, 9.81)
-    assert abs(apexes[5e-3] - apexes[1e-2]) < 1e-9  # the solution does not depend on the output grid
-    cosim = master.simulate(SSP2, parameters="earth", stop_time=1.0, step=5e-3, echo_log=False)
-    assert first_apex_error(cosim, "earth") > 1e-4  # the control: co-simulation does not reach it
+        assert first_apex_error(res, body) <= 3 * MODEL_EXCHANGE, (body, h, first_apex_error(res, body))
+        apexes[h] = apex_of_run(res, g)
+    assert abs(apexes[5e-3] - apexes[1e-2]) < 3e-10  # the grid moves CVODE's steps only (Earth: 7.6e-11 m)
+    if body == "earth":
+        cosim = master.simulate(SSP2, parameters="earth", stop_time=STOP["earth"], step=5e-3, echo_log=False)
+        assert first_apex_error(cosim, "earth") > 1e-4  # the control: co-simulation does not reach it
 
 
 def _plant_events(res):
@@ -463,13 +494,13 @@ def test_a_component_that_refuses_the_shortened_step_is_named_with_the_event(mon
 def test_both_synchronized_paths_in_a_fresh_venv_without_the_project():
     """A fresh process of a venv that has only fmpy and numpy, the master's source on the path:
     the FMI 3.0 early-return and the FMI 2.0 rollback paths each reach the closed loop's first
-    apex to 5e-6 m at h = 1e-3 s, on the FMUs' own bundled code."""
+    apex to 4x its figure (5.4e-9 m) at h = 1e-3 s, on the FMUs' own bundled code."""
     python = clean_venv()
     script = (
         "import json, sys\n"
         f"sys.path.insert(0, {str(ROOT / 'fmu_src')!r})\n"
         "from pogofmu.ssp import simulate\n"
-        "from pogofmu.closed_loop import apex_of_run\n"
+        "from pogofmu.references.closed_loop import apex_of_run\n"
         "out = {}\n"
         f"for key, pkg in {json.dumps({k: str(v) for k, v in PACKAGES.items()})}.items():\n"
         "    res = simulate(pkg, parameters='moon', stop_time=2.0, step=1e-3, echo_log=False)\n"
@@ -484,7 +515,7 @@ def test_both_synchronized_paths_in_a_fresh_venv_without_the_project():
     ref = first_apex(ssv_values("moon"))
     for key in PACKAGES:
         apex, n_event_rows = got[key]
-        assert abs(apex - ref) <= 5e-6 and n_event_rows >= 4, (key, apex, ref)
+        assert abs(apex - ref) <= 4 * SYNCHRONIZED["moon"] and n_event_rows >= 4, (key, apex, ref)
     assert len(got["fmu_code"]) == 4 and not got["installed"], got
 
 
@@ -508,9 +539,10 @@ def test_the_coupling_study_writes_the_table_the_figure_and_the_slopes(tmp_path,
     assert len(rows) == 10 and all(r["status"] == "ok" for r in rows)
     err = {(r["algorithm"], float(r["step_s"])): float(r["error_m"]) for r in rows}
     assert 5 < err[("gauss-seidel", 1e-2)] / err[("gauss-seidel", 1e-3)] < 20  # first order
-    assert err[("fmi3-early-return", 1e-2)] <= 5e-4 and err[("model-exchange", 1e-2)] <= 1e-6
-    for h in (1e-2, 1e-3):  # saturated thrust: Jacobi with its switches at their instants is exact as well
-        assert err[("fmi2-rollback-jacobi", h)] <= 1e-7 and err[("fmi3-early-return-jacobi", h)] <= 1e-7
+    for h in (1e-2, 1e-3):  # saturated thrust: synchronized, Gauss-Seidel or Jacobi, is exact to the FMUs' tolerance
+        for algorithm in ("fmi3-early-return", "fmi2-rollback-jacobi", "fmi3-early-return-jacobi"):
+            assert err[(algorithm, h)] <= 4 * SYNCHRONIZED["moon"], (algorithm, h)
+        assert err[("model-exchange", h)] <= 3 * MODEL_EXCHANGE
     gs_slope = float(next(line for line in printed.splitlines() if "Gauss-Seidel" in line).split()[-1])
     assert 0.9 < gs_slope < 1.1
     assert (out / "coupling.png").read_bytes()[:4] == b"\x89PNG"

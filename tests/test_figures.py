@@ -13,7 +13,7 @@ from fmpy import read_model_description
 
 from support import DIST, all_fmus
 
-from pogofmu import master
+from pogofmu import experiments
 from pogofmu import ssp
 
 matplotlib = pytest.importorskip("matplotlib")
@@ -26,8 +26,8 @@ def runs():
     """Each FMU's default experiment as the master script runs it, with its model."""
     out = {}
     for name in all_fmus():
-        model = master.model_of(DIST / f"{name}.fmu")
-        out[name] = (master.simulate_default(DIST / f"{name}.fmu", model=model), model)
+        model = experiments.model_of(DIST / f"{name}.fmu")
+        out[name] = (experiments.simulate_default(DIST / f"{name}.fmu", model=model), model)
     return out
 
 
@@ -47,7 +47,7 @@ def test_every_panel_has_its_units_and_integer_signals_integer_ticks(name, runs)
     units = md_units(name)
     integer = {v.name for v in read_model_description(str(DIST / f"{name}.fmu")).modelVariables
                if v.type == "Integer"}
-    figs = master.figures(res, model, name)
+    figs = experiments.figures(res, model, name)
     try:
         assert len(figs) == len(model.plots)
         for fig, panels in zip(figs, model.plots):
@@ -85,7 +85,7 @@ def test_penetrator_loop_shows_loading_above_unloading(runs):
     md = read_model_description(str(DIST / "Penetrator.fmu"))
     start = {v.name: float(v.start) for v in md.modelVariables if v.causality == "parameter" and v.type == "Real"}
     K, n = start["K"], start["n"]
-    figs = master.figures(res, model, "Penetrator")
+    figs = experiments.figures(res, model, "Penetrator")
     try:
         [(fig, ax)] = [(f, a) for f in figs for a in f.axes if a.get_xlabel().startswith("delta [")]
         lines = {ln.get_label(): ln for ln in ax.get_lines()}

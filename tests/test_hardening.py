@@ -1,8 +1,9 @@
-"""Issue 9 (hardening), the engine's items: one regression test per item, each against an
-independent reference (closed form, the closed-form event table, the energy balance, the rule).
-
-Items 8 and 10-13 (SSP master, README usage, figures, packaging) are tested elsewhere.  Item 5's
-test is tests/test_conformance.py::test_bad_step_and_nan_input_are_refused_instance_survives.
+"""The engine's hardening: starts on a guard, the work budget, tight tolerances, extreme
+parameters, messages that name the rule, refused tolerances, the event log in constant memory —
+each against an independent reference (closed form, the closed-form event table, the energy
+balance, the rule). Bad steps and NaN inputs: tests/test_conformance.py; the SSP master's
+inputs and memory: tests/test_ssp.py; the README's usage and packaging:
+tests/test_readme_and_packaging.py.
 """
 import math
 import re
@@ -24,7 +25,7 @@ def _energy_residual(run, soil=False):
     return float(np.max(np.abs(bal - E[0])))
 
 
-# ---- item 1: a start exactly on a guard behaves as the physics says --------------------------------
+# ---- a start exactly on a guard behaves as the physics says --------------------------------
 
 @pytest.mark.parametrize("name", STICKS)
 def test_stick_at_free_length_moving_up_lifts_off_at_t0(name):
@@ -69,7 +70,7 @@ def test_thrust_above_weight_lifts_off_from_rest_at_t0(solver, before_init):
     assert y == pytest.approx(1.0 + G * 0.25 / 2, abs=1e-9)
 
 
-# ---- item 2: a work budget; a model without states takes no steps ---------------------------------
+# ---- a work budget; a model without states takes no steps ---------------------------------
 
 def _run_until_error(name, h=1e-2, t_end=10.0, **params):
     from fmpy.fmi1 import FMICallException
@@ -127,7 +128,7 @@ def test_a_model_without_states_takes_no_internal_steps():
     assert not run.errors
 
 
-# ---- item 3: tight tolerances work -----------------------------------------------------------------
+# ---- tight tolerances work -----------------------------------------------------------------
 
 @pytest.mark.parametrize("abs_tol, rel_tol, tol", [(1e-20, 1e-6, 1e-6), (1e-24, 1e-10, 1e-8), (1e-300, 1e-6, 1e-6)])
 def test_tight_absolute_tolerances_work(abs_tol, rel_tol, tol):
@@ -140,7 +141,7 @@ def test_tight_absolute_tolerances_work(abs_tol, rel_tol, tol):
     assert max(abs(a["time"] - b["time"]) for a, b in zip(got, ref)) < tol
 
 
-# ---- item 4: SMA with k2 close to k1; Penetrator with a huge K ------------------------------------
+# ---- SMA with k2 close to k1; Penetrator with a huge K ------------------------------------
 
 def test_sma_with_k2_almost_k1_is_the_linear_stick():
     """k2 -> k1: both plateaus merge with the elastic lines, the leg is the linear spring k1 = 100 ||
@@ -168,7 +169,7 @@ def test_penetrator_soil_stiffness_beyond_resolution_is_refused():
     assert "K = 1e+17" in text and "c/K_s" in text and ">= 1e-09 s" in text, text
 
 
-# ---- item 6: every message names the variable, value and rule ---------------------------------------
+# ---- every message names the variable, value and rule ---------------------------------------
 
 @pytest.mark.parametrize("name", STICKS + ["Penetrator"])
 @pytest.mark.parametrize("param, value", [("g", 1e300), ("m", 1e-300), ("k", 1e300)])
@@ -180,7 +181,7 @@ def test_extreme_magnitudes_get_a_rule_not_a_raw_error(name, param, value):
     assert not any(raw in text for raw in RAW), text
 
 
-# ---- item 7: tolerances that cannot control the error are refused ---------------------------------
+# ---- tolerances that cannot control the error are refused ---------------------------------
 
 def test_loose_abs_tol_is_refused_with_the_scale_it_must_resolve():
     """abs_tol = 1, max_step = 0.287 completed with the energy balance off by 90 % of E(0)."""
@@ -198,7 +199,7 @@ def test_loose_rel_tol_is_refused():
     assert_parameter_rejected("Penetrator", {"abs_tol": 1e-3}, "abs_tol", "resting depth in the soil")
 
 
-# ---- item 9: the event log in constant memory ---------------------------------------------------
+# ---- the event log in constant memory ---------------------------------------------------
 
 def _elastic_ball():
     from pogofmu.runtime.model import FALLING, Event, HybridModel, Parameter, Variable

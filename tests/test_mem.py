@@ -1,7 +1,7 @@
 """PogoStickMem.fmu (docs/models.md "PogoStickMem"): mem-spring and mem-dashpot legs, through the built FMU.
 
 References are independent of the code under test: the closed-form event times of the basic stick
-(pogofmu.closed_form), a solve_ivp model of the mem-stick (tests/references.py), the
+(pogofmu.references.closed_form), a solve_ivp model of the mem-stick (tests/references.py), the
 energy balance, and the geometry of the pinched loop.
 """
 import re

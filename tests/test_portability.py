@@ -278,7 +278,7 @@ def _fmpy_process(job):
             "for path in json.loads(sys.argv[1]):\n"
             "    r = simulate_fmu(path, stop_time=0.5, output_interval=1e-2)\n"
             "    assert abs(r['time'][-1] - 0.5) < 1e-9\n"
-            "try:\n"  # an instance that fails, freed afterwards (the old double release)
+            "try:\n"  # an instance that fails, freed afterwards (where a double release would show)
             "    simulate_fmu(json.loads(sys.argv[1])[0], stop_time=0.5, start_values={'m': -1.0})\n"
             "except Exception:\n"
             "    pass\n")
@@ -292,9 +292,8 @@ def _libcosim_process(job):
 
 def test_one_hundred_processes_load_run_free_and_exit_cleanly(c_host, unzipped):
     """100 processes per host, two at a time — fmpy (all five FMUs, plus a failing instance freed afterwards),
-    libcosimpy, the C host — each load, run and free FMUs and exit with status 0 (the old binary
-    corrupted the heap when an instance that had failed was freed; the test session used to end
-    with os._exit to hide it)."""
+    libcosimpy, the C host — each load, run and free FMUs and exit with status 0 (a binary that released a failed
+    instance's Python slave twice corrupts the heap, which shows at process exit)."""
     assert TEARDOWN_PROCESSES >= 1, f"POGOFMU_TEARDOWN_PROCESSES = {TEARDOWN_PROCESSES}: nothing would be tested"
     d = unzipped("PogoStick")
     md = model_description("PogoStick")

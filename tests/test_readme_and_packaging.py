@@ -25,7 +25,7 @@ else:
 
 
 def test_readme_says_how_fmpy_reports_a_bottomed_out_leg():
-    """Issue 9 item 11: not a quiet stop. A fresh fmpy process running the README's example
+    """Not a quiet stop. A fresh fmpy process running the README's example
     gets FMICallException with the text the README quotes, and the README says fmi2Error."""
     proc = subprocess.run([sys.executable, "-c", BOTTOM_OUT], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
@@ -57,7 +57,7 @@ def test_readme_runs_the_ssp_master_with_the_venv_or_the_console_command():
 
 
 def test_license_is_an_spdx_expression_with_a_setuptools_that_reads_it():
-    """Issue 9 item 13: `license = "MIT"` (PEP 639), not the deprecated table, with setuptools
+    """`license = "MIT"` (PEP 639), not the deprecated table, with setuptools
     >= 77 required to build (older ones reject the string form), and the installed metadata
     carries it as License-Expression (what setuptools >= 77 writes for the string form)."""
     from packaging.licenses import canonicalize_license_expression

@@ -1,4 +1,4 @@
-"""SpaceHopper.ssp (issue 5): PogoStick + HopController composed in SSP, run by two masters.
+"""SpaceHopper.ssp: PogoStick + HopController composed in SSP, run by two masters.
 
 References are independent of the code under test: the SSP 1.0 XSD schemas shipped with fmpy,
 the closed-form flight parabola (apex = y + ydot^2/(2 g)), the control law re-implemented here
@@ -143,8 +143,8 @@ def test_without_thrust_the_apex_decays(tmp_path):
 # ---------------------------------------------------------------------------------------------
 
 def continuous_first_apex(p):
-    """The continuous-time closed loop (pogofmu.closed_loop: the law inside a scipy ODE)."""
-    from pogofmu.closed_loop import first_apex
+    """The continuous-time closed loop (pogofmu.references.closed_loop: the law inside a scipy ODE)."""
+    from pogofmu.references.closed_loop import first_apex
 
     return first_apex(p)
 
@@ -199,7 +199,7 @@ def test_coupling_delay(algorithm, lag):
 
 def run_libcosim_ssp(path, step, times, variables, timeout=300):
     payload = json.dumps({"ssp": str(path), "step": step, "times": list(times), "variables": variables})
-    proc = subprocess.run([sys.executable, "-m", "pogofmu.libcosim_runner", payload], capture_output=True, text=True,
+    proc = subprocess.run([sys.executable, "-m", "pogofmu.ssp.libcosim_runner", payload], capture_output=True, text=True,
                           timeout=timeout)
     assert proc.returncode == 0, f"libcosimpy failed ({proc.returncode}): {proc.stderr[-2000:]}"
     out = json.loads(proc.stdout.strip().splitlines()[-1])
@@ -364,7 +364,7 @@ def test_command_line_run_writes_csv_plot_and_progress(tmp_path):
 
 
 # ---------------------------------------------------------------------------------------------
-# issue 9, item 8: every user input checked before the first step, never a traceback
+# every user input checked before the first step, never a traceback
 # ---------------------------------------------------------------------------------------------
 
 def _ssv_edit(old, new):
@@ -399,8 +399,8 @@ BAD_INPUT = {
 
 @pytest.mark.parametrize("case", sorted(BAD_INPUT))
 def test_bad_user_input_is_refused_before_the_first_step(case, tmp_path, monkeypatch, capsys):
-    """Issue 9 item 8: each bad input ends in one message naming it, exit status 1, no traceback,
-    before any FMU steps (no progress line, no CSV; before the fix --out failed after the run)."""
+    """Each bad input ends in one message naming it, exit status 1, no traceback, before any FMU
+    steps (no progress line, no CSV: a bad --out must not cost the user a whole run)."""
     edit, args, words = BAD_INPUT[case]
     pkg = variant(tmp_path)
     if edit:
@@ -498,7 +498,7 @@ def test_a_run_failing_midway_keeps_its_rows_as_incomplete_not_as_the_result(tmp
 
 
 # ---------------------------------------------------------------------------------------------
-# issue 9, item 10: results streamed to disk, the figure decimated, the memory flat
+# results streamed to disk, the figure decimated, the memory flat
 # ---------------------------------------------------------------------------------------------
 
 def test_envelope_keeps_every_slice_min_and_max():
@@ -545,6 +545,7 @@ def test_csv_stream_memory_does_not_grow_with_the_run(tmp_path):
         tracemalloc.stop()
         return p
 
+    peak(1_000)  # warm-up: what the first stream allocates once (imports, caches) is in neither figure
     small, big = peak(10_000), peak(100_000)
     assert big - small < 0.5e6, (small, big)
     with (tmp_path / "r100000.csv").open() as f:
@@ -572,7 +573,7 @@ def test_run_command_streams_the_same_rows_as_the_in_memory_result(tmp_path):
 
 
 def test_run_command_memory_is_flat_in_the_run_length(tmp_path):
-    """Issue 9 item 10 end to end: the peak RSS of the real command (fresh process each, CSV and
+    """End to end: the peak RSS of the real command (fresh process each, CSV and
     figure included) for 20 000 steps is within 5 MB of that for 2 000 steps; keeping every row
     and plotting it all, as before, cost ~0.7 kB per step (13 MB here, 858 MB at 10^6 steps).
     benchmarks/bench_soak.py measures 10^4 .. 10^6 steps."""
@@ -582,7 +583,9 @@ def test_run_command_memory_is_flat_in_the_run_length(tmp_path):
     def peak(n):
         cmd = [sys.executable, "-m", "pogofmu.ssp", "run", str(SSP), "--stop-time", repr(n * 1e-3), "--quiet",
                "--out", str(tmp_path / str(n))]
-        return peak_rss(cmd, tmp_path)[0]
+        # the smaller of two fresh processes: what can disturb a peak (a late collection, an arena
+        # the allocator keeps) only adds, while 0.7 kB per kept row would show in both
+        return min(peak_rss(cmd, tmp_path)[0] for _ in range(2))
 
     short, long = peak(2_000), peak(20_000)
     assert long - short < 5.0, (short, long)

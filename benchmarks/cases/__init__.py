@@ -24,7 +24,7 @@ How to add a case (e.g. ``pogostick_mem.py`` for PogoStickMem)
    ``[(time, event_name), ...]`` up to ``stop_time``:
 
    * a closed form: :func:`closed_form_reference` (the basic stick's events computed by
-     ``pogofmu.closed_form``), or :func:`csv_reference` for a CSV with ``event`` and ``time_s``
+     ``pogofmu.references.closed_form``), or :func:`csv_reference` for a CSV with ``event`` and ``time_s``
      columns;
    * no closed form: an independent model, not the peer's own loop (a mistake in the peer would
      otherwise make it look exact): :func:`tests_reference` takes the scipy model of the test
@@ -102,9 +102,9 @@ def csv_reference(path) -> Callable[[Case], Events]:
 
 
 def closed_form_reference(case: Case) -> Events:
-    """The basic stick's events in closed form (pogofmu.closed_form, 40-digit roots) for the
+    """The basic stick's events in closed form (pogofmu.references.closed_form, 40-digit roots) for the
     case's parameters, up to its stop time."""
-    from pogofmu.closed_form import events_as_floats
+    from pogofmu.references.closed_form import events_as_floats
 
     return [(e["time"], e["name"]) for e in events_as_floats(case.params, case.stop_time)]
 

@@ -66,6 +66,6 @@ CASE = Case(
     params={},  # the default experiment: drop from y = 1.5 m, 19 events, settles after t = 7.07 s
     scipy_loop=scipy_loop,
     reference=closed_form_reference,
-    reference_label="closed form (pogofmu.closed_form, 19 events)",
+    reference_label="closed form (pogofmu.references.closed_form, 19 events)",
     targets=True,
 )

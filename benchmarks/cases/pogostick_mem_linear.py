@@ -14,7 +14,7 @@ CASE = Case(
     params={"spring_law": 0, "gamma": 0.0},
     scipy_loop=scipy_loop,
     reference=closed_form_reference,
-    reference_label="closed form (pogofmu.closed_form, 19 events)",
+    reference_label="closed form (pogofmu.references.closed_form, 19 events)",
     compare_to="PogoStick",
     max_ratio=1.3,
 )

@@ -13,7 +13,7 @@ FMUs, where the build rewrites the imports to the FMU's private copy of :mod:`po
 
 Two floors: :mod:`pogofmu.runtime` is the code that goes into every FMU (model, engine, FMI
 adapters; standard library only); the host-side tools beside it — :mod:`pogofmu.build` (the
-exporter), :mod:`pogofmu.master` (default experiments), :mod:`pogofmu.ssp` (the SSP master),
+exporter), :mod:`pogofmu.experiments` (default experiments), :mod:`pogofmu.ssp` (the SSP master),
 :mod:`pogofmu.sweep`, :mod:`pogofmu.studies` and :mod:`pogofmu.cli` (the ``pogofmu`` command) —
 never go into an FMU.
 """

@@ -18,12 +18,12 @@ from __future__ import annotations
 import ctypes
 import math
 import sys
-import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Dict, List, Optional
 from xml.etree import ElementTree as ET
 
+from pogofmu.fmpy_raw import raw_function
 from pogofmu.runtime.status import status_name
 
 from .package import SSPError
@@ -141,7 +141,7 @@ class Component:
         n = len(vrs)
         vr_arr = (ctypes.c_uint32 * n)(*vrs)
         buf = (ctype * n)()
-        fget, fset = self.fmu._functions[names[0]], self.fmu._functions[names[1]]
+        fget, fset = raw_function(self.fmu, names[0]), raw_function(self.fmu, names[1])
         comp, fmi3 = self.fmu.component, self.fmi == 3
 
         def get():
@@ -205,7 +205,7 @@ class Component:
         the saved FMU state and makes those calls again — the same calls from the same state, so
         the same state to the bit (the standard's promise for fmi2SetFMUstate/fmi3SetFMUState).
         A master that may have to go back saves before every step, and goes back only at events
-        (issue 17: "save only what is needed"; a save of a Python-hosted FMU costs ~20 µs)."""
+        (saving only what is needed: a save of a Python-hosted FMU costs ~20 µs)."""
         j = self._journal
         if j is not None and len(j) < 2 * REPLAY_STEPS:
             self._mark = len(j)
@@ -283,8 +283,8 @@ class Fmi2CoSimulation(Component):
         self.can_save = bool(md.coSimulation.canGetAndSetFMUstate)
         self.counts_events = self.events is not None and "n_events" in self.variables \
             and "t_last_event" in self.variables
-        self._do_step = self.fmu._functions["fmi2DoStep"]
-        self._get_state = self.fmu._functions["fmi2GetFMUstate"] if self.can_save else None
+        self._do_step = raw_function(self.fmu, "fmi2DoStep")
+        self._get_state = raw_function(self.fmu, "fmi2GetFMUstate") if self.can_save else None
 
     def _set(self, kind, vrs, values):
         f = {"real": self.fmu.setReal, "int": self.fmu.setInteger, "boolean": self.fmu.setBoolean,
@@ -379,7 +379,7 @@ class _Fmi3(Component):
             self._state = self.fmu.getFMUState()
             self._state_ref = ctypes.byref(self._state)
         else:
-            status = self.fmu._functions["fmi3GetFMUState"](self.fmu.component, self._state_ref)
+            status = raw_function(self.fmu, "fmi3GetFMUState")(self.fmu.component, self._state_ref)
             if status > 1:
                 raise _call_failed("fmi3GetFMUState", status)
 
@@ -411,7 +411,7 @@ class Fmi3CoSimulation(_Fmi3):
         # fmi3DoStep called directly, its four results in buffers made once
         self._flags = [ctypes.c_bool(), ctypes.c_bool(), ctypes.c_bool(), ctypes.c_double()]
         self._flag_refs = [ctypes.byref(f) for f in self._flags]
-        self._do_step = self.fmu._functions["fmi3DoStep"]
+        self._do_step = raw_function(self.fmu, "fmi3DoStep")
 
     def exit_initialization(self, t0):
         self.fmu.exitInitializationMode()  # then in Event Mode when eventModeUsed (the master iterates)
@@ -507,9 +507,3 @@ class Fmi3ModelExchange(_Fmi3):
         """(enterEventMode, terminateSimulation)."""
         enter, terminate = self.fmu.completedIntegratorStep()
         return bool(enter), bool(terminate)
-
-
-def source_fmi_version(path: Path) -> str:
-    """The fmiVersion of the FMU at ``path`` (read from its modelDescription.xml)."""
-    with zipfile.ZipFile(path) as z:
-        return ET.fromstring(z.read("modelDescription.xml")).get("fmiVersion", "")

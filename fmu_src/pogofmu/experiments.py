@@ -1,6 +1,6 @@
 """fmpy master script: simulate the default experiment of every FMU in dist/ and write results.
 
-    python -m pogofmu.master [--dist dist] [--out results] [NAME ...]
+    python -m pogofmu.experiments [--dist dist] [--out results] [NAME ...]
 
 For each FMU ``<Name>.fmu`` it writes ``results/<Name>/timeseries.csv`` (every output on the
 default experiment's grid), ``results/<Name>/events.csv`` (the event table, read from the

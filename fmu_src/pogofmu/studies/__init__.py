@@ -25,7 +25,7 @@ from typing import Optional
 
 from pogofmu.sweep import Settings, Sweep, SweepError, add_arguments, execute, make_points, parse_sample
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 TOLERANCES = [10.0 ** -k for k in range(3, 13)]  # 1e-3 ... 1e-12
 SOIL_DEFAULTS = [  # the soil of the default drop (K = 1e4 N/m^1.5, n = 1.5, c_r = 0.5), made uncertain
     "K=lognormal(9.2103404,0.5)",  # median 1e4 N/m^n (ln 1e4 = 9.2103404), a factor 1.65 per sigma
@@ -63,10 +63,10 @@ def _plt():
 
 def reference_times(path: Optional[Path] = None):
     """Closed-form event times [(name, t)] of the default PogoStick drop: computed
-    (pogofmu.closed_form, 40-digit roots), or read from a CSV with ``event`` and ``time_s``
+    (pogofmu.references.closed_form, 40-digit roots), or read from a CSV with ``event`` and ``time_s``
     columns (``--reference``)."""
     if path is None:
-        from pogofmu.closed_form import events_as_floats
+        from pogofmu.references.closed_form import events_as_floats
 
         return [(e["name"], e["time"]) for e in events_as_floats()]
     if not path.is_file():
@@ -188,7 +188,7 @@ def scipy_work(method: str, max_step: float, rel_tol: float, stop: float = STOP)
 
 
 def work_precision(out: Path, fmu: Path, reference: Optional[Path] = None, workers=None, scheduler=None, progress=True):
-    from pogofmu.closed_form import basic_state
+    from pogofmu.references.closed_form import basic_state
 
     ref = reference_times(reference)
     y_ref, ydot_ref = (float(v) for v in basic_state(STOP))
@@ -390,7 +390,7 @@ def study_main(argv, prog="pogofmu study"):
     so.add_argument("--sample", action="append", default=[], metavar="NAME=DIST(a,b)",
                     help=f"replace a default distribution or add one (defaults: {' '.join(SOIL_DEFAULTS)})")
     add_arguments(so)
-    from pogofmu import coupling_study
+    from pogofmu.studies import coupling as coupling_study
 
     coupling_study.add_parser(sub)
     args = ap.parse_args(argv)

@@ -1,6 +1,6 @@
 """Run an SSP package under libcosimpy (CosimExecution.from_ssp_file) and print JSON samples.
 
-``python -m pogofmu.libcosim_runner '<json>'``, in a process of its own (a native crash stays out
+``python -m pogofmu.ssp.libcosim_runner '<json>'``, in a process of its own (a native crash stays out
 of the caller): used by tests/test_ssp.py and ``pogofmu study coupling`` (libcosimpy is a test
 dependency; the study leaves libcosim out where it is not installed).
 libcosim applies, for every component, the *first* ParameterBinding of the .ssd (its parameter

@@ -1,7 +1,7 @@
 """``pogofmu study coupling``: the SpaceHopper's first-apex error against the communication step,
 for every master algorithm, on the Moon and the Earth — one CSV, one log-log figure, the slopes.
 
-The reference is the continuous-time closed loop (:mod:`pogofmu.closed_loop`: the thrust law
+The reference is the continuous-time closed loop (:mod:`pogofmu.references.closed_loop`: the thrust law
 inside a scipy ODE); the first apex of each run is read from its first flight row after the
 first contact whose held thrust is zero (``y + ydot^2/(2 g)``, exact in flight). Algorithms:
 
@@ -27,7 +27,7 @@ import time
 import zipfile
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 STEPS = (1e-4, 3e-4, 1e-3, 3e-3, 1e-2, 3e-2, 1e-1)
 STOP = {"moon": 2.1, "earth": 0.9, "ceres": 6.0}  # past the first apex; a whole number of every step
 ALGORITHMS = {  # name: (package, simulate keywords)
@@ -57,7 +57,7 @@ class StudyError(Exception):
 
 def parameter_values(package: Path, body: str) -> dict:
     """The values of the package's ``resources/<body>.ssv`` (read with the master's reader)."""
-    from .ssp.package import SSPError, read_ssv
+    from ..ssp.package import SSPError, read_ssv
 
     with tempfile.TemporaryDirectory() as tmp:
         with zipfile.ZipFile(package) as z:
@@ -101,7 +101,7 @@ def _run_libcosim(package: Path, body: str, step: float, stop: float, tmp: Path)
     n = int(round(stop / step))
     payload = json.dumps({"ssp": str(_libcosim_package(package, body, tmp)), "step": step, "n_steps": n,
                           "variables": {"PogoStick": ["y", "ydot", "s", "F_ext"]}})
-    proc = subprocess.run([sys.executable, "-m", "pogofmu.libcosim_runner", "-"], input=payload, capture_output=True,
+    proc = subprocess.run([sys.executable, "-m", "pogofmu.ssp.libcosim_runner", "-"], input=payload, capture_output=True,
                           text=True, timeout=3600)
     if proc.returncode:
         raise StudyError(f"libcosim failed ({proc.returncode}): {proc.stderr.strip().splitlines()[-1:]}")
@@ -116,8 +116,8 @@ def _run_libcosim(package: Path, body: str, step: float, stop: float, tmp: Path)
 
 
 def run_study(out: Path, packages: dict, bodies, steps, algorithms, progress=True):
-    from .closed_loop import apex_of_run, first_apex
-    from .ssp import SSPError, simulate
+    from ..references.closed_loop import apex_of_run, first_apex
+    from ..ssp import SSPError, simulate
 
     out.mkdir(parents=True, exist_ok=True)
     rows = []
