@@ -123,14 +123,14 @@ class Limit:
     """The engine loop of one model, compiled from the generated C and the engine's files."""
 
     def __init__(self, name: str, dest: Path):
-        from pogofmu.codegen.build import ENGINE, compile_c, write_model_source, write_pairs_source
+        from pogofmu.codegen.build import ENGINE, ENGINE_SOURCES, compile_c, write_model_source, write_pairs_source
         from pogofmu.runtime.engine import SOLVER_PARAMETERS
         from pogofmu.runtime.models import get
 
         model = get(name)
         folder = dest / f"limit_{name}"
-        sources = [write_model_source(name, folder), write_pairs_source(folder), ENGINE / "pg_engine.c",
-                   ENGINE / "pg_support.c", HERE / "c" / "engine_loop.c"]
+        sources = [write_model_source(name, folder), write_pairs_source(folder),
+                   *(ENGINE / s for s in ENGINE_SOURCES), HERE / "c" / "engine_loop.c"]
         self.exe = compile_c(sources, folder / "engine_loop", shared=False, include=[ENGINE])
         p = model.defaults()
         s = [par.default for par in SOLVER_PARAMETERS]

@@ -96,7 +96,7 @@ def write_pairs_source(folder: Path) -> Path:
     return path
 
 
-ENGINE_SOURCES = ("pg_engine.c", "pg_support.c")
+ENGINE_SOURCES = ("pg_engine.c", "pg_rodas.c", "pg_support.c")
 
 
 def engine_library(model, folder: Path, cc: Optional[str] = None) -> Path:

@@ -17,7 +17,7 @@ from typing import Dict, List, Tuple
 
 from pogofmu.memo import once_per_model
 from pogofmu.runtime.engine import SOLVER_PARAMETERS
-from pogofmu.runtime.engine.settings import check_solver_parameters, domain_slack
+from pogofmu.runtime.engine.settings import METHOD_NAMES, check_solver_parameters, domain_slack
 from pogofmu.runtime.model import HybridModel, Params
 
 from .cprint import Printer, c_string, literal, message_lines, result_nodes
@@ -171,7 +171,7 @@ class ModelWriter:
         # calls them in its order); traced as one, the branches of each would multiply
         counts["check_settings"] = self.function(
             "pg_check_settings", ARGS["check_settings"],
-            lambda: check_solver_parameters(inp.s(), has_states=bool(model.states)),
+            lambda: check_solver_parameters(inp.s(), has_states=bool(model.states), methods=tuple(METHOD_NAMES)),
             lambda v, ref: ["return PG_OK;"], "the solver's settings")
         counts["check"] = self.function("pg_check", ARGS["check"], lambda: model.check_parameters(inp.p()),
                                         lambda v, ref: ["return PG_OK;"], "the parameter rules")
