@@ -149,9 +149,10 @@ static int guard_at(PgEngine *e, int i, const double *x, double *g)
 
 /* ---- the Jacobian (Rodas5P) ---------------------------------------------------------------- */
 static const double NO_INPUT_MOVE[PG_MAX_U];
+#define CBRT_EPS 6.055454452393343e-06 /* cbrt(EPS) */
 
 /* J = d flow / dx at (t, y) and dT = d flow / dt, unless they are kept for this point: exact columns
- * from the model's flow_jvp (dual numbers) where it has one, forward differences otherwise; dT by
+ * from the model's flow_jvp (dual numbers) where it has one, central differences otherwise; dT by
  * a forward difference (exactly 0 for a flow that does not read t) */
 static int jacobian(PgEngine *e, double t, const double *y, const double *f)
 {
@@ -165,13 +166,17 @@ static int jacobian(PgEngine *e, double t, const double *y, const double *f)
             sx[j] = 1.0;
             TRY(e->model->flow_jvp(t, y, e->q, e->u, e->p, sx, NO_INPUT_MOVE, col, &e->msg));
             for (int i = 0; i < n; ++i) e->J[i * PG_MAX_X + j] = col[i];
-        } else {
+        } else { /* central differences: a Rosenbrock method's order rests on the Jacobian */
+            double col_m[PG_MAX_X];
             memcpy(yp, y, nb);
-            double d = sqrt(EPS * pmax(1e-5, fabs(y[j])));
+            double d = CBRT_EPS * pmax(1e-5, fabs(y[j]));
             yp[j] = y[j] + d;
-            d = yp[j] - y[j]; /* the step as represented */
+            double up = yp[j];
             TRY(model_fun(e, t, yp, col, &e->msg));
-            for (int i = 0; i < n; ++i) e->J[i * PG_MAX_X + j] = (col[i] - f[i]) / d;
+            yp[j] = y[j] - d;
+            double width = up - yp[j]; /* the step as represented */
+            TRY(model_fun(e, t, yp, col_m, &e->msg));
+            for (int i = 0; i < n; ++i) e->J[i * PG_MAX_X + j] = (col[i] - col_m[i]) / width;
         }
     }
     double dt = sqrt(EPS) * pmax(fabs(t), 1.0);
