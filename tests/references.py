@@ -177,7 +177,7 @@ def _event(fun, direction, terminal):
 
 
 @functools.lru_cache(maxsize=None)
-def _reference_cached(t_end, items, method="DOP853", rtol=1e-13):
+def _reference_cached(t_end, items, method="DOP853", rtol=1e-13, atol=1e-15):
     P = dict(items)
     t, x = 0.0, [P["y_0"], P["ydot_0"], 0.0]
     s, d0, record = 0, P["d0dot"], 0.0
@@ -196,7 +196,7 @@ def _reference_cached(t_end, items, method="DOP853", rtol=1e-13):
         else:
             events = [_event(lambda t, x, s, lam, P: x[2], -1, True),
                       _event(lambda t, x, s, lam, P: _rhs(t, x, 1, lam, P)[2], -1, False)]
-        sol = solve_ivp(_rhs, (t, t_end), x, method=method, rtol=rtol, atol=1e-15, events=events,
+        sol = solve_ivp(_rhs, (t, t_end), x, method=method, rtol=rtol, atol=atol, events=events,
                         args=(s, lam, P))
         assert sol.status >= 0, sol.message
         if s == 1:
