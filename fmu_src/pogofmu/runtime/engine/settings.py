@@ -73,12 +73,11 @@ def check_solver_parameters(s: Params, has_states: bool = True, methods=PYTHON_M
         v = s[name]
         if not fmath.is_number(v):
             raise ParameterError(f"parameter {name} = {v!r} violates the rule: {name} must be a number")
-    if tuple(methods) == PYTHON_METHODS:
-        require(s.method in PYTHON_METHODS, "method", s.method, "method must be 5 (DOPRI5) or 8 (DOP853) (0, "
-                "automatic, and 1, Rodas5P, run in native FMUs only: pogofmu export --backend native)")
-    else:
-        require(s.method in tuple(METHOD_NAMES), "method", s.method, "method must be 0 (automatic: DOPRI5, Rodas5P "
-                "while the problem is stiff), 1 (Rodas5P, stiff), 5 (DOPRI5) or 8 (DOP853)")
+    require(s.method in tuple(METHOD_NAMES), "method", s.method, "method must be 0 (automatic: DOPRI5, Rodas5P "
+            "while the problem is stiff), 1 (Rodas5P, stiff), 5 (DOPRI5) or 8 (DOP853)")
+    if tuple(methods) == PYTHON_METHODS:  # (never traced into a native FMU: it runs every method)
+        require(s.method in PYTHON_METHODS, "method", s.method, "the Python engine runs method 5 (DOPRI5) or 8 "
+                "(DOP853); 0 (automatic) and 1 (Rodas5P) run in native FMUs only: pogofmu export --backend native")
     require(1e-14 <= s.rel_tol <= REL_TOL_MAX, "rel_tol", s.rel_tol,
             f"1e-14 <= rel_tol <= {REL_TOL_MAX:g} (a looser relative tolerance does not control the error)")
     require(s.abs_tol > 0 and fmath.isfinite(s.abs_tol), "abs_tol", s.abs_tol, "0 < abs_tol < inf")
