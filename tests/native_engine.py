@@ -24,12 +24,17 @@ class NativeEngine:
                                        C.POINTER(C.c_long)]
         L.pg_engine_last_event.argtypes = [C.c_void_p, C.POINTER(C.c_double), C.POINTER(C.c_int)]
         self.model = PgModel.in_dll(L, "PG_MODEL")
+        # the same model without its exact directional derivative: the engine's Jacobian by differences
+        self.model_without_jvp = PgModel.from_buffer_copy(self.model)
+        self.model_without_jvp.flow_jvp = None
         self.size = L.pg_engine_sizeof()
+        L.pg_engine_stats.argtypes = [C.c_void_p, *[C.POINTER(C.c_long)] * 4, C.POINTER(C.c_int)]
 
-    def start(self, model, p, s, u, t0=0.0, t_stop=float("inf")):
-        """A new engine: ``(handle, None)`` or ``(None, message)``."""
+    def start(self, model, p, s, u, t0=0.0, t_stop=float("inf"), jvp=True):
+        """A new engine: ``(handle, None)`` or ``(None, message)``; ``jvp=False``: the model's
+        flow_jvp hidden (the Jacobian by differences, as for a model without one)."""
         buf = C.create_string_buffer(self.size)
-        rc = self.lib.pg_engine_init(buf, C.byref(self.model), arr([p[par.name] for par in model.parameters]),
+        rc = self.lib.pg_engine_init(buf, C.byref(self.model if jvp else self.model_without_jvp), arr([p[par.name] for par in model.parameters]),
                                      arr([s[par.name] for par in SOLVER_PARAMETERS]), arr(u), t0, t_stop)
         return (buf, None) if rc == 0 else (None, self.lib.pg_engine_message(buf).decode())
 
@@ -40,6 +45,12 @@ class NativeEngine:
         t, x, q, n = C.c_double(), (C.c_double * 32)(), (C.c_double * 16)(), C.c_long()
         self.lib.pg_engine_served(e, C.byref(t), x, q, C.byref(n))
         return t.value, list(x[:self.model.nx]), list(q[:self.model.nq]), n.value
+
+    def stats(self, e):
+        """(accepted steps, rejected steps, Jacobians, method switches, the method in use)"""
+        v, cur = [C.c_long() for _ in range(4)], C.c_int()
+        self.lib.pg_engine_stats(e, *(C.byref(x) for x in v), C.byref(cur))
+        return (*(x.value for x in v), cur.value)
 
     def last_event(self, e):
         t, i = C.c_double(), C.c_int()

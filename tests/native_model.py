@@ -42,7 +42,8 @@ class PgModel(C.Structure):
                 ("event_names", STRS), ("event_direction", C.POINTER(C.c_byte)),
                 ("has_time_scales", C.c_int), ("has_error_scales", C.c_int),
                 *((n, FN[n]) for n in ("check_settings", "check", "initial", "flow", "guard", "active", "jump",
-                                       "outputs", "domain", "time_scales", "error_scales"))]
+                                       "outputs", "domain", "time_scales", "error_scales")),
+                ("flow_jvp", C.c_void_p), ("outputs_jvp", C.c_void_p)]
 
 
 def arr(values, n=None):

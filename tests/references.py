@@ -177,7 +177,7 @@ def _event(fun, direction, terminal):
 
 
 @functools.lru_cache(maxsize=None)
-def _reference_cached(t_end, items):
+def _reference_cached(t_end, items, method="DOP853", rtol=1e-13, atol=1e-15):
     P = dict(items)
     t, x = 0.0, [P["y_0"], P["ydot_0"], 0.0]
     s, d0, record = 0, P["d0dot"], 0.0
@@ -196,7 +196,7 @@ def _reference_cached(t_end, items):
         else:
             events = [_event(lambda t, x, s, lam, P: x[2], -1, True),
                       _event(lambda t, x, s, lam, P: _rhs(t, x, 1, lam, P)[2], -1, False)]
-        sol = solve_ivp(_rhs, (t, t_end), x, method="DOP853", rtol=1e-13, atol=1e-15, events=events,
+        sol = solve_ivp(_rhs, (t, t_end), x, method=method, rtol=rtol, atol=atol, events=events,
                         args=(s, lam, P))
         assert sol.status >= 0, sol.message
         if s == 1:
@@ -218,9 +218,43 @@ def _reference_cached(t_end, items):
     return out, record
 
 
-def penetrator_reference(t_end=10.0, **par):
-    """[(name, time, state before jump)], largest penetration; for the parameters ``par``."""
-    return _reference_cached(t_end, tuple(sorted(dict(PENETRATOR_DEFAULTS, **par).items())))
+def penetrator_reference(t_end=10.0, method="DOP853", rtol=1e-13, **par):
+    """[(name, time, state before jump)], largest penetration; for the parameters ``par``, solved
+    by scipy's ``method`` (DOP853 or, for stiff soils, Radau) at ``rtol``."""
+    return _reference_cached(t_end, tuple(sorted(dict(PENETRATOR_DEFAULTS, **par).items())), method, rtol)
+
+
+def penetrator_contacts(t_end, method, rtol, **par):
+    """[(touchdown or liftoff, time)] of the Penetrator (the contact times, without the peaks)."""
+    return [(n, t) for n, t, _ in penetrator_reference(t_end, method, rtol, **par)[0] if n != "max_penetration"]
+
+
+def hard_stop_reference(t_end, F=30.0, method="Radau", rtol=1e-12, m=1.0, k=100.0, c=0.5, z_s=0.1, K=1e7, n=1.0,
+                        c_r=0.8, d0dot=1.0):
+    """[(contact or release, time)] of a mass on a spring and a dashpot pushed by a constant force
+    ``F`` against a Hunt-Crossley stop at z = z_s (examples/hard_stop/), from rest at z = 0."""
+    lam = 1.5 * (1 - c_r) * K / d0dot
+
+    def free(t, x):
+        return [x[1], (F - k * x[0] - c * x[1]) / m]
+
+    def stop(t, x):
+        d = max(x[0] - z_s, 0.0)
+        return [x[1], (F - k * x[0] - c * x[1] - (K + lam * x[1]) * d ** n) / m]
+
+    contact = _ev(lambda t, x: x[0] - z_s, 1, "contact")
+    release = _ev(lambda t, x: x[0] - z_s, -1, "release")
+    t, x, on, out = 0.0, [0.0, 0.0], False, []
+    while t < t_end:
+        sol = solve_ivp(stop if on else free, (t, t_end), x, method=method, rtol=rtol, atol=1e-15,
+                        events=[release if on else contact], max_step=0.01)
+        assert sol.status >= 0, sol.message
+        if sol.status == 0:
+            break
+        t, x = float(sol.t_events[0][0]), list(sol.y_events[0][0])
+        out.append(("release" if on else "contact", t))
+        on = not on
+    return out
 
 
 def hunt_crossley(state, d0, **par):

@@ -328,18 +328,28 @@ static void on_event(void *ctx, const PgEngine *e, const PgEvent *ev, long numbe
     note(nt, PG_ST_OK, "logEvents", m.text, 0);
 }
 
+/* method = 0: each switch between the explicit and the implicit method, with its time and estimate */
+static void on_switch(void *ctx, const PgEngine *e, double t, int from, int to, double h_rho)
+{
+    Notes *nt = ctx;
+    PgMsg m;
+    (void)e;
+    pg_engine_switch_message(&m, t, from, to, h_rho);
+    note(nt, PG_ST_OK, "logSolver", m.text, 0);
+}
+
 static void notes_begin(PgInstance *in, Notes *nt)
 {
     memset(nt, 0, sizeof *nt);
     nt->in = in;
     PgEngine *e = &in->st.sim;
-    e->on_event = on_event, e->on_warning = on_warning, e->hook_ctx = nt;
+    e->on_event = on_event, e->on_warning = on_warning, e->on_switch = on_switch, e->hook_ctx = nt;
 }
 
 static void notes_end(PgInstance *in, Notes *nt)
 {
     PgEngine *e = &in->st.sim;
-    e->on_event = NULL, e->on_warning = NULL, e->hook_ctx = NULL;
+    e->on_event = NULL, e->on_warning = NULL, e->on_switch = NULL, e->hook_ctx = NULL;
     for (size_t i = 0; i < nt->n; ++i) {
         say(in, nt->items[i].status, nt->items[i].category, nt->items[i].text);
         free(nt->items[i].text);
@@ -598,7 +608,8 @@ int pg_inst_serialize(PgInstance *in, const PgState *state, unsigned call_state,
         return refuse(in, &m);
     }
     PgState copy = *state;
-    copy.sim.on_event = NULL, copy.sim.on_warning = NULL, copy.sim.hook_ctx = NULL, copy.sim.model = NULL;
+    copy.sim.on_event = NULL, copy.sim.on_warning = NULL, copy.sim.on_switch = NULL, copy.sim.hook_ctx = NULL;
+    copy.sim.model = NULL;
     memcpy(bytes, head, nh);
     memcpy(bytes + nh, &copy, sizeof copy);
     bytes[nh + sizeof copy] = '\n';
@@ -677,7 +688,7 @@ void pg_inst_restore(PgInstance *in, const PgState *state)
 {
     if (state != &in->st) in->st = *state;
     in->st.sim.model = in->fmu->model;
-    in->st.sim.on_event = NULL, in->st.sim.on_warning = NULL, in->st.sim.hook_ctx = NULL;
+    in->st.sim.on_event = NULL, in->st.sim.on_warning = NULL, in->st.sim.on_switch = NULL, in->st.sim.hook_ctx = NULL;
     in->inputs_changed = 1;
     if (in->st.has_sim) {
         in->h_fast = fast_step_limit(in);

@@ -20,14 +20,26 @@ PGB_API size_t pgb_sizeof(void) { return sizeof(PgEngine); }
 
 PGB_API const char *pgb_message(const PgEngine *e) { return e->msg.text; }
 
+/* a method switch (method = 0) handed on as its text, as the native FMUs log it */
+typedef void (*PgbSwitchText)(const char *text);
+static void on_switch(void *ctx, const PgEngine *e, double t, int from, int to, double h_rho)
+{
+    (void)ctx;
+    PgMsg m;
+    pg_engine_switch_message(&m, t, from, to, h_rho);
+    PgbSwitchText to_caller = (PgbSwitchText)e->hook_ctx;
+    if (to_caller) to_caller(m.text);
+}
+
 /* pg_engine_init with the hooks set first (init keeps them), then the storm bound and the history:
  * keep_history < 0 keeps the engine's choice (the setting log_events) */
 PGB_API int pgb_init(PgEngine *e, const PgModel *model, const double *p, const double *s, const double *u, double t0,
                      double t_stop, int zeno_max_events, double zeno_window, int keep_history, PgEventHook on_event,
-                     PgWarnHook on_warning)
+                     PgWarnHook on_warning, PgbSwitchText on_switch_text)
 {
     memset(e, 0, sizeof *e);
-    e->on_event = on_event, e->on_warning = on_warning, e->hook_ctx = NULL;
+    e->on_event = on_event, e->on_warning = on_warning, e->on_switch = on_switch;
+    e->hook_ctx = (void *)on_switch_text;
     int rc = pg_engine_init(e, model, p, s, u, t0, t_stop);
     if (rc) return rc;
     if (zeno_max_events > 0) {
@@ -39,10 +51,12 @@ PGB_API int pgb_init(PgEngine *e, const PgModel *model, const double *p, const d
 }
 
 /* an engine restored from bytes: this process's model and hooks */
-PGB_API void pgb_rebind(PgEngine *e, const PgModel *model, PgEventHook on_event, PgWarnHook on_warning)
+PGB_API void pgb_rebind(PgEngine *e, const PgModel *model, PgEventHook on_event, PgWarnHook on_warning,
+                        PgbSwitchText on_switch_text)
 {
     e->model = model;
-    e->on_event = on_event, e->on_warning = on_warning, e->hook_ctx = NULL;
+    e->on_event = on_event, e->on_warning = on_warning, e->on_switch = on_switch;
+    e->hook_ctx = (void *)on_switch_text;
 }
 
 PGB_API void pgb_read(const PgEngine *e, double *out);

@@ -22,6 +22,18 @@
 #define STORM_EVENTS 5
 #define ABS_TOL_MAX_FRACTION 1e-3
 #define DOMAIN_SLACK 10.0
+/* method = 0: DOPRI5's stiffness test (Hairer-Wanner II, IV.10; dopri5.f): h*rho > STIFF_H_RHO in
+ * STIFF_STEPS accepted steps (CALM_RESET steps below it in a row forget them) switches to Rodas5P;
+ * h*rho < STIFF_H_RHO in CALM_STEPS accepted Rodas5P steps in a row (rho from the Jacobian) back.
+ * dopri5.f tests 3.25; this engine's step control (no PI term) settles a stability-bound DOPRI5
+ * at h*rho = 3.13 ... 3.17 (the Penetrator's contacts), below it: hence 3.0 */
+#define STIFF_H_RHO 3.0
+#define STIFF_STEPS 15
+#define CALM_RESET 6
+#define CALM_STEPS 15
+#define M_RODAS 1
+#define M_DOPRI5 5
+#define M_DOP853 8
 
 /* an error of the model's own (PG_RAISE) or of its arithmetic (PG_ARITH), as raised in Python */
 #define TRY(call) do { int rc_ = (call); if (rc_) return rc_; } while (0)
@@ -135,21 +147,140 @@ static int guard_at(PgEngine *e, int i, const double *x, double *g)
     return e->model->guard(i, x, e->q, e->u, e->p, g, &e->msg);
 }
 
+/* ---- the Jacobian (Rodas5P) ---------------------------------------------------------------- */
+static const double NO_INPUT_MOVE[PG_MAX_U];
+#define CBRT_EPS 6.055454452393343e-06 /* cbrt(EPS) */
+
+/* J = d flow / dx at (t, y) and dT = d flow / dt, unless they are kept for this point: exact columns
+ * from the model's flow_jvp (dual numbers) where it has one, central differences otherwise; dT by
+ * a forward difference (exactly 0 for a flow that does not read t) */
+static int jacobian(PgEngine *e, double t, const double *y, const double *f)
+{
+    int n = e->nx;
+    size_t nb = sizeof(double) * (size_t)n;
+    if (e->jac_ok && e->jac_t == t && memcmp(e->jac_y, y, nb) == 0) return PG_OK;
+    double col[PG_MAX_X], yp[PG_MAX_X];
+    for (int j = 0; j < n; ++j) {
+        if (e->model->flow_jvp) {
+            double sx[PG_MAX_X] = {0};
+            sx[j] = 1.0;
+            TRY(e->model->flow_jvp(t, y, e->q, e->u, e->p, sx, NO_INPUT_MOVE, col, &e->msg));
+            for (int i = 0; i < n; ++i) e->J[i * PG_MAX_X + j] = col[i];
+        } else { /* central differences: a Rosenbrock method's order rests on the Jacobian */
+            double col_m[PG_MAX_X];
+            memcpy(yp, y, nb);
+            double d = CBRT_EPS * pmax(1e-5, fabs(y[j]));
+            yp[j] = y[j] + d;
+            double up = yp[j];
+            TRY(model_fun(e, t, yp, col, &e->msg));
+            yp[j] = y[j] - d;
+            double width = up - yp[j]; /* the step as represented */
+            TRY(model_fun(e, t, yp, col_m, &e->msg));
+            for (int i = 0; i < n; ++i) e->J[i * PG_MAX_X + j] = (col[i] - col_m[i]) / width;
+        }
+    }
+    double dt = sqrt(EPS) * pmax(fabs(t), 1.0);
+    dt = (t + dt) - t;
+    TRY(model_fun(e, t + dt, y, col, &e->msg));
+    for (int i = 0; i < n; ++i) e->dT[i] = (col[i] - f[i]) / dt;
+    /* rho <= min(|J|_inf, |J|_1): a bound of the spectral radius, for the switch back */
+    double r_inf = 0.0, r_one = 0.0;
+    for (int i = 0; i < n; ++i) {
+        double a = 0.0, b = 0.0;
+        for (int j = 0; j < n; ++j) a += fabs(e->J[i * PG_MAX_X + j]), b += fabs(e->J[j * PG_MAX_X + i]);
+        r_inf = pmax(r_inf, a), r_one = pmax(r_one, b);
+    }
+    e->jac_rho = pmin(r_inf, r_one);
+    e->jac_t = t;
+    memcpy(e->jac_y, y, nb);
+    e->jac_ok = 1;
+    e->n_jacobians += 1;
+    return PG_OK;
+}
+
+/* one step of the method `method` (5, 8 or 1) from (t, y) with f = flow(t, y) */
+static int pair_step_of(PgEngine *e, int method, double t, const double *y, const double *f, double h,
+                        double *y_new, double *f_new, double *K)
+{
+    if (method == M_DOP853) return pg_dop853_step(model_fun, e, t, y, f, h, e->nx, y_new, f_new, K, &e->msg);
+    if (method == M_RODAS) {
+        int singular = 0;
+        TRY(jacobian(e, t, y, f));
+        return pg_rodas_step(model_fun, e, t, y, f, h, e->nx, e->J, e->dT, y_new, f_new, K, &singular, &e->msg);
+    }
+    return pg_dopri5_step(model_fun, e, t, y, f, h, e->nx, y_new, f_new, K, &e->msg);
+}
+
 static int pair_step(PgEngine *e, double t, const double *y, const double *f, double h, double *y_new,
                      double *f_new, double *K)
 {
-    if (e->method == 8) return pg_dop853_step(model_fun, e, t, y, f, h, e->nx, y_new, f_new, K, &e->msg);
-    return pg_dopri5_step(model_fun, e, t, y, f, h, e->nx, y_new, f_new, K, &e->msg);
+    return pair_step_of(e, e->cur, t, y, f, h, y_new, f_new, K);
 }
 
 static double error_norm(const PgEngine *e, const double *K, double h, const double *y, const double *y_new)
 {
-    if (e->method == 8) return pg_dop853_error_norm(K, h, y, y_new, e->atol, e->rtol, e->nx);
+    if (e->cur == M_DOP853) return pg_dop853_error_norm(K, h, y, y_new, e->atol, e->rtol, e->nx);
+    if (e->cur == M_RODAS) {
+        for (int i = 0; i < e->nx; ++i)
+            if (!isfinite(y_new[i])) return INFINITY; /* W singular at this h: a smaller step */
+        return pg_rodas_error_norm(K, y, y_new, e->atol, e->rtol, e->nx);
+    }
     return pg_dopri5_error_norm(K, h, y, y_new, e->atol, e->rtol, e->nx);
 }
 
-static double error_exponent(const PgEngine *e) { return e->method == 8 ? -1.0 / 8.0 : -1.0 / 5.0; }
-static int pair_order(const PgEngine *e) { return e->method == 8 ? 8 : 5; }
+static double error_exponent(const PgEngine *e) { return e->cur == M_DOP853 ? -1.0 / 8.0 : -1.0 / 5.0; }
+static int pair_order(const PgEngine *e) { return e->cur == M_DOP853 ? 8 : 5; }
+
+/* DOPRI5's stiffness estimate h*rho = h |k7 - k6| / |y_new - Y6| (Hairer-Wanner II, IV.10): the
+ * stages 6 and 7 are both at t + h, on Y6 and y_new; y_new - Y6 = h sum_j (b_j - a6j) k_j */
+static double dopri5_h_rho(const PgEngine *e, const double *K, double h)
+{
+    static const double bma[6] = {35.0 / 384 - 9017.0 / 3168, 355.0 / 33, 500.0 / 1113 - 46732.0 / 5247,
+                                  125.0 / 192 - 49.0 / 176, -2187.0 / 6784 + 5103.0 / 18656, 11.0 / 84};
+    double num = 0.0, den = 0.0;
+    for (int i = 0; i < e->nx; ++i) {
+        double dk = K[6 * PG_MAX_X + i] - K[5 * PG_MAX_X + i], dy = 0.0;
+        for (int j = 0; j < 6; ++j) dy += bma[j] * K[j * PG_MAX_X + i];
+        dy *= h;
+        num += dk * dk, den += dy * dy;
+    }
+    return den > 0.0 ? h * sqrt(num / den) : 0.0;
+}
+
+/* method = 0: after an accepted step of size h, the stiffness test of the method in use; a switch
+ * is made before the next step */
+static void stiffness_test(PgEngine *e, const double *K, double h)
+{
+    if (e->method != 0) return;
+    if (e->cur == M_DOPRI5) {
+        double hr = dopri5_h_rho(e, K, h);
+        e->h_rho = hr;
+        if (hr > STIFF_H_RHO) {
+            e->calm_n = 0;
+            if (++e->stiff_n >= STIFF_STEPS) e->switch_to = M_RODAS;
+        } else if (++e->calm_n >= CALM_RESET) {
+            e->stiff_n = 0;
+        }
+    } else {
+        double hr = h * e->jac_rho;
+        e->h_rho = hr;
+        if (hr < STIFF_H_RHO) {
+            if (++e->calm_n >= CALM_STEPS) e->switch_to = M_DOPRI5;
+        } else {
+            e->calm_n = 0;
+        }
+    }
+}
+
+static void make_switch(PgEngine *e)
+{
+    int from = e->cur, to = e->switch_to;
+    e->switch_to = 0;
+    e->cur = to;
+    e->stiff_n = e->calm_n = 0;
+    e->n_switches += 1;
+    if (e->on_switch) e->on_switch(e->hook_ctx, e, e->t, from, to, e->h_rho);
+}
 
 /* _Segment.__call__: the step's end points exactly, the dense output in between */
 static int seg_at(PgEngine *e, PgSeg *seg, double t, double *out)
@@ -164,14 +295,17 @@ static int seg_at(PgEngine *e, PgSeg *seg, double t, double *out)
     }
     double h = seg->t1 - seg->t0;
     if (!seg->dense_built) {
-        if (e->method == 8) {
+        if (seg->method == M_DOP853) {
             TRY(pg_dop853_dense(model_fun, e, seg->t0, seg->y0, seg->y1, h, seg->K, e->nx, seg->Q, &e->msg));
+        } else if (seg->method == M_RODAS) {
+            pg_rodas_dense(seg->K, e->nx, seg->Q);
         } else {
             pg_dopri5_dense(seg->K, e->nx, seg->Q);
         }
         seg->dense_built = 1;
     }
-    if (e->method == 8) pg_dop853_eval(seg->Q, seg->t0, h, seg->y0, t, e->nx, out);
+    if (seg->method == M_DOP853) pg_dop853_eval(seg->Q, seg->t0, h, seg->y0, t, e->nx, out);
+    else if (seg->method == M_RODAS) pg_rodas_eval(seg->Q, seg->t0, h, seg->y0, seg->y1, t, e->nx, out);
     else pg_dopri5_eval(seg->Q, seg->t0, h, seg->y0, t, e->nx, out);
     return PG_OK;
 }
@@ -186,6 +320,7 @@ static void make_seg(PgEngine *e, PgSeg *seg, double t0, double t1, const double
     memmove(seg->f0, f0, n);
     for (int j = 0; j < PG_MAX_STAGES; ++j) memmove(seg->K + j * PG_MAX_X, K + j * PG_MAX_X, n);
     seg->dense_built = 0;
+    seg->method = e->cur;
 }
 
 static double sgn_of(const PgEngine *e, int i) { return e->model->event_direction[i] == PG_FALLING ? -1.0 : 1.0; }
@@ -419,6 +554,7 @@ static int rebind(PgEngine *e)
 static int bind(PgEngine *e)
 {
     TRY(rebind(e));
+    e->jac_ok = 0; /* a new mode or new inputs: another flow */
     TRY(e->model->flow(e->t, e->x, e->q, e->u, e->p, e->f, &e->msg));
     for (int k = 0; k < e->n_active; ++k) TRY(guard_at(e, e->active[k], e->x, &e->g[k]));
     e->has_g_prev = 0;
@@ -509,9 +645,10 @@ int pg_engine_init(PgEngine *e, const PgModel *model, const double *p, const dou
 {
     PgEventHook on_event = e->on_event;
     PgWarnHook on_warning = e->on_warning;
+    PgSwitchHook on_switch = e->on_switch;
     void *ctx = e->hook_ctx;
     memset(e, 0, sizeof *e);
-    e->on_event = on_event, e->on_warning = on_warning, e->hook_ctx = ctx;
+    e->on_event = on_event, e->on_warning = on_warning, e->on_switch = on_switch, e->hook_ctx = ctx;
     e->model = model;
     e->nx = model->nx, e->nq = model->nq, e->nu = model->nu, e->np = model->np;
     if (e->nx > PG_MAX_X || e->nq > PG_MAX_Q || e->nu > PG_MAX_U || e->np > PG_MAX_P || model->ne > PG_MAX_EVENTS ||
@@ -523,6 +660,7 @@ int pg_engine_init(PgEngine *e, const PgModel *model, const double *p, const dou
     int rc = prepare(e);
     if (rc) return at_time(e, rc, "initialization", 0, NULL);
     e->method = (int)s[PG_S_METHOD];
+    e->cur = e->method == 0 ? M_DOPRI5 : e->method; /* automatic: explicit until found stiff */
     e->rtol = s[PG_S_REL_TOL];
     e->atol = s[PG_S_ABS_TOL];
     e->max_step = s[PG_S_MAX_STEP] == 0.0 ? INFINITY : s[PG_S_MAX_STEP];
@@ -860,6 +998,7 @@ static int end_step(PgEngine *e, PgSeg *seg, double t_target, int *cut)
 /* _step */
 static int step(PgEngine *e, double t_target)
 {
+    if (e->switch_to) make_switch(e);
     double t = e->t, y[PG_MAX_X], f[PG_MAX_X];
     memcpy(y, e->x, sizeof y), memcpy(f, e->f, sizeof f);
     double h = pmin(pmin(e->h, e->max_step), UNBOUNDED_STEP_FACTOR * pmax(fabs(t), 1.0));
@@ -899,6 +1038,7 @@ static int step(PgEngine *e, double t_target)
         }
     }
     e->n_steps += 1;
+    stiffness_test(e, K, h);
     int at_start = e->at_start;
     e->at_start = 0;
     int disarmed = e->disarmed;
@@ -1176,7 +1316,8 @@ int pg_engine_set_input(PgEngine *e, const double *u)
         } else {
             double f_c[PG_MAX_X];
             double K_c[PG_MAX_STAGES * PG_MAX_X];
-            int rc = pair_step(e, e->seg.t0, e->seg.y0, e->seg.f0, e->t_out - e->seg.t0, x, f_c, K_c);
+            int rc = pair_step_of(e, e->seg.method, e->seg.t0, e->seg.y0, e->seg.f0, e->t_out - e->seg.t0, x,
+                                  f_c, K_c);
             if (!rc) rc = crossed_in(e, e->seg.y0, x, &crossed);
             if (rc) return at_time(e, rc, "the input change at t = ", e->t_out, " s");
         }
@@ -1253,9 +1394,29 @@ void pg_engine_served(const PgEngine *e, double *t_out, double *x_out, double *q
     *n_events = e->n_events;
 }
 
+void pg_engine_stats(const PgEngine *e, long *n_steps, long *n_rejected, long *n_jacobians, long *n_switches,
+                     int *method_in_use)
+{
+    *n_steps = e->n_steps, *n_rejected = e->n_rejected, *n_jacobians = e->n_jacobians;
+    *n_switches = e->n_switches, *method_in_use = e->cur;
+}
+
 int pg_engine_last_event(const PgEngine *e, double *time, int *index)
 {
     if (!e->has_last) return 0;
     *time = e->last.time, *index = e->last.index;
     return 1;
+}
+
+static const char *method_name(int method) { return method == 1 ? "Rodas5P" : method == 8 ? "DOP853" : "DOPRI5"; }
+
+void pg_engine_switch_message(PgMsg *m, double t, int from, int to, double h_rho)
+{
+    pg_msg_clear(m);
+    pg_msg_printf(m, "method switch at t = ");
+    pg_msg_value(m, t, 'f', "r");
+    pg_msg_printf(m, " s: %s -> %s (%s: h*rho = ", method_name(from), method_name(to),
+                  to == 1 ? "stiff" : "no longer stiff");
+    pg_msg_value(m, h_rho, 'f', ".3g");
+    pg_msg_str(m, to == 1 ? " > 3 in 15 steps, DOPRI5's stiffness test)" : " < 3 in 15 steps, rho from the Jacobian)");
 }

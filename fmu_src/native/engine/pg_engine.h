@@ -15,6 +15,7 @@
 
 #include "pg_model.h"
 #include "pg_pairs.h"
+#include "pg_rodas.h"
 
 #define PG_MAX_Q 16
 #define PG_MAX_U 64
@@ -32,6 +33,7 @@ typedef struct PgSeg {
     double y0[PG_MAX_X], y1[PG_MAX_X], f0[PG_MAX_X];
     double K[PG_MAX_STAGES * PG_MAX_X];
     int dense_built;
+    int method; /* the method that made the step (5, 8 or 1): its continuous extension */
     double Q[PG_MAX_DENSE * PG_MAX_X];
 } PgSeg;
 
@@ -46,6 +48,10 @@ typedef struct PgEngine PgEngine;
 typedef void (*PgEventHook)(void *ctx, const PgEngine *e, const PgEvent *ev, long number);
 /* called with a warning text (the work budget) */
 typedef void (*PgWarnHook)(void *ctx, const char *text);
+/* method = 0 (automatic): called at each switch, at time t, from one method to the other (5 DOPRI5,
+ * 1 Rodas5P), with the stiffness estimate h*rho that decided it (rho: the largest eigenvalue's
+ * modulus of the flow's Jacobian as estimated, h the step) */
+typedef void (*PgSwitchHook)(void *ctx, const PgEngine *e, double t, int from, int to, double h_rho);
 
 struct PgEngine {
     const PgModel *model;
@@ -78,9 +84,22 @@ struct PgEngine {
     double f[PG_MAX_X], g[PG_MAX_EVENTS], g_prev[PG_MAX_EVENTS];
     int has_g_prev;
     double h;
+    /* the method in use (e->method unless it is 0: then 5 or 1, switched by the stiffness tests) */
+    int cur;
+    int switch_to; /* a switch decided after the latest step, made before the next */
+    int stiff_n, calm_n; /* consecutive-ish steps found stiff / not stiff (method = 0) */
+    double h_rho;        /* the latest stiffness estimate */
+    long n_switches, n_jacobians;
+    /* the flow's Jacobian at (jac_t, jac_y) in the current mode and inputs, and d flow / dt there:
+     * kept while it serves (a rejected step, the steps redone up to an event); jac_ok = 0 after a
+     * jump or an input change */
+    int jac_ok;
+    double jac_t, jac_y[PG_MAX_X], jac_rho;
+    double J[PG_MAX_X * PG_MAX_X], dT[PG_MAX_X];
     /* not state: the hooks of the adapter, and scratch */
     PgEventHook on_event;
     PgWarnHook on_warning;
+    PgSwitchHook on_switch;
     void *hook_ctx;
     PgMsg msg; /* the message of the latest PG_RAISE */
     PgMsg scratch;
@@ -110,5 +129,10 @@ const char *pg_engine_message(const PgEngine *e);
 /* the time, state and discrete state served last, and the event count */
 void pg_engine_served(const PgEngine *e, double *t_out, double *x_out, double *q_out, long *n_events);
 int pg_engine_last_event(const PgEngine *e, double *time, int *index);
+/* the text of a method switch (method = 0), logged under logSolver by both backends */
+void pg_engine_switch_message(PgMsg *m, double t, int from, int to, double h_rho);
+/* the work done: accepted and rejected steps, Jacobians evaluated, method switches, the method in use */
+void pg_engine_stats(const PgEngine *e, long *n_steps, long *n_rejected, long *n_jacobians, long *n_switches,
+                     int *method_in_use);
 
 #endif

@@ -86,7 +86,7 @@ def model_library(model, folder: Path, cc: Optional[str] = None) -> Path:
 
 # the engine's C files (pg_pairs.c is generated from the tableaux by pogofmu.codegen.cpairs and kept
 # in the repository; a test regenerates it); pg_binding.c is what the Python binding calls
-ENGINE_SOURCES = ("pg_engine.c", "pg_pairs.c", "pg_support.c")
+ENGINE_SOURCES = ("pg_engine.c", "pg_pairs.c", "pg_rodas.c", "pg_support.c")
 BINDING_SOURCES = (*ENGINE_SOURCES, "pg_binding.c")
 
 

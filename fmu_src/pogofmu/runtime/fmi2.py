@@ -72,6 +72,7 @@ LOG_CATEGORIES = {
     "logStatusFatal": "messages with status Fatal",
     "logAll": "all other messages",
     "logEvents": "every state event: kind, exact time, state before the jump (parameter log_events = 1)",
+    "logSolver": "the solver's method switches (method = 0): time, methods, stiffness estimate",
 }
 
 
@@ -418,7 +419,7 @@ class HybridSlave:
                 sim.advance(end)
         except ModelError as exc:
             raise self._model_failed(exc) from None
-        if sim.new_events or sim.new_warnings:
+        if sim.new_events or sim.new_warnings or sim.new_switches:
             self._drain_engine()
         self._update_outputs()
         self._t_ok = sim.t_out
@@ -460,6 +461,9 @@ class HybridSlave:
         for text in sim.new_warnings:
             self.log(f"{type(self).model.name}: {text}", WARNING)
         sim.new_warnings.clear()
+        for text in sim.new_switches:
+            self.log(text, OK, "logSolver")
+        sim.new_switches.clear()
         new = list(sim.new_events)  # filled only with log_events = 1 (the engine keeps the history then)
         sim.new_events.clear()
         first = sim.n_events - len(new) + 1

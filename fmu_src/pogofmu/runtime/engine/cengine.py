@@ -92,6 +92,7 @@ class PgModel(C.Structure):
 
 EVENT_HOOK = C.CFUNCTYPE(None, C.c_void_p, C.c_void_p, C.POINTER(PgEvent), C.c_long)
 WARN_HOOK = C.CFUNCTYPE(None, C.c_void_p, C.c_char_p)
+SWITCH_HOOK = C.CFUNCTYPE(None, C.c_char_p)  # pg_binding.c: a method switch's text
 
 # ---- the library --------------------------------------------------------------------------------
 _LIB = None
@@ -128,8 +129,8 @@ def library():
             lib.pgb_message.restype = C.c_char_p
             lib.pgb_message.argtypes = [C.c_void_p]
             lib.pgb_init.argtypes = [C.c_void_p, C.c_void_p, D, D, D, C.c_double, C.c_double, C.c_int, C.c_double,
-                                     C.c_int, EVENT_HOOK, WARN_HOOK]
-            lib.pgb_rebind.argtypes = [C.c_void_p, C.c_void_p, EVENT_HOOK, WARN_HOOK]
+                                     C.c_int, EVENT_HOOK, WARN_HOOK, SWITCH_HOOK]
+            lib.pgb_rebind.argtypes = [C.c_void_p, C.c_void_p, EVENT_HOOK, WARN_HOOK, SWITCH_HOOK]
             lib.pgb_rebind.restype = None
             lib.pgb_advance.argtypes = [C.c_void_p, C.c_double, D]
             lib.pgb_advance_to_event.argtypes = [C.c_void_p, C.c_double, C.POINTER(C.c_int), D]
@@ -272,6 +273,7 @@ class Simulator:
         self._history: Optional[List[EventRecord]] = [] if keep else None
         self.new_events: List[EventRecord] = []
         self.new_warnings: List[str] = []
+        self.new_switches: List[str] = []  # method = 0: the switches' texts not yet taken (logSolver)
         lib = library()
         self._engine = C.create_string_buffer(lib.pgb_sizeof())
         self._attach()
@@ -283,7 +285,7 @@ class Simulator:
                 raise ParameterError(f"parameter {name} = {v!r} violates the rule: {name} must be a number")
         rc = lib.pgb_init(self._engine, C.byref(self._struct), _doubles(pvals),
                           _doubles(svals), _doubles(self.u, len(model.inputs)), float(t0), float(t_stop),
-                          int(zeno_max_events), float(zeno_window), int(keep), self._on_event, self._on_warning)
+                          int(zeno_max_events), float(zeno_window), int(keep), self._on_event, self._on_warning, self._on_switch)
         self._check(rc)
         self._read()
 
@@ -313,6 +315,7 @@ class Simulator:
             setattr(st, name, fn)
         self._on_event = EVENT_HOOK(self._cb_event)
         self._on_warning = WARN_HOOK(self._cb_warning)
+        self._on_switch = SWITCH_HOOK(self._cb_switch)
         return static
 
     def _fail(self, exc, m) -> int:
@@ -479,6 +482,9 @@ class Simulator:
     def _cb_warning(self, ctx, text):
         self.new_warnings.append(text.decode("utf-8", "replace"))
 
+    def _cb_switch(self, text):
+        self.new_switches.append(text.decode("utf-8", "replace"))
+
     # ---- calls ----------------------------------------------------------------------------
     def _check(self, rc):
         if rc == PG_OK:
@@ -606,13 +612,15 @@ class Simulator:
         return {"model": self.model, "p": self.p, "solver": self.solver, "u": self.u,
                 "engine": self._engine.raw,
                 "history": None if self._history is None else list(self._history),
-                "new_events": list(self.new_events), "new_warnings": list(self.new_warnings)}
+                "new_events": list(self.new_events), "new_warnings": list(self.new_warnings),
+                "new_switches": list(self.new_switches)}
 
     def restore(self, snap):
         fresh = getattr(self, "_engine", None) is None or getattr(self, "model", None) is not snap["model"]
         self.model, self.p, self.solver, self.u = snap["model"], snap["p"], snap["solver"], tuple(snap["u"])
         self._history = None if snap["history"] is None else list(snap["history"])
         self.new_events, self.new_warnings = list(snap["new_events"]), list(snap["new_warnings"])
+        self.new_switches = list(snap.get("new_switches", ()))
         lib = library()
         if fresh:
             self._engine = C.create_string_buffer(lib.pgb_sizeof())
@@ -622,7 +630,7 @@ class Simulator:
             raise ModelError(f"the engine state has {len(raw)} bytes, not {len(self._engine.raw)}: it was taken "
                              f"from another build of the engine")
         C.memmove(self._engine, raw, len(raw))
-        lib.pgb_rebind(self._engine, C.byref(self._struct), self._on_event, self._on_warning)
+        lib.pgb_rebind(self._engine, C.byref(self._struct), self._on_event, self._on_warning, self._on_switch)
         self._qkey = self._qdict = self._bound = self._ukey = None
         self._uc = self.u
         self.n_events = -1
@@ -635,7 +643,8 @@ def snapshot_to_data(snap: dict) -> dict:
     return {"params": snap["p"].as_dict(), "solver": snap["solver"].as_dict(), "u": list(snap["u"]),
             "engine": snap["engine"].hex(),
             "history": None if snap["history"] is None else [_event_data(e) for e in snap["history"]],
-            "new_events": [_event_data(e) for e in snap["new_events"]], "new_warnings": list(snap["new_warnings"])}
+            "new_events": [_event_data(e) for e in snap["new_events"]], "new_warnings": list(snap["new_warnings"]),
+            "new_switches": list(snap["new_switches"])}
 
 
 def _event_data(e: EventRecord):
@@ -647,7 +656,8 @@ def snapshot_from_data(model: HybridModel, data: dict) -> dict:
     return {"model": model, "p": Params(dict(data["params"])), "solver": Params(dict(data["solver"])),
             "u": tuple(data["u"]), "engine": bytes.fromhex(data["engine"]),
             "history": None if data["history"] is None else [EventRecord(*e) for e in data["history"]],
-            "new_events": [EventRecord(*e) for e in data["new_events"]], "new_warnings": list(data["new_warnings"])}
+            "new_events": [EventRecord(*e) for e in data["new_events"]], "new_warnings": list(data["new_warnings"]),
+            "new_switches": list(data.get("new_switches", ()))}
 
 
 __all__ = ["EventRecord", "Simulator", "discrete_layout", "library", "snapshot_from_data", "snapshot_to_data",

@@ -11,7 +11,9 @@ from .. import fmath
 from ..model import HybridModel, Parameter, ParameterError, Params, require
 
 SOLVER_PARAMETERS = (
-    Parameter("method", 5, "", "Runge-Kutta pair: 5 = Dormand-Prince 5(4) (ode45), 8 = DOP853", integer=True),
+    Parameter("method", 5, "", "integration method: 5 = Dormand-Prince 5(4) (ode45), 8 = DOP853, 1 = Rodas5P "
+              "(stiff: linearly implicit, exact Jacobian), 0 = automatic (DOPRI5, Rodas5P while stiff); 0 and 1 in "
+              "native FMUs", integer=True),
     Parameter("rel_tol", 1e-6, "", "relative error tolerance of the internal solver"),
     Parameter("abs_tol", 1e-12, "", "absolute error tolerance of the internal solver (state units)"),
     Parameter("max_step", 0.01, "s", "largest internal step (0 or inf: unbounded)"),
@@ -27,7 +29,7 @@ SOLVER_PARAMETERS = (
 SOLVER_PARAMETER_NAMES = tuple(par.name for par in SOLVER_PARAMETERS)
 REL_TOL_MAX = 1e-3  # looser relative tolerances do not control the error (ode45's default)
 ABS_TOL_MAX_FRACTION = 1e-3  # abs_tol <= this fraction of the states' scale
-METHOD_NAMES = {5: "DOPRI5", 8: "DOP853"}
+METHOD_NAMES = {0: "automatic", 1: "Rodas5P", 5: "DOPRI5", 8: "DOP853"}
 DOMAIN_SLACK = 10.0  # a domain condition may be crossed by this many local error tolerances
 
 
@@ -68,7 +70,8 @@ def check_solver_parameters(s: Params, has_states: bool = True):
         v = s[name]
         if not fmath.is_number(v):
             raise ParameterError(f"parameter {name} = {v!r} violates the rule: {name} must be a number")
-    require(s.method in tuple(METHOD_NAMES), "method", s.method, "method must be 5 (DOPRI5) or 8 (DOP853)")
+    require(s.method in tuple(METHOD_NAMES), "method", s.method, "method must be 0 (automatic: DOPRI5, Rodas5P "
+            "while the problem is stiff), 1 (Rodas5P, stiff), 5 (DOPRI5) or 8 (DOP853)")
     require(1e-14 <= s.rel_tol <= REL_TOL_MAX, "rel_tol", s.rel_tol,
             f"1e-14 <= rel_tol <= {REL_TOL_MAX:g} (a looser relative tolerance does not control the error)")
     require(s.abs_tol > 0 and fmath.isfinite(s.abs_tol), "abs_tol", s.abs_tol, "0 < abs_tol < inf")
