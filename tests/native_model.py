@@ -5,17 +5,9 @@ from __future__ import annotations
 import ctypes as C
 import math
 
-PG_OK, PG_RAISE, PG_ARITH = 0, 1, 2
-PG_MSG_MAX = 2048
+from pogofmu.runtime.engine.cengine import PG_ARITH, PG_OK, PG_RAISE, PgMsg, PgScale  # noqa: F401 (pg_model.h)
+
 D = C.POINTER(C.c_double)
-
-
-class PgMsg(C.Structure):
-    _fields_ = [("text", C.c_char * PG_MSG_MAX), ("len", C.c_size_t), ("arith", C.c_int)]
-
-
-class PgScale(C.Structure):
-    _fields_ = [("label", C.c_char_p), ("names", C.c_char_p * 6), ("n_names", C.c_int), ("value", C.c_double)]
 
 
 MSG = C.POINTER(PgMsg)

@@ -161,6 +161,10 @@ def _doubles(values, n=None):
     return a
 
 
+def _number_or_nan(v) -> float:
+    return float(v) if isinstance(v, (int, float)) else math.nan
+
+
 def discrete_layout(model: HybridModel, p=None):
     """The slots of the discrete state ``q``: ``(key, 'i' or 'f')`` in the order of the model's initial
     ``q`` (the native generator's layout)."""
@@ -277,12 +281,10 @@ class Simulator:
         lib = library()
         self._engine = C.create_string_buffer(lib.pgb_sizeof())
         self._attach()
-        svals = [s[par.name] for par in SOLVER_PARAMETERS]
-        pvals = [p[par.name] for par in model.parameters]
-        for name, v in zip([par.name for par in SOLVER_PARAMETERS] + [par.name for par in model.parameters],
-                           svals + pvals):
-            if not isinstance(v, (int, float)) or isinstance(v, complex):
-                raise ParameterError(f"parameter {name} = {v!r} violates the rule: {name} must be a number")
+        # (a value that is no number goes in as NaN: the rules, called back with the Python values,
+        # refuse it in the engine's order with their own words)
+        svals = [_number_or_nan(s[par.name]) for par in SOLVER_PARAMETERS]
+        pvals = [_number_or_nan(p[par.name]) for par in model.parameters]
         rc = lib.pgb_init(self._engine, C.byref(self._struct), _doubles(pvals),
                           _doubles(svals), _doubles(self.u, len(model.inputs)), float(t0), float(t_stop),
                           int(zeno_max_events), float(zeno_window), int(keep), self._on_event, self._on_warning, self._on_switch)
@@ -514,6 +516,7 @@ class Simulator:
         o += nx + nq
         self.x = v[o:o + nx]
         self.q = self._qdict_of(v[o + nx:o + nx + nq])
+        self.u = tuple(v[o + nx + nq:])
         if n_events != getattr(self, "n_events", -1) or (v[7] and getattr(self, "last_event", None) is None):
             self.n_events = n_events
             if v[7]:
@@ -575,15 +578,10 @@ class Simulator:
         u = tuple(float(v) for v in u)
         if u == self.u:
             return
-        old = self.u
-        self.u, self._bound = u, None
+        self._bound = None
         rc = library().pgb_set_input(self._engine, _doubles(u, self._nu))
-        if rc != PG_OK:
-            text = library().pgb_message(self._engine).decode("utf-8", "replace")
-            if text.startswith("input ") and " violates the rule: " in text:
-                self.u = old  # (refused before anything changed)
+        self._read()  # (the engine's inputs: the new ones, or the old where it refused them)
         self._check(rc)
-        self._read()
 
     def apply_event(self, index: int, t: float, x) -> list:
         """Apply the jump of event ``index`` at time ``t`` to the state ``x`` located by someone else
