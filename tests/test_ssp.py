@@ -7,6 +7,7 @@ delay), and libcosim (a second, independent FMI/SSP importer).
 """
 import json
 import math
+import re
 import subprocess
 import sys
 import zipfile
@@ -78,8 +79,9 @@ def variant(tmp_path, edit_ssd=None, files=None, remove=()):
 def test_package_holds_ssd_ssv_and_fmus():
     with zipfile.ZipFile(SSP) as z:
         names = set(z.namelist())
+    parts = {f"resources/{body}.{comp}.ssv" for body in BODIES for comp in ("PogoStick", "HopController")}
     assert names == {"SystemStructure.ssd", "resources/earth.ssv", "resources/moon.ssv", "resources/ceres.ssv",
-                     "resources/PogoStick.fmu", "resources/HopController.fmu"}
+                     "resources/PogoStick.fmu", "resources/HopController.fmu"} | parts
 
 
 def test_ssd_and_ssv_validate_against_the_ssp_1_0_schemas():
@@ -218,7 +220,7 @@ def test_libcosimpy_agrees_with_the_master(body, tmp_path):
     p = ssv_values(body)
     step, stop = 1e-3, 6.0
     path = SSP if body == "earth" else variant(
-        tmp_path, edit_ssd=lambda t: t.replace("resources/earth.ssv", f"resources/{body}.ssv"))
+        tmp_path, edit_ssd=lambda t: t.replace("resources/earth.", f"resources/{body}."))
     n = int(round(stop / step))
     times = [round(k * step, 12) for k in range(1, n + 1)]
     lc = run_libcosim_ssp(path, step, times, {"PogoStick": ["y", "ydot", "s", "E"], "HopController": ["F_ext"]})
@@ -258,7 +260,7 @@ BROKEN = {
         ["Connection 1 (PogoStick.y -> HopController.y)", "unit mismatch", "'m'", "'m/s'",
          "Connector HopController.y"]),
     "missing ssv": (
-        lambda t: t.replace('<ssd:ParameterBinding source="resources/earth.ssv"/>\n        </ssd:ParameterBindings>\n'
+        lambda t: t.replace('<ssd:ParameterBinding source="resources/earth.PogoStick.ssv"/>\n        </ssd:ParameterBindings>\n'
                             '      </ssd:Component>\n      <ssd:Component name="HopController"',
                             '<ssd:ParameterBinding source="resources/mars.ssv"/>\n        </ssd:ParameterBindings>\n'
                             '      </ssd:Component>\n      <ssd:Component name="HopController"'),
@@ -286,14 +288,14 @@ BROKEN = {
                             'endConnector="y"><ssc:LinearTransformation factor="2"/></ssd:Connection>'),
         ["Connection 1 (PogoStick.y -> HopController.y)", "ssc:LinearTransformation is not supported"]),
     "inline ParameterValues": (
-        lambda t: t.replace('<ssd:ParameterBinding source="resources/earth.ssv"/>\n        </ssd:ParameterBindings>\n'
+        lambda t: t.replace('<ssd:ParameterBinding source="resources/earth.PogoStick.ssv"/>\n        </ssd:ParameterBindings>\n'
                             '      </ssd:Component>\n      <ssd:Component name="HopController"',
                             '<ssd:ParameterBinding><ssd:ParameterValues/></ssd:ParameterBinding>\n'
                             '        </ssd:ParameterBindings>\n      </ssd:Component>\n'
                             '      <ssd:Component name="HopController"'),
         ["Component PogoStick", "inline values (ssd:ParameterValues, no source): not supported"]),
     "ssm parameter mapping": (
-        lambda t: t.replace('<ssd:ParameterBinding source="resources/earth.ssv"/>\n        </ssd:ParameterBindings>\n'
+        lambda t: t.replace('<ssd:ParameterBinding source="resources/earth.PogoStick.ssv"/>\n        </ssd:ParameterBindings>\n'
                             '      </ssd:Component>\n      <ssd:Component name="HopController"',
                             '<ssd:ParameterBinding source="resources/earth.ssv"><ssd:ParameterMapping '
                             'source="resources/map.ssm"/></ssd:ParameterBinding>\n        </ssd:ParameterBindings>\n'
@@ -341,7 +343,7 @@ def test_a_failing_fmu_step_ends_the_run_with_its_message(tmp_path):
     pkg = variant(tmp_path, files={"resources/earth.ssv": text.replace('name="k"><ssv:Real value="100"',
                                                                        'name="k"><ssv:Real value="5"')})
     with pytest.raises(master.SSPError, match=r"(?s)Component PogoStick: fmi2DoStep from t = .*bottomed out"):
-        master.simulate(pkg, stop_time=5.0, step=1e-3, echo_log=False)
+        master.simulate(pkg, parameters="earth", stop_time=5.0, step=1e-3, echo_log=False)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -608,3 +610,52 @@ def test_the_native_package_runs_the_python_hosted_ones_bits(package):
         lc_b = run_libcosim_ssp(DIST / "native" / package, 1e-3, times, variables)
         for key in lc_a:
             assert np.array_equal(lc_a[key], lc_b[key]), key
+
+
+# ---------------------------------------------------------------------------------------------
+# each component bound to its own parameter values
+# ---------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("package", ["SpaceHopper.ssp", "native/SpaceHopper.ssp"])
+def test_libcosim_finds_every_bound_parameter_and_says_nothing(package):
+    """Each component's ParameterBinding names its own part of the set: libcosim, at its warning
+    level, prints no "No such variable" (it did, 12 times, for one set bound to both components);
+    the master still gives every component all of the set's values that are its own — the
+    bindings' run is the --parameters run to the bit, and the parts are the set, split."""
+    script = ("import sys\n"
+              "from libcosimpy.CosimExecution import CosimExecution\n"
+              "from libcosimpy.CosimLogging import CosimLogLevel, log_output_level\n"
+              "log_output_level(CosimLogLevel.WARNING)\n"
+              "ex = CosimExecution.from_ssp_file(ssp_path=sys.argv[1], step_size=1000000)\n"
+              "assert ex.simulate_until(target_time=100000000)\n")
+    proc = subprocess.run([sys.executable, "-c", script, str(DIST / package)], capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "No such variable" not in proc.stdout + proc.stderr, (proc.stdout + proc.stderr)[-2000:]
+    with zipfile.ZipFile(DIST / package) as z:
+        ssd = z.read("SystemStructure.ssd").decode()
+        whole = {p.get("name"): p for p in ET.fromstring(z.read("resources/earth.ssv")).iter(f"{NS_SSV}Parameter")}
+        parts = {comp: {p.get("name") for p in ET.fromstring(z.read(f"resources/earth.{comp}.ssv"))
+                        .iter(f"{NS_SSV}Parameter")} for comp in ("PogoStick", "HopController")}
+    assert parts["PogoStick"] | parts["HopController"] == set(whole)
+    assert {"h_target", "F_max"} <= parts["HopController"] - parts["PogoStick"]
+    assert {"y_0", "z_0"} <= parts["PogoStick"] - parts["HopController"]
+    assert 'source="resources/earth.PogoStick.ssv"' in ssd and 'source="resources/earth.HopController.ssv"' in ssd
+    a = master.simulate(DIST / package, stop_time=3.0, step=1e-3, echo_log=False)
+    b = master.simulate(DIST / package, parameters="earth", stop_time=3.0, step=1e-3, echo_log=False)
+    assert a.names == b.names and a.rows == b.rows
+    for column in a.names:
+        assert np.array_equal(a[column], b[column]), column
+    assert np.count_nonzero(a["HopController.F_ext"]) > 50  # the controller got its values
+
+
+def test_the_whole_set_bound_to_both_components_is_what_libcosim_warns_about(tmp_path):
+    """The control of the test above: the same package with each binding back on earth.ssv."""
+    pkg = variant(tmp_path, edit_ssd=lambda t: re.sub(r"resources/earth\.\w+\.ssv", "resources/earth.ssv", t))
+    script = ("import sys\n"
+              "from libcosimpy.CosimExecution import CosimExecution\n"
+              "from libcosimpy.CosimLogging import CosimLogLevel, log_output_level\n"
+              "log_output_level(CosimLogLevel.WARNING)\n"
+              "CosimExecution.from_ssp_file(ssp_path=sys.argv[1], step_size=1000000)\n")
+    proc = subprocess.run([sys.executable, "-c", script, str(pkg)], capture_output=True, text=True, timeout=300)
+    assert "No such variable: PogoStick:h_target" in proc.stdout + proc.stderr, proc.stderr[-2000:]

@@ -11,7 +11,7 @@ from .master import ALGORITHMS, DEFAULT_EVENT_TOLERANCE, simulate
 from .package import SSPError, read_ssd, unpack
 from .plot import plot
 from .record import CSVStream
-from .validate import validate
+from .validate import selectable_sets, validate
 
 def prepare_out(out: Path, *files: Path):
     """The output folder, created, and proven writable before the first step (never after the run)."""
@@ -117,7 +117,7 @@ def main(argv=None, prog="pogofmu ssp"):
                 validate(system, args.parameters)
                 print(f"{args.ssp}: system {system.name!r} is valid: components {system.update_order()}, "
                       f"{len(system.connections)} connections, parameter sets "
-                      f"{[Path(s).stem for s in system.parameter_sets]}")
+                      f"{selectable_sets(system)}")
             return 0
         run(args.ssp, args.parameters, args.stop_time, args.step, args.out, args.algorithm, not args.quiet,
             events=args.events, event_tolerance=args.event_tolerance, rel_tol=args.rel_tol, abs_tol=args.abs_tol)

@@ -100,7 +100,7 @@ def validate(system: System, parameters: Optional[str] = None) -> Dict[str, Opti
         matches = [ps for ps in system.parameter_sets.values()
                    if ps.source == f"resources/{parameters}.ssv" or ps.name == parameters]
         if not matches:
-            avail = ", ".join(Path(s).stem for s in system.parameter_sets) or "none"
+            avail = ", ".join(selectable_sets(system)) or "none"
             problems.append(f"parameter set {parameters!r}: no resources/{parameters}.ssv in the package "
                             f"(available: {avail})")
         else:
@@ -144,3 +144,10 @@ def validate(system: System, parameters: Optional[str] = None) -> Dict[str, Opti
     if problems:
         raise SSPError(_problem_text(system, problems))
     return selected
+
+
+def selectable_sets(system) -> list:
+    """The names ``--parameters`` offers: every .ssv but a component's part of another set
+    (``moon.PogoStick.ssv``, packed beside ``moon.ssv`` so that each binding names only its own)."""
+    stems = [Path(s).stem for s in system.parameter_sets]
+    return [s for s in stems if not (s.rpartition(".")[0] in stems and s.rpartition(".")[2] in system.components)]

@@ -20,6 +20,7 @@ import argparse
 import csv
 import json
 import math
+import re
 import subprocess
 import sys
 import tempfile
@@ -90,8 +91,9 @@ def _libcosim_package(package: Path, body: str, dest: Path) -> Path:
             data = z.read(item)
             if item.filename == "SystemStructure.ssd":
                 text = data.decode()
-                for other in STOP:
-                    text = text.replace(f'source="resources/{other}.ssv"', f'source="resources/{body}.ssv"')
+                # the whole set or a component's part of it (resources/<body>.<Component>.ssv)
+                text = re.sub(r'source="resources/(?:%s)((?:\.\w+)?)\.ssv"' % "|".join(STOP),
+                              lambda m: f'source="resources/{body}{m.group(1)}.ssv"', text)
                 data = text.encode()
             w.writestr(item, data)
     return out
