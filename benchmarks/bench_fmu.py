@@ -10,7 +10,7 @@ into a temporary folder (``pogofmu.build.build_project(tmp, names)``, never into
 alternately through ``fmpy.simulate_fmu`` with fmpy's defaults (validation, extraction to a
 temporary folder), ``stop_time`` = the case's, ``output_interval = 1e-3``; the best CPU time
 (``time.process_time``) of ``--repeat`` runs of each counts (the median is printed too).  The FMU
-runs with the case's parameters and its own solver defaults (method 5, rel_tol 1e-6, max_step 0.01).
+runs with the case's parameters and its own solver defaults (method 0, rel_tol 1e-6, max_step 0.01).
 
 Two like-for-like peers, both judged against the target:
 

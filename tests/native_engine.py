@@ -1,5 +1,6 @@
 """ctypes access to the native engine (fmu_src/native/engine/pg_engine.h) built with one model, and
-the Python engine run side by side with it, step by step."""
+the binding's run of the model's Python functions (the Python-hosted backend) side by side with it,
+step by step."""
 from __future__ import annotations
 
 import ctypes as C
@@ -58,7 +59,7 @@ class NativeEngine:
 
 
 def both_runs(native, model, p, s, steps, inputs=None, t_stop=float("inf"), early=False, outcome=None):
-    """Run the Python engine and the native one side by side over ``steps`` communication points
+    """Run the binding (the Python model) and the native model side by side over ``steps`` communication points
     (``inputs[k]``: the inputs held from point k on); returns a list of differences (empty: the
     same bits at every point, the same events, the same message if a run stops). ``outcome``, a
     set if given, collects how the run ended: init, input or advance (a message) or ok."""

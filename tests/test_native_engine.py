@@ -1,4 +1,5 @@
-"""The native engine (fmu_src/native/engine, C) against the Python engine it follows.
+"""The two backends' models on the one engine (fmu_src/native/engine, C): the generated C of a
+model against its Python functions called back through the binding (runtime/engine/cengine.py).
 
 Both integrate the same model — the C generated from the Python model — from the same parameters,
 settings and inputs, and are compared at every communication point *to the bit*: the served time,

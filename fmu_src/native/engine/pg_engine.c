@@ -128,7 +128,7 @@ static int arithmetic_error(PgEngine *e, const PgMsg *detail, const char *where_
     return PG_RAISE;
 }
 
-/* a PG_ARITH of a model call becomes the Python engine's DomainError text; PG_RAISE stays */
+/* a PG_ARITH of a model call becomes the DomainError text (the binding raises DomainError); PG_RAISE stays */
 static int at_time(PgEngine *e, int rc, const char *prefix, double t, const char *suffix)
 {
     if (rc == PG_ARITH) return arithmetic_error(e, &e->msg, prefix, t, suffix);

@@ -1,7 +1,8 @@
-/* pogofmu native engine: the hybrid integrator of the Python engine
- * (fmu_src/pogofmu/runtime/engine/simulator.py), written once in C for any generated model.
+/* pogofmu engine: the hybrid integrator of every FMU (native ones link it with their generated
+ * model; the Python-hosted ones' launcher carries it, runtime/engine/cengine.py binds it), written
+ * once in C for any model.
  *
- * The same rules, in the same order, with the same floating-point operations: DOPRI5 / DOP853 with
+ * Its rules (docs/solver.md): DOPRI5 / DOP853 / Rodas5P with
  * error control, the step running ahead of the communication points and serving them from the
  * dense output, event location on the continuous extension (Illinois) then on exact steps
  * (secant), hidden crossings, guards at zero after a jump or at the start, the restart caps, the
@@ -9,7 +10,7 @@
  *
  * A PgEngine holds no pointer to memory of its own: copying the struct copies the whole state
  * (fmi2GetFMUstate is a memcpy). Functions return PG_OK, or PG_RAISE with the message in e->msg
- * (the text the Python engine's exception carries). */
+ * (the text of the exception the Python binding raises). */
 #ifndef PG_ENGINE_H
 #define PG_ENGINE_H
 
@@ -105,8 +106,9 @@ struct PgEngine {
     PgMsg scratch;
 };
 
-/* the Python Simulator(model, p, u, t0, t_stop) with the settings s: every rule checked in the
- * order of the Python engine's prepare(); PG_RAISE names the rule broken */
+/* a run of the model from t0 to t_stop with the parameters p, the settings s and the inputs u:
+ * every rule checked (settings, parameters, initial state, domain) in a fixed order; PG_RAISE names
+ * the rule broken */
 int pg_engine_init(PgEngine *e, const PgModel *model, const double *p, const double *s, const double *u,
                    double t0, double t_stop);
 int pg_engine_set_input(PgEngine *e, const double *u);

@@ -52,7 +52,7 @@ typedef struct PgModel {
     const char *const *event_names;
     const signed char *event_direction;
     int has_time_scales, has_error_scales;
-    /* the pieces of the Python engine's prepare(), called by the engine in its order: */
+    /* the checks of a run's start, called by the engine in this order: */
     int (*check_settings)(const double *s, PgMsg *m); /* the solver settings' rules */
     int (*check)(const double *p, PgMsg *m);           /* the parameter rules */
     int (*initial)(const double *p, double *x, double *q, PgMsg *m);

@@ -3,7 +3,7 @@ compiler (host-side; :mod:`pogofmu.build` and the tests use it).  Functions that
 a :class:`~pogofmu.runtime.model.HybridModel` or the name of one of the project's models.
 
 Flags: C99, ``-O2`` and ``-ffp-contract=off`` — no fused multiply-add, so that every operation is
-rounded as Python rounds it (the same bits as the Python engine).
+rounded as Python rounds it (the generated model gives the bits of the Python model).
 """
 from __future__ import annotations
 

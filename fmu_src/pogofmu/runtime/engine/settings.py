@@ -11,9 +11,9 @@ from .. import fmath
 from ..model import HybridModel, Parameter, ParameterError, Params, require
 
 SOLVER_PARAMETERS = (
-    Parameter("method", 5, "", "integration method: 5 = Dormand-Prince 5(4) (ode45), 8 = DOP853, 1 = Rodas5P "
-              "(stiff: linearly implicit, exact Jacobian), 0 = automatic (DOPRI5, Rodas5P while stiff); 0 and 1 in "
-              "native FMUs", integer=True),
+    Parameter("method", 0, "", "integration method: 0 = automatic (Dormand-Prince 5(4), Rodas5P while the "
+              "problem is stiff), 5 = Dormand-Prince 5(4) (ode45) only, 8 = DOP853, 1 = Rodas5P (stiff: linearly "
+              "implicit, exact Jacobian)", integer=True),
     Parameter("rel_tol", 1e-6, "", "relative error tolerance of the internal solver"),
     Parameter("abs_tol", 1e-12, "", "absolute error tolerance of the internal solver (state units)"),
     Parameter("max_step", 0.01, "s", "largest internal step (0 or inf: unbounded)"),
