@@ -21,7 +21,7 @@ from pogofmu.runtime.engine.settings import check_solver_parameters, domain_slac
 from pogofmu.runtime.model import HybridModel, Params
 
 from .cprint import Printer, c_string, literal, message_lines, result_nodes
-from .dual import Dual, dual_math, value_and_tangent
+from .dual import Dual, value_and_tangent
 from .trace import BOOL, FLOAT, INT, Sym, TraceError, explore, symbol
 
 ARGS = {
@@ -207,17 +207,15 @@ class ModelWriter:
 
         # directional derivatives: the flow and the outputs on dual numbers (codegen.dual)
         def flow_jvp():
-            with dual_math():
-                t, x, q, u, p = inp.t(), inp.x_seeded(), inp.q(), inp.u_seeded(), inp.p()
-                f = model.bind(q, u, p)(t, x) if model.bind is not None else model.flow(t, x, q, u, p)
-                return [value_and_tangent(v)[1] for v in f]
+            t, x, q, u, p = inp.t(), inp.x_seeded(), inp.q(), inp.u_seeded(), inp.p()
+            f = model.bind(q, u, p)(t, x) if model.bind is not None else model.flow(t, x, q, u, p)
+            return [value_and_tangent(v)[1] for v in f]
         counts["flow_jvp"] = self.function("pg_flow_jvp", ARGS["flow_jvp"], flow_jvp,
                                            self._vector("df", nx, "the flow's derivative"), "flow derivative")
 
         def outputs_jvp():
-            with dual_math():
-                out = model.output_fn(inp.t(), inp.x_seeded(), inp.q(), inp.u_seeded(), inp.p())
-                return {k: value_and_tangent(v)[1] for k, v in out.items()}
+            out = model.output_fn(inp.t(), inp.x_seeded(), inp.q(), inp.u_seeded(), inp.p())
+            return {k: value_and_tangent(v)[1] for k, v in out.items()}
 
         def outputs_jvp_leaf(value, ref):
             if not isinstance(value, dict) or set(value) != set(names):

@@ -12,10 +12,6 @@ A tangent that is known to be zero is the number ``0.0`` and costs no operation.
 """
 from __future__ import annotations
 
-from contextlib import contextmanager
-
-from pogofmu.runtime import fmath
-
 from .trace import TRACED_MATH, Sym, TraceError
 
 
@@ -204,18 +200,10 @@ DUAL_MATH = {
 }
 
 
-@contextmanager
-def dual_math():
-    """Inside :func:`~.trace.explore` (which has put the traced functions in place):
-    ``pogofmu.runtime.fmath``'s functions replaced by dual-aware ones."""
-    saved = {name: getattr(fmath, name) for name in DUAL_MATH}
-    try:
-        for name, fn in DUAL_MATH.items():
-            setattr(fmath, name, fn)
-        yield
-    finally:
-        for name, fn in saved.items():
-            setattr(fmath, name, fn)
+# a dual number's own math functions, which pogofmu.runtime.fmath calls on it (ranked above a
+# traced value's: a dual holds traced values)
+Dual.__fmath__ = DUAL_MATH
+Dual.__fmath_rank__ = 2
 
 
 def value_and_tangent(v):
@@ -223,4 +211,4 @@ def value_and_tangent(v):
     return _parts(v)
 
 
-__all__ = ["Dual", "dual_math", "value_and_tangent"]
+__all__ = ["Dual", "value_and_tangent"]

@@ -11,7 +11,7 @@ combination of decisions and returns the paths; :mod:`.cprint` prints them as on
 with the decisions as ``if``/``else``.
 
 What a traced function may do: arithmetic (``+ - * / ** abs``, unary minus), comparisons, the
-math functions of :mod:`pogofmu.runtime.fmath` (replaced here while tracing), ``math.trunc``,
+math functions of :mod:`pogofmu.runtime.fmath` (which call a traced value's own, ``Sym.__fmath__``), ``math.trunc``,
 ``min``/``max``, lists/tuples/dicts of values, f-strings formatting values (``{v!r}``,
 ``{v:.6g}``: recorded as placeholders that C formats the same way), raising a model error. What
 it may not: ``float(v)``, ``int(v)``, hashing a value (a dict or set keyed by one), ``math.*``
@@ -20,7 +20,6 @@ other than the above — each raises :class:`TraceError` naming the operation.
 from __future__ import annotations
 
 import math
-from contextlib import contextmanager
 from typing import Any, Callable, Dict, List, Optional, Tuple
 
 from pogofmu.runtime import fmath
@@ -329,20 +328,12 @@ TRACED_MATH = {
 }
 
 
-@contextmanager
-def traced_math():
-    """``pogofmu.runtime.fmath``'s functions replaced by traced ones (restored afterwards)."""
-    saved = {name: getattr(fmath, name) for name in TRACED_MATH}
-    missing = set(fmath.__all__) - set(TRACED_MATH)
-    if missing:
-        raise TraceError(f"pogofmu.runtime.fmath has functions the tracer does not know: {sorted(missing)}")
-    try:
-        for name, fn in TRACED_MATH.items():
-            setattr(fmath, name, fn)
-        yield
-    finally:
-        for name, fn in saved.items():
-            setattr(fmath, name, fn)
+# a traced value's own math functions, which pogofmu.runtime.fmath calls on it
+Sym.__fmath__ = TRACED_MATH
+Sym.__fmath_rank__ = 1
+_UNTRACED = set(fmath.HOOKED) - set(TRACED_MATH)
+if _UNTRACED:  # a function added to fmath must be added here too, or a model's call on it fails to trace
+    raise TraceError(f"pogofmu.runtime.fmath has functions the tracer does not know: {sorted(_UNTRACED)}")
 
 
 # ---- inputs of a traced function -------------------------------------------------------------------
@@ -368,28 +359,27 @@ def explore(fn: Callable[[], Any], what: str) -> List[Path]:
     a :class:`TraceError` naming ``what``."""
     paths: List[Path] = []
     pending: List[Tuple[bool, ...]] = [()]
-    with traced_math():
-        while pending:
-            prefix = pending.pop()
-            rec = Recorder(prefix)
-            _current[0] = rec
+    while pending:
+        prefix = pending.pop()
+        rec = Recorder(prefix)
+        _current[0] = rec
+        try:
             try:
-                try:
-                    result = ("return", fn())
-                except ModelError as exc:
-                    result = ("raise", type(exc).__name__, str(exc))
-                except TraceError as exc:
-                    raise TraceError(f"{_where(exc)}{what}: {exc}") from None
-                except Exception as exc:  # noqa: BLE001 - a path that cannot be traced
-                    raise TraceError(f"{_where(exc)}{what}: {type(exc).__name__}: {exc}{_hint(exc)} (on the path "
-                                     f"{[v for _, v, _ in rec.decisions]})") from None
-            finally:
-                _current[0] = None
-            for k in range(len(prefix), len(rec.decisions)):
-                pending.append(tuple(v for _, v, _ in rec.decisions[:k]) + (False,))
-            paths.append(Path(rec.decisions, rec.nodes, result))
-            if len(paths) > MAX_PATHS:
-                raise TraceError(f"{what}: more than {MAX_PATHS} paths")
+                result = ("return", fn())
+            except ModelError as exc:
+                result = ("raise", type(exc).__name__, str(exc))
+            except TraceError as exc:
+                raise TraceError(f"{_where(exc)}{what}: {exc}") from None
+            except Exception as exc:  # noqa: BLE001 - a path that cannot be traced
+                raise TraceError(f"{_where(exc)}{what}: {type(exc).__name__}: {exc}{_hint(exc)} (on the path "
+                                 f"{[v for _, v, _ in rec.decisions]})") from None
+        finally:
+            _current[0] = None
+        for k in range(len(prefix), len(rec.decisions)):
+            pending.append(tuple(v for _, v, _ in rec.decisions[:k]) + (False,))
+        paths.append(Path(rec.decisions, rec.nodes, result))
+        if len(paths) > MAX_PATHS:
+            raise TraceError(f"{what}: more than {MAX_PATHS} paths")
     return paths
 
 
@@ -402,7 +392,8 @@ def _where(exc) -> str:
     found = None
     for frame in traceback.extract_tb(exc.__traceback__):
         if not frame.filename.startswith("<") and os.path.dirname(os.path.abspath(frame.filename)) != _CODEGEN \
-                and "site-packages" not in frame.filename and "/lib/python" not in frame.filename:
+                and "site-packages" not in frame.filename and "/lib/python" not in frame.filename \
+                and os.path.abspath(frame.filename) != os.path.abspath(fmath.__file__):
             found = frame
     return f"{found.filename}:{found.lineno}: " if found else ""
 
