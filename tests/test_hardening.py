@@ -87,9 +87,9 @@ def _run_until_error(name, h=1e-2, t_end=10.0, **params):
 
 
 def test_stiff_dashpot_ends_in_a_budget_error_naming_the_stiffness():
-    """c = 1e6 (m/c = 1 us): before, 71 s to more than 90 s of CPU with no word.  Now a warning,
-    then an error naming the work budget, the time scale m/c with c's value, and what to change."""
-    messages, t = _run_until_error("PogoStick", c=1e6)
+    """c = 1e6 (m/c = 1 us) with the explicit method only (method = 5): a warning, then an error
+    naming the work budget, the time scale m/c with c's value, and what to change."""
+    messages, t = _run_until_error("PogoStick", c=1e6, method=5)
     warnings = [m[2] for m in messages if m[0] == 1]
     errors = [m[2] for m in messages if m[0] >= 3]
     assert any("stiff" in w and "max_steps_per_second" in w for w in warnings), messages
@@ -103,10 +103,20 @@ def test_stiff_dashpot_ends_in_a_budget_error_naming_the_stiffness():
 def test_budget_is_a_parameter_a_larger_one_lets_the_run_finish():
     """c = 3e4 needs ~1e4 steps per second of contact: refused with a budget of 2000, completed with
     the default 1e5, with the energy balance holding (independent check of the result)."""
-    messages, _ = _run_until_error("PogoStick", t_end=2.0, c=3e4, max_steps_per_second=2000)
+    messages, _ = _run_until_error("PogoStick", t_end=2.0, c=3e4, max_steps_per_second=2000, method=5)
     assert any("max_steps_per_second = 2000" in m[2] for m in messages if m[0] >= 3), messages
-    run = simulate("PogoStick", start_values=dict(c=3e4), stop_time=2.0, output_interval=1e-2)
+    run = simulate("PogoStick", start_values=dict(c=3e4, method=5), stop_time=2.0, output_interval=1e-2)
     assert not run.errors
+    assert _energy_residual(run) <= 1e-6 * run["E"][0]
+
+
+@pytest.mark.parametrize("c", [3e4, 1e6])
+def test_the_default_method_runs_the_stiff_dashpot_within_the_budget_and_keeps_the_energy_balance(c):
+    """What exhausts DOPRI5's budget (c = 1e6) the default method 0 runs: it switches to Rodas5P in
+    the contact, within the default budget, and the energy balance holds as for DOPRI5 at c = 3e4."""
+    run = simulate("PogoStick", start_values=dict(c=c), stop_time=2.0, output_interval=1e-2)
+    assert not run.errors, run.errors
+    assert run["time"][-1] == pytest.approx(2.0)
     assert _energy_residual(run) <= 1e-6 * run["E"][0]
 
 

@@ -185,7 +185,7 @@ def test_the_storm_and_the_budget_end_alike_in_both_engines(native, case):
     model, values, stop, words = {
         "storm of events": (_ball(False), {}, 5.0, "event storm: 200 events (bounce)"),
         "storm within the rounding": (_ball(True), {}, 5.0, "event storm: bounce happens again within the rounding"),
-        "work budget": (all_models()["PogoStick"], {"c": 1e4, "max_steps_per_second": 1000.0}, 1.0,
+        "work budget": (all_models()["PogoStick"], {"c": 1e4, "max_steps_per_second": 1000.0, "method": 5}, 1.0,
                         "work budget exhausted"),
     }[case]
     p, s = split(model, values)

@@ -310,6 +310,10 @@ class Simulator:
         self._qkey = None
         self._qdict = None
         self._bound = None
+        # the discrete state of the latest read, its dict, and where a float entry's zero could be
+        # -0.0 (equal to 0.0 but other bits: read anew, not served from the cache)
+        self._qlast, self._qlast_dict = None, None
+        self._qfloat = tuple(i for i, (_, kind) in enumerate(self._layout) if kind != "i")
         st = self._struct = PgModel()
         C.pointer(st)[0] = static.struct  # the constant fields
         self._callbacks = cbs = {name: FN[name](getattr(self, "_cb_" + name)) for name in _FUNCTIONS[:11]}
@@ -501,25 +505,27 @@ class Simulator:
     def _read(self, filled=False):
         """Take the engine's served values into this object's attributes (``filled``: the call that
         just returned wrote them into the buffer already)."""
-        nx, nq = self._nx, self._nq
         buf = self._buf
         if not filled:
             library().pgb_read(self._engine, buf)
         v = buf[:]
-        self.t_out, self.t, self.h, self.max_step = v[0], v[1], v[2], v[3]
-        n_events = int(v[4])
-        self.n_steps, self.n_rejected = int(v[5]), int(v[6])
+        self.t_out, self.t, self.h, self.max_step, n_events, n_steps, n_rejected = v[:7]
+        n_events, self.n_steps, self.n_rejected = int(n_events), int(n_steps), int(n_rejected)
         self._due = bool(v[10])
-        o = _READ_HEAD
-        self.x_out = v[o:o + nx]
-        self.q_out = self._qdict_of(v[o + nx:o + nx + nq])
-        o += nx + nq
-        self.x = v[o:o + nx]
-        self.q = self._qdict_of(v[o + nx:o + nx + nq])
-        self.u = tuple(v[o + nx + nq:])
+        a = _READ_HEAD
+        b = a + self._nx
+        c = b + self._nq
+        d = c + self._nx
+        e = d + self._nq
+        self.x_out = v[a:b]
+        self.q_out = self._qdict_of(v[b:c])
+        self.x = v[c:d]
+        self.q = self._qdict_of(v[d:e])
+        self.u = tuple(v[e:])
         if n_events != getattr(self, "n_events", -1) or (v[7] and getattr(self, "last_event", None) is None):
             self.n_events = n_events
             if v[7]:
+                nx = self._nx
                 xb, xa = (C.c_double * max(nx, 1))(), (C.c_double * max(nx, 1))()
                 library().pgb_last_event(self._engine, xb, xa)
                 i = int(v[9])
@@ -531,10 +537,17 @@ class Simulator:
         return struct.pack(self._qfmt, *(float(qd[k]) for k, _ in self._layout))
 
     def _qdict_of(self, values):
+        """The discrete state ``values`` as the model's dict: the latest read's while it is the same
+        (the common case: a mode changes only at events), the callbacks' if it is theirs."""
+        if values == self._qlast and not (self._qfloat and any(values[i] == 0.0 for i in self._qfloat)):
+            return self._qlast_dict
         key = struct.pack(self._qfmt, *values)
         if key == self._qkey:
-            return self._qdict
-        return {k: (int(v) if kind == "i" else v) for (k, kind), v in zip(self._layout, values)}
+            qd = self._qdict
+        else:
+            qd = {k: (int(v) if kind == "i" else v) for (k, kind), v in zip(self._layout, values)}
+        self._qlast, self._qlast_dict = values, qd
+        return qd
 
     @property
     def events(self) -> List[EventRecord]:
@@ -630,6 +643,7 @@ class Simulator:
         C.memmove(self._engine, raw, len(raw))
         lib.pgb_rebind(self._engine, C.byref(self._struct), self._on_event, self._on_warning, self._on_switch)
         self._qkey = self._qdict = self._bound = self._ukey = None
+        self._qlast = self._qlast_dict = None
         self._uc = self.u
         self.n_events = -1
         self.last_event = None
