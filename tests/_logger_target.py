@@ -9,8 +9,9 @@ calls the freed function, which may kill the process.
 
 Arguments: the backend (``python`` or ``native``), the FMI version (2 or 3), ``own`` (the instance gets callbacks of its own, as
 tests/support.py's RawInstance gives them) or ``default`` (fmpy's ``instantiate_fmu`` without a
-logger: fmpy's default callbacks). Prints the status and the messages the instance's logger got,
-as JSON on its last line.
+logger: fmpy's default callbacks); optionally ``sweep``: what comes first is a run of the sweep's
+runner (pogofmu.sweep.Runner) instead of ``simulate_fmu(logger=...)``. Prints the status and the
+messages the instance's logger got, as JSON on its last line.
 """
 import ctypes
 import gc
@@ -29,7 +30,13 @@ backend, fmi, callbacks = "native/" if sys.argv[1] == "native" else "", int(sys.
 path = str(DIST / backend / ("fmi3/" if fmi == 3 else "") / "PogoStick.fmu")
 md = read_model_description(path)
 unzipped = extract(path)
-simulate_fmu(unzipped, model_description=md, stop_time=0.01, logger=lambda *message: None)
+if sys.argv[4:] == ["sweep"]:
+    from pogofmu.sweep import Runner, Settings
+
+    row, _ = Runner(path).run({"k": 100.0}, Settings(stop_time=0.01))
+    assert row["status"] == "ok", row
+else:
+    simulate_fmu(unzipped, model_description=md, stop_time=0.01, logger=lambda *message: None)
 gc.collect()  # the logger's ctypes function is freed now; the proxy still points at it
 
 getter = "fmi2GetReal" if fmi == 2 else "fmi3GetFloat64"

@@ -15,7 +15,7 @@ import tomllib
 
 import pytest
 from pogofmu import fmpy_raw
-from support import ROOT, RawInstance
+from support import DIST, ROOT, RawInstance
 
 
 def _pinned_range():
@@ -92,6 +92,44 @@ def test_an_error_logged_after_fmpy_freed_its_proxys_logger_reaches_the_instance
         assert proc.returncode == 0 and result["status"] == 3 and text in proc.stdout, (proc.returncode, proc.stdout)
     else:  # the control: the hazard the own callbacks avoid is there
         assert proc.returncode != 0 or text not in proc.stdout, (proc.returncode, proc.stdout)
+
+
+@pytest.mark.parametrize("backend", ["python", "native"])
+def test_after_a_sweep_run_fmpys_proxy_is_left_at_a_logger_that_lives(backend):
+    """The sweep's runner points fmpy's FMI 2.0 proxy at one logger that lives as long as the
+    process (its own per-run logger was freed with the run and a later instance on fmpy's default
+    callbacks then died, as after simulate_fmu(logger=...) in the control above): the refusal of
+    an unknown value reference on such an instance returns Error and the process lives."""
+    proc = subprocess.run([sys.executable, str(ROOT / "tests" / "_logger_target.py"), backend, "2", "default", "sweep"],
+                          capture_output=True, text=True, timeout=180)
+    assert proc.returncode == 0, (proc.returncode, proc.stderr[-2000:])
+    assert json.loads(proc.stdout.strip().splitlines()[-1])["status"] == 3
+
+
+def test_sweep_runs_on_threads_each_get_their_own_fmi2_messages():
+    """Runs of the sweep on two threads at once (a Dask worker's threads): each row's event list is
+    that of the same point run alone; with fmpy's one proxy target a run's messages could land in
+    the other's list."""
+    import threading
+
+    from pogofmu.sweep import Runner, Settings
+
+    runner = Runner(str(DIST / "PogoStick.fmu"))
+    settings = Settings(stop_time=3.0, events=True)
+    points = [{"ydot_0": 0.3 * i} for i in range(6)]
+    alone = [runner.run(p, settings)[0]["event_t"] for p in points]
+    assert len({tuple(e) for e in alone}) == len(points) and all(alone)
+    together = [None] * len(points)
+
+    def work(k):
+        for i in range(k, len(points), 2):
+            together[i] = runner.run(points[i], settings)[0]["event_t"]
+    threads = [threading.Thread(target=work, args=(k,)) for k in range(2)]
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join()
+    assert together == alone
 
 
 def test_a_missing_function_or_table_is_named():

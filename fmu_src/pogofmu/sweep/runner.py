@@ -19,6 +19,46 @@ def _decode(b):
     return b.decode(errors="replace") if b else ""
 
 
+# FMI 2.0 logging. fmpy 0.3 formats an FMI 2.0 message in a native proxy that has one target for the
+# whole process (docs/known-issues.md): a logger per run would leave it pointing at a freed function
+# once the run is over (a later instance's message then kills the process) and, with several runs on
+# a worker's threads, send one run's messages to another's list. So the target is one function that
+# lives as long as the process and appends to the list of the run on the calling thread (an FMU
+# logs from inside the FMI call that the run's thread makes).
+_RUN_LOG = threading.local()
+
+
+def _fmi2_log(component, instance, status, category, message):
+    messages = getattr(_RUN_LOG, "messages", None)
+    if messages is not None:
+        messages.append((status, _decode(category), _decode(message)))
+
+
+_FMI2_LOGGER = None  # the one ctypes function of _fmi2_log (made on first use: fmpy is imported late)
+
+
+def _fmi2_callbacks():
+    """Callbacks for one FMI 2.0 instance, through fmpy's proxy to :func:`_fmi2_log` (pointing the
+    proxy at it again: a user's ``simulate_fmu(logger=...)`` in the same process may have moved it).
+    Keep the object as long as the instance lives."""
+    global _FMI2_LOGGER
+    from ctypes import byref
+
+    from fmpy import calloc, free
+    from fmpy.fmi2 import (fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions,
+                           fmi2CallbackLoggerTYPE)
+    from fmpy.logging import addLoggerProxy
+
+    if _FMI2_LOGGER is None:
+        _FMI2_LOGGER = fmi2CallbackLoggerTYPE(_fmi2_log)
+    callbacks = fmi2CallbackFunctions()
+    callbacks.logger = _FMI2_LOGGER
+    callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+    callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+    addLoggerProxy(byref(callbacks))
+    return callbacks
+
+
 class Runner:
     """One extracted FMU, run as often as asked; each run in a fresh instance."""
 
@@ -38,31 +78,27 @@ class Runner:
         """A fresh FMU instance for one run. With the C loop, the thread's FMU object (its library
         loaded and its functions bound once) instantiates again: fmpy's ``instantiate_fmu`` binds
         every function anew each time, which costs more than the run itself."""
+        from fmpy.fmi2 import FMU2Slave
         from fmpy.simulation import instantiate_fmu
 
         slave = getattr(self._slaves, "fmu", None)
-        if slave is None:
-            fmu = instantiate_fmu(self.unzipdir, self.md, "CoSimulation", False, True, logger)
-            if self._grid_loop(fmu) is not None:
-                self._slaves.fmu = fmu
-            return fmu
         if self.fmi3:
+            if slave is None:
+                fmu = instantiate_fmu(self.unzipdir, self.md, "CoSimulation", False, True, logger)
+                if self._grid_loop(fmu) is not None:
+                    self._slaves.fmu = fmu
+                return fmu
             slave.instantiate(visible=False, loggingOn=True, logMessage=logger)
             return slave
-        from ctypes import byref
-
-        from fmpy import calloc, free
-        from fmpy.fmi2 import (fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions,
-                               fmi2CallbackLoggerTYPE)
-        from fmpy.logging import addLoggerProxy
-
-        callbacks = fmi2CallbackFunctions()
-        callbacks.logger = fmi2CallbackLoggerTYPE(logger)
-        callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
-        callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-        addLoggerProxy(byref(callbacks))
-        slave.instantiate(visible=False, callbacks=callbacks, loggingOn=True)
-        return slave
+        fmu = slave
+        if fmu is None:
+            fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self.unzipdir,
+                            modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName=None)
+        fmu.pogofmu_callbacks = _fmi2_callbacks()  # (kept with the instance)
+        fmu.instantiate(visible=False, callbacks=fmu.pogofmu_callbacks, loggingOn=True)
+        if slave is None and self._grid_loop(fmu) is not None:
+            self._slaves.fmu = fmu
+        return fmu
 
     def _free(self, fmu):
         if getattr(self._slaves, "fmu", None) is fmu:  # the instance only: the library stays for the next run
@@ -138,13 +174,10 @@ class Runner:
         from fmpy.fmi1 import FMICallException
 
         messages = []  # this run's log (a worker with several threads runs several at once)
+        _RUN_LOG.messages = messages  # FMI 2.0: _fmi2_log appends here, on this thread
 
-        def logger(component, instance, status, category, message):
+        def logger(environment, status, category, message):  # fmi3LogMessageCallback: an instance's own
             messages.append((status, _decode(category), _decode(message)))
-
-        if self.fmi3:  # fmi3LogMessageCallback: (instanceEnvironment, status, category, message)
-            def logger(environment, status, category, message):  # noqa: F811
-                messages.append((status, _decode(category), _decode(message)))
 
         start = dict(settings.fixed)
         start.update(point)
@@ -195,6 +228,7 @@ class Runner:
             row["event_t"] = [e["time"] for e in ev]
             row["event_name"] = [e["name"] for e in ev]
             row["event_state"] = [list(e["state"].items()) for e in ev]
+        _RUN_LOG.messages = None  # (a message after the run, e.g. of a freed instance, is nobody's)
         return row, (res if settings.timeseries else None)
 
 
