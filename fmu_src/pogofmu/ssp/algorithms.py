@@ -294,8 +294,13 @@ class Synchronizer:
                 ex.also_read(inst, ["n_events", "t_last_event"])
         self.switching = [inst for inst in order if inst.switches]
         self._switch_keys = [(inst.name, n) for inst in self.switching for n in inst.switches]
+        # the components stepped together with ``inst`` (its level; with Jacobi, all of them) go to
+        # the step's end before any event among them is known, so a peer's event cuts them back too
+        self.levels = [order] if jacobi else ex.levels
+        peers = {inst.name: level for level in self.levels for inst in level}
         for i, inst in enumerate(order):
-            later = any(o.may_stop for o in order[i + 1:]) or any(o.switches for o in order[i:])
+            later = any(o.may_stop for o in order[i + 1:]) or any(o.switches for o in order[i:]) \
+                or any(o.may_stop for o in peers[inst.name] if o is not inst)
             inst.must_save = inst.can_save and (inst.rollback or later)
             if later and not inst.can_save:
                 warn(f"warning: Component {inst.name} cannot get and set its FMU state: an event of a "
@@ -386,7 +391,7 @@ class Synchronizer:
         if jacobi:
             for inst in ex.order:
                 ex.feed(inst)
-        for level in ([ex.order] if jacobi else ex.levels):
+        for level in self.levels:
             # the level's components step together to ``target`` (in parallel with --threads);
             # the earliest event among them then cuts the macro step, as one after the other the
             # first would have cut the step of the next: those that went past it go back to it
