@@ -65,6 +65,10 @@ def main(argv=None):
         for (r, th) in cases:
             per[r, th] = best[r, th] / steps / RINGS[r] * 1e6
             print(f"{r:>5} {RINGS[r]:>5} {th:>7} {best[r, th]:>8.2f} {per[r, th]:>12.1f} {peak[r, th]:>8.1f}")
+        if min(best.values()) <= 0:  # the load's noise exceeded the runs' difference: no ratio
+            print("a difference of run times is <= 0: the machine's load exceeds the cost measured; "
+                  "run again with a larger --long on an idle machine")
+            return 1
         scale = per[4, 1] / per[1, 1]
         speed = best[4, 1] / best[4, 2]
         print(f"(1) cost per step per FMU, 4 rings / 1 ring: {scale:.2f} (target <= 1.3: "
@@ -74,4 +78,4 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())
