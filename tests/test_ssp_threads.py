@@ -1,0 +1,92 @@
+"""The SSP master at scale on a 1-ring native mirror (docs/ssp-master.md, "Threads and
+recording"): ``--threads 2`` gives the bits of ``--threads 1`` (Gauss–Seidel and Jacobi, events
+on, actuators on their stops), an error of a component stepped on a worker thread is the
+master's one line, and ``--record`` writes exactly the selected columns of the full run."""
+from __future__ import annotations
+
+import zipfile
+
+import numpy as np
+import pytest
+
+from support import run_pogofmu
+
+STOP = "0.8"  # the gust (0.3-0.7 s) has put segments on both stops by then
+
+
+def pogofmu(*args, cwd):
+    return run_pogofmu(*args, cwd=cwd, timeout=600)
+
+
+@pytest.fixture(scope="module")
+def mirror(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("threads")
+    proc = pogofmu("ssp", "mirror", "--rings", "1", "--backend", "native", "--out", "m.ssp", cwd=folder)
+    assert proc.returncode == 0, proc.stderr
+    return folder
+
+
+def run(folder, name, *args, ssp="m.ssp"):
+    proc = pogofmu("ssp", "run", ssp, "--step", "1e-3", "--stop-time", STOP, "--out", name, "--quiet", *args,
+                   cwd=folder)
+    return proc, folder / name / "default.csv"
+
+
+def table(path):
+    return np.genfromtxt(path, delimiter=",", names=True, deletechars="")
+
+
+@pytest.mark.parametrize("algorithm", ["gauss-seidel", "jacobi"])
+def test_two_threads_give_the_bits_of_one(mirror, algorithm):
+    got = {}
+    for threads in ("1", "2"):
+        proc, csv = run(mirror, f"{algorithm}-{threads}", "--algorithm", algorithm, "--threads", threads)
+        assert proc.returncode == 0, proc.stderr
+        got[threads] = table(csv)
+    one, two = got["1"], got["2"]
+    modes = np.array([one[f"Actuator_{i}.mode"] for i in range(1, 8)])
+    assert (modes == 1).any() and (modes == -1).any()  # stops hit: rollbacks and cut steps on both threads
+    assert (one["event"] != 0).any()
+    assert one.dtype.names == two.dtype.names and len(one) == len(two)
+    for col in one.dtype.names:
+        assert np.array_equal(one[col], two[col]), col
+
+
+def test_a_component_failing_on_a_worker_thread_ends_the_run_in_one_line(mirror):
+    """Actuator_2 is stepped on the worker thread (the level's components are dealt round-robin);
+    allowed 3 solver steps per call its first step fails, on that thread."""
+    edited = mirror / "failing.ssp"
+    with zipfile.ZipFile(mirror / "m.ssp") as src, zipfile.ZipFile(edited, "w") as dst:
+        for item in src.infolist():
+            data = src.read(item.filename)
+            if item.filename == "resources/actuator_2.ssv":
+                data = data.decode().replace(
+                    "  </ssv:Parameters>",
+                    '    <ssv:Parameter name="max_steps_per_call"><ssv:Real value="3"/></ssv:Parameter>\n'
+                    "  </ssv:Parameters>").encode()
+            dst.writestr(item, data)
+    proc, _ = run(mirror, "failing", "--threads", "2", ssp=edited)
+    assert proc.returncode == 1, proc.stderr
+    assert "Traceback" not in proc.stderr + proc.stdout
+    errors = [line for line in proc.stderr.splitlines() if line.startswith("error: ")]
+    assert len(errors) == 1 and "Component Actuator_2" in errors[0] and "max_steps_per_call" in errors[0], proc.stderr
+
+
+def test_recorded_columns_are_those_of_the_full_run(mirror):
+    proc, full = run(mirror, "full")
+    assert proc.returncode == 0, proc.stderr
+    proc, part = run(mirror, "part", "--record", "Actuator_*.z,Reconstructor.piston_rms")
+    assert proc.returncode == 0, proc.stderr
+    full, part = table(full), table(part)
+    assert part.dtype.names == ("time", "event", *[f"Actuator_{i}.z" for i in range(1, 8)],
+                                "Reconstructor.piston_rms")
+    assert len(part) == len(full)
+    for col in part.dtype.names:
+        assert np.array_equal(part[col], full[col]), col
+
+
+def test_a_record_pattern_matching_nothing_is_one_line_naming_it(mirror):
+    proc, _ = run(mirror, "none", "--record", "Actuator_*.z,Actuator_*.nothing")
+    assert proc.returncode == 1
+    assert proc.stderr.strip().count("\n") == 0 and "'Actuator_*.nothing'" in proc.stderr, proc.stderr
+    assert "Traceback" not in proc.stderr
