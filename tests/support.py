@@ -146,25 +146,11 @@ class Instance:
         self.dir = extract(str(path)) if unzip_dir is None else unzip_dir  # reuse one extraction
         self.messages = []
 
-        def logger(component, instance, status, category, message):
-            self.messages.append(_message(status, category, message))
-
         self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self.dir,
                              modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName=instance_name)
-        self._instantiate_with(logger)
+        self._callbacks = fmi2_callbacks(self.messages)
+        self.fmu.instantiate(loggingOn=True, callbacks=self._callbacks.struct)
         self.t = 0.0
-
-    def _instantiate_with(self, logger):
-        from fmpy.fmi2 import fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, fmi2CallbackAllocateMemoryTYPE, \
-            fmi2CallbackFreeMemoryTYPE
-        from fmpy import calloc, free
-
-        cb = fmi2CallbackFunctions()
-        cb.logger = fmi2CallbackLoggerTYPE(logger)
-        cb.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
-        cb.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-        self._callbacks = cb
-        self.fmu.instantiate(loggingOn=True, callbacks=cb)
 
     def set(self, **values):
         for name, value in values.items():
@@ -225,19 +211,12 @@ def run_pogofmu(*args, cwd, timeout):
 
 
 def fmi2_callbacks(messages):
-    """FMI 2.0 callbacks whose logger appends ``(status, category, text)`` to ``messages``; keep the
-    returned object as long as the instance lives.  (Never fmpy's ``defaultCallbacks``: their
-    logger goes through fmpy's native proxy, which keeps one target for the whole process — the
-    logger of the latest ``simulate_fmu(..., logger=...)`` — and calls it after it was freed.)"""
-    from fmpy import calloc, free
-    from fmpy.fmi2 import fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions, \
-        fmi2CallbackLoggerTYPE
+    """FMI 2.0 callbacks (:class:`pogofmu.fmpy_raw.Fmi2Callbacks`) whose messages are appended to
+    ``messages`` as ``(status, category, text)``; pass ``.struct`` to the instantiation and keep the
+    returned object as long as the instance lives."""
+    from pogofmu.fmpy_raw import Fmi2Callbacks
 
-    cb = fmi2CallbackFunctions()
-    cb.logger = fmi2CallbackLoggerTYPE(lambda c, i, st, cat, msg: messages.append(_message(st, cat, msg)))
-    cb.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
-    cb.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-    return cb
+    return Fmi2Callbacks(lambda status, category, text: messages.append((status, category, text)))
 
 
 def init_failure_text(name, **params):
@@ -340,17 +319,15 @@ class RawInstance:
         self.vars = {v.name: v for v in md.modelVariables}
         unzipped = extract(str(path)) if unzip_dir is None else unzip_dir
         if fmi == 2:
-            from fmpy import calloc, free
-            from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
-                                   fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
+            from fmpy.fmi2 import FMU2Slave
+
+            from pogofmu.fmpy_raw import Fmi2Callbacks
 
             self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipped, modelIdentifier=md.coSimulation.modelIdentifier,
                                  instanceName="raw")
-            cb = fmi2CallbackFunctions()
-            cb.logger = fmi2CallbackLoggerTYPE(lambda c, inst, status, cat, msg: self.messages.append((status, msg.decode())))
-            cb.allocateMemory, cb.freeMemory = fmi2CallbackAllocateMemoryTYPE(calloc), fmi2CallbackFreeMemoryTYPE(free)
-            self._cb = cb
-            self.fmu.instantiate(loggingOn=True, callbacks=cb)
+            self._callbacks = Fmi2Callbacks(lambda status, category, text: self.messages.append((status, text)))
+            self._cb = self._callbacks.struct  # (the struct, for the tests that instantiate by hand)
+            self.fmu.instantiate(loggingOn=True, callbacks=self._cb)
         else:
             from fmpy.fmi3 import FMU3Model, FMU3Slave
 

@@ -211,21 +211,18 @@ class Machine(RuleBasedStateMachine):
 
 class Fmi2CoSimulation(Machine):
     def make(self):
-        from fmpy import calloc, extract, free, read_model_description
-        from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
-                               fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
+        from fmpy import extract, read_model_description
+        from fmpy.fmi2 import FMU2Slave
+
+        from pogofmu.fmpy_raw import Fmi2Callbacks
 
         path = DIST / f"{self.NAME}.fmu"
         md = read_model_description(str(path))
         self.vars = {v.name: v for v in md.modelVariables}
         fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(str(path)), modelIdentifier=md.coSimulation.modelIdentifier,
                         instanceName="machine")
-        cb = fmi2CallbackFunctions()
-        cb.logger = fmi2CallbackLoggerTYPE(lambda c, inst, status, cat, msg: self.messages.append(
-            (status, msg.decode(errors="replace"))))
-        cb.allocateMemory, cb.freeMemory = fmi2CallbackAllocateMemoryTYPE(calloc), fmi2CallbackFreeMemoryTYPE(free)
-        self._cb = cb
-        fmu.instantiate(loggingOn=True, callbacks=cb)
+        self._cb = Fmi2Callbacks(lambda status, category, text: self.messages.append((status, text)))
+        fmu.instantiate(loggingOn=True, callbacks=self._cb.struct)
         return fmu
 
     @rule()

@@ -132,6 +132,30 @@ def test_sweep_runs_on_threads_each_get_their_own_fmi2_messages():
     assert together == alone
 
 
+def test_instances_alive_at_once_each_get_their_own_fmi2_messages():
+    """Two FMI 2.0 instances alive at once, stepped in turn: each one's events and refusals land in
+    its own list only (fmpy's proxy has one target; pogofmu.fmpy_raw.Fmi2Callbacks files a message
+    by the componentEnvironment the instance hands back), the same events as an instance alone."""
+    from fmpy.fmi1 import FMICallException
+    from support import Instance, parse_event_log
+
+    a = Instance("PogoStick", "a").init(log_events=1)
+    b = Instance("PogoStick", "b").init(log_events=1, ydot_0=-2.0)
+    for k in range(1, 201):
+        a.run_to(k * 1e-2, 1e-2)
+        b.run_to(k * 1e-2, 1e-2)
+    alone = Instance("PogoStick", "alone").init(log_events=1)
+    alone.run_to(2.0, 1e-2)
+    ta, tb = ([e["time"] for e in parse_event_log(i.messages)] for i in (a, b))
+    assert ta and tb and set(ta).isdisjoint(tb), (ta, tb)
+    assert ta == [e["time"] for e in parse_event_log(alone.messages)]
+    n_b = len(b.messages)
+    with pytest.raises(FMICallException):
+        a.fmu.setReal([10 ** 6], [1.0])  # an unknown value reference: refused, and the refusal logged
+    assert a.messages[-1][0] >= 3 and "1000000" in a.messages[-1][2], a.messages[-1]
+    assert len(b.messages) == n_b
+
+
 def test_a_missing_function_or_table_is_named():
     class NotAnFmpyFMU:
         component = None

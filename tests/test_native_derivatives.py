@@ -205,7 +205,7 @@ def test_controller_outputs_with_respect_to_its_inputs_fmi3_and_fmi2():
     from support import fmi2_callbacks
 
     callbacks = fmi2_callbacks([])
-    cs.instantiate(callbacks=callbacks)
+    cs.instantiate(callbacks=callbacks.struct)
     cs.setupExperiment(startTime=0.0)
     cs.enterInitializationMode()
     cs.exitInitializationMode()

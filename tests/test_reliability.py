@@ -175,7 +175,7 @@ def test_another_builds_serialized_state_is_refused_naming_the_build(tmp_path):
     from support import fmi2_callbacks
 
     callbacks = fmi2_callbacks([])
-    fmu.instantiate(loggingOn=True, callbacks=callbacks)
+    fmu.instantiate(loggingOn=True, callbacks=callbacks.struct)
     own = Instance("PogoStick", "own").init()
     try:
         fmu.setupExperiment(startTime=0.0)

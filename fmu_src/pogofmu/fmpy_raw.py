@@ -37,3 +37,55 @@ def raw_function(fmu, name: str):
 def raw_call(fmu, name: str, *args) -> int:
     """``name(fmu.component, *args)`` called bare: the FMI status."""
     return raw_function(fmu, name)(fmu.component, *args)
+
+
+# ---- FMI 2.0 callbacks ----------------------------------------------------------------------------
+# fmpy 0.3 formats an FMI 2.0 message (a printf format with variadic arguments, which ctypes cannot
+# take) in a native proxy that has ONE target for the whole process (docs/known-issues.md). A logger
+# per instance would leave that target pointing at a freed function once its instance is gone (the
+# next message from any instance then kills the process), and with several instances each would
+# steal the others' messages. So the target is one function that lives as long as the process and
+# files each message under the instance that sent it, by the componentEnvironment each instance
+# hands back with every message.
+_FMI2_LOGGER = None  # the one ctypes function of _fmi2_dispatch (made on first use: fmpy is imported late)
+_FMI2_SINKS = {}  # componentEnvironment -> the instance's sink
+_FMI2_KEYS = None  # itertools.count: the componentEnvironment of the next instance
+
+
+def _fmi2_dispatch(environment, instance, status, category, message):
+    sink = _FMI2_SINKS.get(environment or 0)
+    if sink is not None:
+        sink(int(status), category.decode(errors="replace") if category else "",
+             message.decode(errors="replace") if message else "")
+
+
+class Fmi2Callbacks:
+    """The ``fmi2CallbackFunctions`` of one FMI 2.0 instance: its messages, formatted, go to
+    ``sink(status, category, text)`` (called on the thread of the FMI call that logs). Pass
+    :attr:`struct` to ``instantiate`` and keep this object as long as the instance lives; a message
+    after it is gone is dropped."""
+
+    def __init__(self, sink):
+        global _FMI2_LOGGER, _FMI2_KEYS
+        import itertools
+        import weakref
+        from ctypes import byref
+
+        from fmpy import calloc, free
+        from fmpy.fmi2 import (fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions,
+                               fmi2CallbackLoggerTYPE)
+        from fmpy.logging import addLoggerProxy
+
+        if _FMI2_LOGGER is None:
+            _FMI2_LOGGER, _FMI2_KEYS = fmi2CallbackLoggerTYPE(_fmi2_dispatch), itertools.count(1)
+        self.key = next(_FMI2_KEYS)
+        _FMI2_SINKS[self.key] = sink
+        weakref.finalize(self, _FMI2_SINKS.pop, self.key, None)
+        cb = self.struct = fmi2CallbackFunctions()
+        cb.logger = _FMI2_LOGGER
+        cb.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+        cb.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+        cb.componentEnvironment = self.key
+        # (pointing the proxy at the dispatcher again: a user's simulate_fmu(logger=...) in the same
+        # process may have moved it)
+        addLoggerProxy(byref(cb))

@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Dict, List, Optional
 from xml.etree import ElementTree as ET
 
-from pogofmu.fmpy_raw import raw_function
+from pogofmu.fmpy_raw import Fmi2Callbacks, raw_function
 from pogofmu.runtime.status import status_name
 
 from .package import SSPError
@@ -267,19 +267,13 @@ class Fmi2CoSimulation(Component):
 
     def __init__(self, comp, workdir, echo):
         super().__init__(comp, workdir, echo)
-        from fmpy import calloc, free
-        from fmpy.fmi2 import FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE, \
-            fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
+        from fmpy.fmi2 import FMU2Slave
 
         md = self.md
         self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=self.dir, modelIdentifier=md.coSimulation.modelIdentifier,
                              instanceName=self.name)
-        cb = fmi2CallbackFunctions()
-        cb.logger = fmi2CallbackLoggerTYPE(lambda c, inst, status, cat, msg: self._log(status, msg))
-        cb.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
-        cb.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-        self._cb = cb  # keep the callbacks alive
-        self.fmu.instantiate(loggingOn=True, callbacks=cb)
+        self._cb = Fmi2Callbacks(lambda status, category, text: self._log(status, text))  # kept with the instance
+        self.fmu.instantiate(loggingOn=True, callbacks=self._cb.struct)
         self.can_save = bool(md.coSimulation.canGetAndSetFMUstate)
         self.counts_events = self.events is not None and "n_events" in self.variables \
             and "t_last_event" in self.variables

@@ -11,52 +11,14 @@ import time
 from pathlib import Path
 from typing import Dict, Sequence
 
+from pogofmu.fmpy_raw import Fmi2Callbacks
 from pogofmu.runtime.eventlog import parse_event_log  # the FMU's event records, as data
 
 from .spec import INTEGER_TYPES, SUMMARY_OUTPUTS, Settings, default_step, recorded_outputs, run_span
 
+
 def _decode(b):
     return b.decode(errors="replace") if b else ""
-
-
-# FMI 2.0 logging. fmpy 0.3 formats an FMI 2.0 message in a native proxy that has one target for the
-# whole process (docs/known-issues.md): a logger per run would leave it pointing at a freed function
-# once the run is over (a later instance's message then kills the process) and, with several runs on
-# a worker's threads, send one run's messages to another's list. So the target is one function that
-# lives as long as the process and appends to the list of the run on the calling thread (an FMU
-# logs from inside the FMI call that the run's thread makes).
-_RUN_LOG = threading.local()
-
-
-def _fmi2_log(component, instance, status, category, message):
-    messages = getattr(_RUN_LOG, "messages", None)
-    if messages is not None:
-        messages.append((status, _decode(category), _decode(message)))
-
-
-_FMI2_LOGGER = None  # the one ctypes function of _fmi2_log (made on first use: fmpy is imported late)
-
-
-def _fmi2_callbacks():
-    """Callbacks for one FMI 2.0 instance, through fmpy's proxy to :func:`_fmi2_log` (pointing the
-    proxy at it again: a user's ``simulate_fmu(logger=...)`` in the same process may have moved it).
-    Keep the object as long as the instance lives."""
-    global _FMI2_LOGGER
-    from ctypes import byref
-
-    from fmpy import calloc, free
-    from fmpy.fmi2 import (fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions,
-                           fmi2CallbackLoggerTYPE)
-    from fmpy.logging import addLoggerProxy
-
-    if _FMI2_LOGGER is None:
-        _FMI2_LOGGER = fmi2CallbackLoggerTYPE(_fmi2_log)
-    callbacks = fmi2CallbackFunctions()
-    callbacks.logger = _FMI2_LOGGER
-    callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
-    callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-    addLoggerProxy(byref(callbacks))
-    return callbacks
 
 
 class Runner:
@@ -74,7 +36,7 @@ class Runner:
         self.c_loop = None  # known after the first instance: does the binary bring its own loop?
         self._slaves = threading.local()  # with a C loop: this thread's FMU object, its library kept loaded
 
-    def _instantiate(self, logger):
+    def _instantiate(self, logger, messages):
         """A fresh FMU instance for one run. With the C loop, the thread's FMU object (its library
         loaded and its functions bound once) instantiates again: fmpy's ``instantiate_fmu`` binds
         every function anew each time, which costs more than the run itself."""
@@ -94,8 +56,9 @@ class Runner:
         if fmu is None:
             fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self.unzipdir,
                             modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName=None)
-        fmu.pogofmu_callbacks = _fmi2_callbacks()  # (kept with the instance)
-        fmu.instantiate(visible=False, callbacks=fmu.pogofmu_callbacks, loggingOn=True)
+        # (fmpy's one FMI 2.0 proxy target: pogofmu.fmpy_raw.Fmi2Callbacks; kept with the instance)
+        fmu.pogofmu_callbacks = Fmi2Callbacks(lambda status, category, text: messages.append((status, category, text)))
+        fmu.instantiate(visible=False, callbacks=fmu.pogofmu_callbacks.struct, loggingOn=True)
         if slave is None and self._grid_loop(fmu) is not None:
             self._slaves.fmu = fmu
         return fmu
@@ -174,7 +137,6 @@ class Runner:
         from fmpy.fmi1 import FMICallException
 
         messages = []  # this run's log (a worker with several threads runs several at once)
-        _RUN_LOG.messages = messages  # FMI 2.0: _fmi2_log appends here, on this thread
 
         def logger(environment, status, category, message):  # fmi3LogMessageCallback: an instance's own
             messages.append((status, _decode(category), _decode(message)))
@@ -190,7 +152,7 @@ class Runner:
         row = {"status": "ok", "message": ""}
         res = None
         t0 = time.perf_counter()
-        fmu = self._instantiate(logger)
+        fmu = self._instantiate(logger, messages)
         try:
             loop = self._grid_loop(fmu)
             if loop is not None and (settings.step or self.default_step) and self._c_recordable(record):
@@ -228,7 +190,6 @@ class Runner:
             row["event_t"] = [e["time"] for e in ev]
             row["event_name"] = [e["name"] for e in ev]
             row["event_state"] = [list(e["state"].items()) for e in ev]
-        _RUN_LOG.messages = None  # (a message after the run, e.g. of a freed instance, is nobody's)
         return row, (res if settings.timeseries else None)
 
 
