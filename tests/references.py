@@ -6,7 +6,10 @@ use them). One module, so that no test imports another test for its reference.
 * :func:`reference_stick` — any stick (linear, mem, SMA) of given parameters, one mode per branch
   of the SMA flag, guards written in x instead of the FMUs' force differences; :func:`scipy_sma`
   the SMA stick from the default drop;
-* :func:`penetrator_reference` — the Penetrator (Eq. 50), :func:`hunt_crossley` its soil force.
+* :func:`penetrator_reference` — the Penetrator (Eq. 50), :func:`hunt_crossley` its soil force;
+* :func:`mirror_closed_loop` — a whole segmented mirror (docs/segmented-mirror.md): every
+  actuator with its stops, every PID loop and the edge-sensor reconstruction in one ODE, the
+  stops' contacts and releases as events.
 
 Checked-in outputs of these (``tests/data/references/<Model>_ref.csv``, event name and time) let
 a test compare an FMU without running scipy and show when a reference itself changes
@@ -263,6 +266,89 @@ def hunt_crossley(state, d0, **par):
     lam = 1.5 * (1 - P["c_r"]) * P["K"] / d0
     dd = _rhs(0.0, state[:3], 1, lam, P)[2]
     return P["K"] * max(0.0, state[2]) ** P["n"] * (1 + lam / P["K"] * dd)
+
+
+def mirror_closed_loop(actuators, controllers, reconstructor, edges, t_eval, rtol=1e-12, atol=1e-16):
+    """The closed loop of a segmented mirror as one ODE (scipy DOP853), the pistons ``z[i]`` at
+    ``t_eval`` and the stop events ``[(segment, name, time)]``.
+
+    ``actuators[i]``, ``controllers[i]``: dicts of segment i's parameters (the names of the
+    .ssv files); ``reconstructor``: ``z_target``, ``G``; ``edges``: the neighbour pairs (i, j)
+    of the edge sensors, s = z_j - z_i. Per segment the states are z, z', the absement a, the
+    controller's integral I and filtered piston w:
+
+        m z'' = F + F_w(t) - k z - c z' - k_m/(1 + beta |a|) z + F_stop,   a' = z
+        F_stop = -(K + lam z') (z - z_s) on the upper stop, (K - lam z') (-z_s - z) on the lower,
+                 lam = 1.5 (1 - c_r) K / d0dot
+        r = z_target - G z_rel,  z_rel the minimum-norm least squares of D z_rel = D z (numpy pinv)
+        F_u = K_p (r - z) + K_i I - K_d (z - w)/T_f,  F = clip(F_u, +-F_max)
+        I' = (r - z) + (F - F_u)/(K_i T_t),  w' = (z - w)/T_f
+
+    Contact where z crosses +-z_s towards the stop, release where it crosses back."""
+    import numpy as np
+
+    n = len(actuators)
+    col = lambda d, key: np.array([float(x[key]) for x in d])  # noqa: E731
+    m, k, c, km, beta = (col(actuators, q) for q in ("m", "k", "c", "k_m", "beta"))
+    zs, Ks, cr, d0 = (col(actuators, q) for q in ("z_s", "K", "c_r", "d0dot"))
+    Aw, tg, Tg = (col(actuators, q) for q in ("A_w", "t_g", "T_g"))
+    lam = 1.5 * (1 - cr) * Ks / d0
+    Kp, Ki, Kd, Tf, Tt, Fm = (col(controllers, q) for q in ("K_p", "K_i", "K_d", "T_f", "T_t", "F_max"))
+    D = np.zeros((len(edges), n))
+    for e, (i, j) in enumerate(edges):
+        D[e, i], D[e, j] = -1.0, 1.0
+    P = np.linalg.pinv(D) @ D  # z_rel = P z
+    zt, G = float(reconstructor["z_target"]), float(reconstructor["G"])
+
+    def rhs(t, X, mode):
+        z, zd, a, I, w = X.reshape(5, n)
+        r = zt - G * (P @ z)
+        Fu = Kp * (r - z) + Ki * I - Kd * (z - w) / Tf
+        F = np.clip(Fu, -Fm, Fm)
+        on = (t > tg) & (t < tg + Tg)
+        Fw = np.where(on, 0.5 * Aw * (1 - np.cos(2 * np.pi * (t - tg) / Tg)), 0.0)
+        Fs = np.where(mode == 1, -(Ks + lam * zd) * np.maximum(z - zs, 0.0),
+                      np.where(mode == -1, (Ks - lam * zd) * np.maximum(-zs - z, 0.0), 0.0))
+        zdd = (F + Fw - k * z - c * zd - km / (1 + beta * np.abs(a)) * z + Fs) / m
+        return np.concatenate([zd, zdd, z, (r - z) + (F - Fu) / (Ki * Tt), (z - w) / Tf])
+
+    X = np.concatenate([col(actuators, "z_0"), np.zeros(n), np.array([float(x.get("a_0", 0.0)) for x in actuators]),
+                        np.array([float(x.get("I_0", 0.0)) for x in controllers]), col(controllers, "z_0")])
+    mode = np.zeros(n, dtype=int)
+    t, t_end = float(t_eval[0]), float(t_eval[-1])
+    t_eval = np.asarray(t_eval, dtype=float)
+    out = np.full((n, len(t_eval)), np.nan)
+    events = []
+    while True:
+        fns, what = [], []
+        for i in range(n):  # the events the current modes arm
+            if mode[i] == 0:
+                cand = ((lambda tt, X, *_, i=i: X[i] - zs[i], 1, 1, "upper_contact"),
+                        (lambda tt, X, *_, i=i: X[i] + zs[i], -1, -1, "lower_contact"))
+            else:
+                s = mode[i]
+                cand = ((lambda tt, X, *_, i=i, s=s: X[i] - s * zs[i], -s, 0, "upper_release" if s == 1 else "lower_release"),)
+            for fun, direction, to, name in cand:
+                fun.terminal, fun.direction = True, direction
+                fns.append(fun)
+                what.append((i, to, name))
+        sel = t_eval >= t
+        sol = solve_ivp(rhs, (t, t_end), X, method="DOP853", rtol=rtol, atol=atol, events=fns, args=(mode.copy(),),
+                        dense_output=True)
+        assert sol.status >= 0, sol.message
+        hits = [(sol.t_events[q][0], q) for q in range(len(fns)) if len(sol.t_events[q]) and sol.t_events[q][0] > t]
+        t_stop = min(hits)[0] if hits else t_end
+        take = sel & (t_eval <= t_stop)
+        if take.any():
+            out[:, take] = sol.sol(t_eval[take])[:n]
+        if not hits:
+            return out, events
+        te, q = min(hits)
+        i, to, name = what[q]
+        events.append((i, name, te))
+        X, mode = sol.y_events[q][0], mode.copy()
+        mode[i] = to
+        t = te
 
 
 REFERENCE_OUTPUTS = {  # model: (its reference's events [(name, time)], the stop time)

@@ -28,12 +28,17 @@ class Exchange:
     every input, and the rows written from them (``event`` column: 0 grid, -1 / +1 the left and
     right limits at an event instant)."""
 
-    def __init__(self, system, instances: Dict[str, object], order: List[str], record):
+    def __init__(self, system, instances: Dict[str, object], order: List[str], record, threads: int = 1,
+                 columns=None):
         self.system = system
         self.instances = instances
         self.order = [instances[n] for n in order]
         self.record = record
-        self.incoming = {n: [c for c in system.connections if c.end_element == n] for n in order}
+        incoming = {n: [] for n in order}
+        for c in system.connections:
+            if c.end_element in incoming:
+                incoming[c.end_element].append(c)
+        self.incoming = incoming
         self.outputs = {n: [c.name for c in system.components[n].connectors.values() if c.kind != "input"]
                         for n in order}
         self.watch = {n: list(self.outputs[n]) for n in order}  # read with the outputs (see watch())
@@ -41,7 +46,56 @@ class Exchange:
         self.held = {}  # (component, connector) -> value set on the input
         self.source = {(c.end_element, c.end_connector): (c.start_element, c.start_connector)
                        for c in system.connections}
-        self.columns = [(n, c) for n in order for c in system.components[n].connectors.values()]
+        # the recorded columns (``columns``: those --record selects; default every connector), each
+        # read from ``value`` by one key: an input's is its source's (None: an unconnected input)
+        self.columns = columns if columns is not None else \
+            [(n, c) for n in order for c in system.components[n].connectors.values()]
+        self._row_keys = [self.source.get((n, c.name)) if c.kind == "input" else (n, c.name)
+                          for n, c in self.columns]
+        self._keyed = all(k is not None for k in self._row_keys)
+        self.levels = update_levels(self.order, incoming)
+        self.threads = max(1, int(threads))
+        self._pool = None
+
+    # ---- parallel steps --------------------------------------------------------------------
+    def map(self, fn, insts) -> list:
+        """``[fn(inst) for inst in insts]``, on ``threads`` threads when there are several
+        (``insts`` must be independent: separate instances none of which feeds another within
+        the call). Every call has ended when this returns; the first failure in ``insts``'s order
+        is raised. The results do not depend on the thread count: each call does what it would do
+        alone, on its own instance (the FMI calls of native FMUs release the GIL)."""
+        k = min(self.threads, len(insts))
+        if k <= 1:
+            return [fn(inst) for inst in insts]
+        if self._pool is None:
+            from concurrent.futures import ThreadPoolExecutor
+
+            self._pool = ThreadPoolExecutor(self.threads - 1, thread_name_prefix="pogofmu-step")
+        chunks = [range(i, len(insts), k) for i in range(k)]
+        out = [None] * len(insts)
+        failed = {}
+
+        def run(idx):
+            for i in idx:
+                try:
+                    out[i] = fn(insts[i])
+                except BaseException as exc:  # noqa: BLE001 - raised below, in order
+                    failed[i] = exc
+                    return
+        futures = [self._pool.submit(run, c) for c in chunks[1:]]
+        try:
+            run(chunks[0])
+        finally:
+            for f in futures:
+                f.result()  # (run never raises: every call has ended here)
+        if failed:
+            raise failed[min(failed)]
+        return out
+
+    def close(self):
+        if self._pool is not None:
+            self._pool.shutdown(wait=True)
+            self._pool = None
 
     def ready(self, inst) -> bool:
         """Every input of ``inst`` has a source value."""
@@ -97,16 +151,30 @@ class Exchange:
         self.record.add(self.row_values(t, kind))
 
     def row_values(self, t: float, kind: int = GRID) -> list:
+        v = self.value
+        if self._keyed:
+            return [t, kind, *[v[k] for k in self._row_keys]]
         out = [t, kind]
-        for name, con in self.columns:
-            key = (name, con.name)
-            if con.kind == "input":
-                src = self.source.get(key)
-                v = self.value[src] if src is not None else self.instances[name].get_values([con.name])[0]
-            else:
-                v = self.value[key]
-            out.append(v)
+        for (name, con), key in zip(self.columns, self._row_keys):
+            out.append(v[key] if key is not None else self.instances[name].get_values([con.name])[0])
         return out
+
+
+def update_levels(order, incoming) -> List[list]:
+    """The update order cut into levels: consecutive components none of which feeds another of
+    its level (through any connection). Stepping a level's components together (in parallel)
+    is Gauss–Seidel in update order: each sees the outputs of the levels before it, and of none
+    of its own level, as it would one after the other."""
+    levels, names = [], set()
+    for inst in order:
+        if names and any(c.start_element in names for c in incoming[inst.name]):
+            levels.append([])
+            names = set()
+        if not levels:
+            levels.append([])
+        levels[-1].append(inst)
+        names.add(inst.name)
+    return levels
 
 
 class Progress:
@@ -144,18 +212,23 @@ def fixed_step(ex: Exchange, t0, t_end, step, jacobi=False, progress=None):
     them at the next communication point."""
     t = t0
     for T in grid_points(t0, t_end, step):
+        h = T - t
+
+        def gauss_seidel(inst):
+            ex.feed(inst)
+            inst.do_step(t, h)
+            ex.read(inst)
+
+        def held(inst):  # Jacobi: the inputs were all set at t_k
+            inst.do_step(t, h)
+            ex.read(inst)
         if jacobi:
             for inst in ex.order:
                 ex.feed(inst)
-        for inst in ex.order:
-            if not jacobi:
-                ex.feed(inst)
-            inst.do_step(t, T - t)
-            if not jacobi:
-                ex.read(inst)
-        if jacobi:
-            for inst in ex.order:
-                ex.read(inst)
+            ex.map(held, ex.order)
+        else:
+            for level in ex.levels:
+                ex.map(gauss_seidel, level)
         ex.row(T)
         t = T
         if progress:
@@ -313,36 +386,49 @@ class Synchronizer:
         if jacobi:
             for inst in ex.order:
                 ex.feed(inst)
-        for inst in ex.order:
-            if inst.t >= target:  # ahead (it cannot roll back): wait for the others
-                stepped.append(inst)
-                continue
-            if not jacobi:
-                ex.feed(inst)
-            if inst.must_save:
-                inst.save()
-            if inst.rollback:
-                r = self._step(inst, t, target)  # (it reads the outputs)
-            else:
-                r = inst.do_step(t, target - t)
+        for level in ([ex.order] if jacobi else ex.levels):
+            # the level's components step together to ``target`` (in parallel with --threads);
+            # the earliest event among them then cuts the macro step, as one after the other the
+            # first would have cut the step of the next: those that went past it go back to it
+            todo = [inst for inst in level if inst.t < target]
+            stepped += [inst for inst in level if inst.t >= target]  # ahead (they cannot roll back): they wait
+            goal = target
+
+            def one(inst):
+                if not jacobi:
+                    ex.feed(inst)
+                if inst.must_save:
+                    inst.save()
+                if inst.rollback:
+                    return self._step(inst, t, goal)  # (it reads the outputs)
+                r = inst.do_step(t, goal - t)
                 ex.read(inst)
-            if r.terminate:
-                raise SSPError(f"Component {inst.name} asked to terminate the simulation at t = {r.t_end!r} s")
-            if r.t_end < target:  # it stopped at (or just before) an event: everyone goes no further
-                target, event = r.t_end, r
-                for prev in stepped:
-                    if prev.t > target and prev.must_save:
-                        prev.restore()
-                        try:
-                            if target > t:
-                                prev.do_step(t, target - t)
-                        except SSPError as exc:
-                            raise SSPError(f"{exc} (the step shortened to the event of Component {inst.name} at "
-                                           f"t = {target!r} s)") from None
-                        ex.read(prev)
-            elif r.event_at is not None and event is None:
-                event = r  # an event exactly at the end of the step
-            stepped.append(inst)
+                return r
+            results = ex.map(one, todo)
+            cut = None
+            for inst, r in zip(todo, results):
+                if r.terminate:
+                    raise SSPError(f"Component {inst.name} asked to terminate the simulation at t = {r.t_end!r} s")
+                if r.t_end < goal and (cut is None or r.t_end < cut[1].t_end):
+                    cut = (inst, r)  # it stopped at (or just before) an event: everyone goes no further
+                elif r.event_at is not None and event is None and r.t_end == goal:
+                    event = r  # an event exactly at the end of the step
+            stepped += todo
+            if cut is not None:
+                inst, event = cut
+                target = event.t_end
+                back = [prev for prev in stepped if prev.t > target and prev.must_save]
+
+                def redo(prev, inst=inst):
+                    prev.restore()
+                    try:
+                        if target > t:
+                            prev.do_step(t, target - t)
+                    except SSPError as exc:
+                        raise SSPError(f"{exc} (the step shortened to the event of Component {inst.name} at "
+                                       f"t = {target!r} s)") from None
+                    ex.read(prev)
+                ex.map(redo, back)
         if event is None and next_event and target in next_event.values():
             event = StepResult(target, event_at=target, event_mode=True)
         if event is None and switch0:
@@ -395,17 +481,20 @@ class Synchronizer:
         each fed from the components before it, at ``tau``; the inputs from later ones are those
         saved at ``t``; Jacobi: every input the one saved at ``t``, then the switching outputs
         probed at ``tau``)."""
-        ex, done = self.ex, set()
-        for inst in ex.order:
+        ex, done, jacobi = self.ex, set(), self.jacobi
+
+        def one(inst):
             if inst.must_save and inst.saved_at == t:
                 inst.restore()
             if inst.t == t:
-                if not self.jacobi:
+                if not jacobi:
                     ex.feed(inst, only=done)
                 if tau > t:
                     inst.do_step(t, tau - t)
                 ex.read(inst)
-            done.add(inst.name)
+        for level in ex.levels:
+            ex.map(one, level)
+            done.update(inst.name for inst in level)
         if self.jacobi:
             self._probe(t, tau)
 
@@ -438,12 +527,15 @@ class Synchronizer:
         new mode), none from later ones — an input changed just before the event would move the
         event it is crossing. The same with Jacobi: the crossing is the event's iteration."""
         ex, done = self.ex, set()
-        for inst in ex.order:
+
+        def one(inst):
             ex.feed(inst, only=done)
             if inst.t < t_event:
                 inst.do_step(inst.t, t_event - inst.t)
             ex.read(inst)
-            done.add(inst.name)
+        for level in ex.levels:
+            ex.map(one, level)
+            done.update(inst.name for inst in level)
 
     def iterate(self, t):
         """Event Mode at ``t`` for every FMI 3.0 component that uses it: update in update order
@@ -487,15 +579,20 @@ class Synchronizer:
 
 def switching_outputs(inst, ex) -> List[str]:
     """The discrete outputs of ``inst`` that depend directly on a connected input (declared
-    dependencies; an output without them depends on every input)."""
+    dependencies; an output without them depends on every input) and that the system declares
+    as connectors of the component: a switch of an output the system does not expose (the
+    mirror controllers' ``sat``, whose force is continuous at the kink) is not located."""
     from .graph import feedthrough
 
     fed = {c.end_connector for c in ex.incoming[inst.name]}
     if not fed:
         return []
+    declared = getattr(inst.comp, "connectors", None)
     ft = feedthrough(inst.comp)
     out = []
     for name in inst.discrete_outputs:
+        if declared is not None and name not in declared:
+            continue
         deps = ft.get(name)
         if deps is None or deps & fed:
             out.append(name)

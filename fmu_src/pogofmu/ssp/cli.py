@@ -73,6 +73,16 @@ def _on_off(text):
     return text == "on"
 
 
+def _threads(text):
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: a whole number of threads >= 1") from None
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"{text!r}: a whole number of threads >= 1")
+    return n
+
+
 def main(argv=None, prog="pogofmu ssp"):
     """The command line (``run`` / ``check``); returns the exit status. ``prog`` names the command
     in the usage text (a console command forwarding here may pass its own)."""
@@ -103,6 +113,12 @@ def main(argv=None, prog="pogofmu ssp"):
                         "discrete output; this project's FMUs report the exact time)")
     r.add_argument("--rel-tol", type=float, default=1e-10, help="model-exchange integrator's relative tolerance")
     r.add_argument("--abs-tol", type=float, default=1e-12, help="model-exchange integrator's absolute tolerance")
+    r.add_argument("--threads", type=_threads, default=1, metavar="N",
+                   help="step the independent components of a macro step (none feeding another: e.g. a "
+                        "mirror's actuators) on N threads (default 1); the results are those of 1 thread, to the bit")
+    r.add_argument("--record", metavar="PATTERN",
+                   help="the columns to record: glob patterns over component.connector, comma-separated "
+                        "(e.g. 'Actuator_*.z,Reconstructor.piston_rms'; default: every connector)")
     r.add_argument("--out", help="output folder (default results/<SSP name>)")
     r.add_argument("--quiet", action="store_true", help="no progress lines")
     c = sub.add_parser("check", parents=[common],
@@ -120,7 +136,8 @@ def main(argv=None, prog="pogofmu ssp"):
                       f"{selectable_sets(system)}")
             return 0
         run(args.ssp, args.parameters, args.stop_time, args.step, args.out, args.algorithm, not args.quiet,
-            events=args.events, event_tolerance=args.event_tolerance, rel_tol=args.rel_tol, abs_tol=args.abs_tol)
+            events=args.events, event_tolerance=args.event_tolerance, rel_tol=args.rel_tol, abs_tol=args.abs_tol,
+            threads=args.threads, record=args.record)
     except SSPError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1

@@ -118,16 +118,41 @@ def initialize(ex: Exchange, t0, selected):
         ex.feed(inst)
 
 
+def select_columns(system, order, record=None):
+    """``[(component, connector)]`` recorded: every connector, or those matching a glob pattern
+    of ``record`` (``component.connector``, e.g. ``Actuator_*.z``); a pattern that matches
+    nothing is a mistake, not an empty column set."""
+    cols = [(n, c) for n in order for c in system.components[n].connectors.values()]
+    if record is None:
+        return cols
+    from fnmatch import fnmatchcase
+
+    patterns = [p.strip() for p in (record.split(",") if isinstance(record, str) else record)]
+    patterns = [p for p in patterns if p]
+    if not patterns:
+        raise SSPError("--record: no pattern given (glob patterns over component.connector, e.g. 'Actuator_*.z')")
+    for pat in patterns:
+        if not any(fnmatchcase(f"{n}.{c.name}", pat) for n, c in cols):
+            raise SSPError(f"--record {pat!r} matches no connector of the system (patterns are globs over "
+                           f"component.connector, e.g. 'Actuator_*.z,Reconstructor.piston_rms')")
+    return [(n, c) for n, c in cols if any(fnmatchcase(f"{n}.{c.name}", p) for p in patterns)]
+
+
 def simulate(ssp, parameters: Optional[str] = None, stop_time: Optional[float] = None, step: float = 1e-3,
              start_time: Optional[float] = None, algorithm: str = "gauss-seidel", progress: bool = False,
              echo_log: bool = True, sink=None, events: bool = True, event_tolerance: float = DEFAULT_EVENT_TOLERANCE,
-             rel_tol: float = 1e-10, abs_tol: float = 1e-12):
+             rel_tol: float = 1e-10, abs_tol: float = 1e-12, threads: int = 1, record=None):
     """Run an SSP package; return a :class:`~.record.Result` (see the package docstring).
 
     ``algorithm``: ``gauss-seidel`` or ``jacobi`` co-simulation, with every component brought to
     each event instant (``events=True``) or a fixed communication step (``events=False``); or
     ``model-exchange``, the strongly coupled solution (FMI 3.0 model exchange, ``rel_tol`` and
     ``abs_tol`` its integrator's tolerances). ``step`` is the communication step, the output grid.
+
+    ``threads``: the components of one level of the update order (none feeding another, e.g. the
+    mirror's actuators) step in parallel on this many threads; the results are those of one
+    thread, to the bit. ``record``: glob patterns over ``component.connector`` (a list, or one
+    string with commas), the columns recorded (default: every connector).
 
     ``sink(names, types, units, span)``, if given, makes the recorder instead (an object with
     ``add(row)`` and ``close(complete)``, e.g. a :class:`~.record.CSVStream`): it is called once the
@@ -149,12 +174,14 @@ def simulate(ssp, parameters: Optional[str] = None, stop_time: Optional[float] =
     if algorithm == "model-exchange" and not events:
         raise SSPError("--events off is co-simulation with a fixed communication step; --algorithm model-exchange "
                        "has no communication step and always locates the events: give one or the other")
+    if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
+        raise SSPError(f"--threads {threads!r} must be a whole number >= 1")
     if not (0 < rel_tol < 1 and abs_tol > 0):
         raise SSPError(f"model-exchange tolerances --rel-tol = {rel_tol!r}, --abs-tol = {abs_tol!r} must be "
                        f"0 < rel-tol < 1 and abs-tol > 0")
     work = Path(tempfile.mkdtemp(prefix="pogofmu_ssp_"))
     instances = {}
-    res = None
+    res = ex = None
     try:
         root = unpack(Path(ssp), work / "package")
         system = read_ssd(root)
@@ -182,14 +209,18 @@ def simulate(ssp, parameters: Optional[str] = None, stop_time: Optional[float] =
             comp = system.components[name]
             comp.model_description_path = root / comp.source
             _check_interface(comp, algorithm)
-        cols = [(n, c) for n in order for c in system.components[n].connectors.values()]
+        cols = select_columns(system, order, record)
         columns = (["event"] + [f"{n}.{c.name}" for n, c in cols], ["Integer"] + [c.type for _, c in cols],
                    [None] + [c.unit or _fmu_unit(system.components[n].variables[c.name]) for n, c in cols],
                    (t0, t0 + n_steps * step))
         res = (sink or Result)(*columns)
+        if hasattr(res, "plot_only"):  # the figure's envelope: only the signals it draws
+            from .plot import plotted
+
+            res.plot_only(plotted(columns[0], dict(zip(columns[0], columns[1])), system.connections))
         for name in order:
             instances[name] = _instantiate(system.components[name], work, echo_log, algorithm, events)
-        ex = Exchange(system, instances, order, res)
+        ex = Exchange(system, instances, order, res, threads=threads, columns=cols)
         initialize(ex, t0, selected)
         prog = Progress(system.name, t0, t0 + n_steps * step, progress)
         if algorithm == "model-exchange":
@@ -210,6 +241,8 @@ def simulate(ssp, parameters: Optional[str] = None, stop_time: Optional[float] =
         res.last_time = t0 + n_steps * step
         return res
     finally:
+        if ex is not None:
+            ex.close()  # the step threads (every call has ended)
         if res is not None:
             res.close(complete=False)  # a no-op once the run is complete
         for inst in instances.values():

@@ -11,14 +11,13 @@ packed with them (:func:`pogofmu.build.pack_ssp`).  The Reconstructor of a ring 
 example file does not define at module level is a two-line model file written beside it
 (``MODEL = reconstructor_model(R)``).
 
-Parameters: ``resources/actuator.ssv`` and ``resources/controller.ssv`` hold those every
-segment shares, ``resources/reconstructor.ssv`` the reconstructor's; ``actuator_<i>.ssv`` and
-``controller_<i>.ssv``, bound after the shared set (later values win), the segment's own:
-the initial piston ``z_0`` (the initial misphasing; the controller's filter starts there too)
+Parameters: one set per component (libcosim applies a component's first ParameterBinding
+only): ``resources/actuator_<i>.ssv`` and ``controller_<i>.ssv`` hold the values every segment
+shares (ACTUATOR, CONTROLLER) and the segment's own, ``reconstructor.ssv`` the reconstructor's.
+The segment's own values are the initial piston ``z_0`` (the initial misphasing; the controller's filter starts there too)
 and the gust amplitude ``A_w``, which grows linearly across the mirror (``A_W_EDGE x / x_max``),
 so the outer segments on one side are pushed into their upper stops and those on the other side
-into their lower stops.  (The master's validation wants every value of the sets bound to a
-component to be one of its variables, hence one shared set per kind of component.)
+into their lower stops.
 
 ``python -m pogofmu.ssp.mirror demo DIR`` (``tasks.py run``) builds the 1-ring system, runs it
 with ``pogofmu ssp run`` and draws the pistons over time and hexagon maps of them.
@@ -136,13 +135,12 @@ def system_structure(rings: int, grid) -> str:
                             [_connector("F", "input", "N"), _connector("z", "output", "m"),
                              _connector("zdot", "output", "m/s"), _connector("F_stop", "output", "N"),
                              _connector("mode", "output", integer=True), _connector("F_w", "output", "N")],
-                            ("actuator", f"actuator_{i}"))
+                            (f"actuator_{i}",))
     for i in range(1, n + 1):
         lines += _component(f"Controller_{i}", "SegmentController",
                             [_connector("r", "input", "m"), _connector("z", "input", "m"),
-                             _connector("F", "output", "N"), _connector("F_u", "output", "N"),
-                             _connector("sat", "output", integer=True)],
-                            ("controller", f"controller_{i}"))
+                             _connector("F", "output", "N"), _connector("F_u", "output", "N")],
+                            (f"controller_{i}",))
     lines += _component("Reconstructor", f"Reconstructor_R{rings}",
                         [_connector(f"z_{i}", "input", "m") for i in range(1, n + 1)]
                         + [_connector(f"r_{i}", "output", "m") for i in range(1, n + 1)]
@@ -183,15 +181,17 @@ def write_system(folder: Path, rings: int, grid) -> Path:
     system = folder / f"Mirror_R{rings}"
     system.mkdir(parents=True)
     (system / "SystemStructure.ssd").write_text(system_structure(rings, grid))
-    for name, values, what in (("actuator", ACTUATOR, "every actuator's"), ("controller", CONTROLLER,
-                               "every controller's"), ("reconstructor", RECONSTRUCTOR, "the reconstructor's")):
-        (system / f"{name}.ssv").write_text(parameter_set(name, values, f"{what} parameters"))
+    # one set per component, the shared values with the segment's own: libcosim applies only a
+    # component's first ParameterBinding, so each component has one
+    (system / "reconstructor.ssv").write_text(parameter_set("reconstructor", RECONSTRUCTOR,
+                                                            "the reconstructor's parameters"))
     for i, (z0, aw) in enumerate(segment_parameters(rings, grid), start=1):
         (system / f"actuator_{i}.ssv").write_text(parameter_set(
-            f"actuator_{i}", {"z_0": (z0, "m"), "A_w": (aw, "N")},
-            f"segment {i}'s actuator: its initial piston and its gust amplitude"))
+            f"actuator_{i}", {**ACTUATOR, "z_0": (z0, "m"), "A_w": (aw, "N")},
+            f"segment {i}'s actuator: the shared values, its initial piston and its gust amplitude"))
         (system / f"controller_{i}.ssv").write_text(parameter_set(
-            f"controller_{i}", {"z_0": (z0, "m")}, f"segment {i}'s controller: its filter starts at the piston"))
+            f"controller_{i}", {**CONTROLLER, "z_0": (z0, "m")},
+            f"segment {i}'s controller: the shared values; its filter starts at the piston"))
     return system
 
 

@@ -3,6 +3,15 @@ from __future__ import annotations
 
 from pathlib import Path
 
+MAX_PANELS = 16  # signals drawn at most (a system of hundreds of components: the first ones; the CSV has all)
+
+
+def plotted(names, types, connections):
+    """The signals the figure draws (at most MAX_PANELS): ``names`` are the recorded columns."""
+    rec = type("Columns", (), {"names": ["time"] + list(names), "types": types})()
+    return _panels(rec, connections)[0]
+
+
 def _panels(rec, connections):
     """The figure's panels, one signal each (integer signals last); a connected input is not
     drawn again (it is its source's copy, held over the step): ``copies`` names it instead."""
@@ -11,7 +20,9 @@ def _panels(rec, connections):
     for dst, src in fed.items():
         copies.setdefault(src, []).append(dst)
     shown = [n for n in rec.names[1:] if n not in fed and n != "event" and not n.endswith(".n_events")]
-    return sorted(shown, key=lambda n: rec.types[n] != "Real"), copies  # integer signals last
+    shown = sorted(shown, key=lambda n: rec.types[n] != "Real")  # integer signals last
+    rec_total = len(shown)
+    return shown[:MAX_PANELS], copies, rec_total
 
 
 def figure(rec, title: str, connections=()):
@@ -26,7 +37,7 @@ def figure(rec, title: str, connections=()):
 
     env = rec.envelope()
     col = {n: i for i, n in enumerate(rec.names)}
-    panels, copies = _panels(rec, connections)
+    panels, copies, total = _panels(rec, connections)
     fig, axes = plt.subplots(len(panels), 1, figsize=(9, 1.7 * len(panels) + 0.9), sharex=True, squeeze=False)
     for ax, name in zip(axes[:, 0], panels):
         t, v = env.series(col[name])
@@ -40,7 +51,8 @@ def figure(rec, title: str, connections=()):
         ax.legend(loc="upper right", fontsize=7, handlelength=1)
         ax.grid(True, alpha=0.3)
     axes[-1, 0].set_xlabel("time [s]")
-    fig.suptitle(title, fontsize=10)
+    fig.suptitle(title if len(panels) == total else
+                 f"{title}\n(the first {len(panels)} of {total} signals; the CSV has every column)", fontsize=10)
     fig.align_ylabels(axes[:, 0])
     fig.tight_layout()
     return fig

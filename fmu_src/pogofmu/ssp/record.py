@@ -3,9 +3,17 @@
 :class:`Envelope` as the only thing kept of a streamed run."""
 from __future__ import annotations
 
+from operator import itemgetter
 from pathlib import Path
 
 PLOT_BINS = 2000  # time slices of a figure's min/max envelope (more than the figure's pixel columns)
+CHUNK_VALUES = 1 << 20  # values per block of rows (CSV write, in-memory block): a block's memory bounded
+
+
+def chunk_rows(n_cols: int) -> int:
+    """Rows per block: 4096 for a narrow run, fewer for a wide one (hundreds of components),
+    so that a block holds at most about CHUNK_VALUES values whatever the column count."""
+    return max(16, min(4096, CHUNK_VALUES // max(n_cols, 1)))
 
 
 class Envelope:
@@ -20,13 +28,17 @@ class Envelope:
     run's events add rows to its grid).
     """
 
-    def __init__(self, span, n_cols: int, bins: int = PLOT_BINS):
+    def __init__(self, span, n_cols: int, bins: int = PLOT_BINS, keep=None):
         import numpy as np
 
         self.t0, t1 = float(span[0]), float(span[1])
         self.width = t1 - self.t0 if t1 > self.t0 else 1.0
         self.bins, self.rows = bins, 0
-        shape = (self.bins, n_cols)
+        # the columns kept (``keep``, column indices with 0, the time, first): 6 x bins numbers each
+        self.keep = list(range(n_cols)) if keep is None else [0] + [c for c in keep if c != 0]
+        self._slot = {c: i for i, c in enumerate(self.keep)}
+        self._pick = None if keep is None else itemgetter(*self.keep)
+        shape = (self.bins, len(self.keep))
         self.kmin, self.kmax = np.full(shape, -1, np.int64), np.full(shape, -1, np.int64)
         self.vmin, self.vmax = np.full(shape, np.inf), np.full(shape, -np.inf)
         self.tmin, self.tmax = np.zeros(shape), np.zeros(shape)
@@ -35,10 +47,12 @@ class Envelope:
         """Rows ``self.rows ...`` of the run: a 2-D array, column 0 the time."""
         import numpy as np
 
-        block = np.asarray(block, dtype=np.float64)
         m = len(block)
         if m == 0:
             return
+        if self._pick is not None:
+            block = [self._pick(r) for r in block] if not isinstance(block, np.ndarray) else block[:, self.keep]
+        block = np.asarray(block, dtype=np.float64).reshape(m, len(self.keep))
         slot = np.clip(np.floor((block[:, 0] - self.t0) / self.width * self.bins), 0, self.bins - 1).astype(np.int64)
         slot = np.maximum.accumulate(slot)  # rows come in time order (equal times at event instants)
         cuts = np.flatnonzero(np.diff(slot)) + 1
@@ -59,6 +73,7 @@ class Envelope:
         """(time, value) of column ``col``: each slice's min and max in time order."""
         import numpy as np
 
+        col = self._slot[col]
         k = np.stack([self.kmin[:, col], self.kmax[:, col]], axis=1)
         t = np.stack([self.tmin[:, col], self.tmax[:, col]], axis=1)
         v = np.stack([self.vmin[:, col], self.vmax[:, col]], axis=1)
@@ -79,39 +94,57 @@ class Result:
         self.types = dict(zip(names, types))
         self.units = dict(zip(names, units))
         self.span = span
-        self._rows = []
+        self._chunk = chunk_rows(len(self.names))
+        self._blocks = []  # full blocks of rows, float64 arrays (integers are exact in them)
+        self._rows = []  # the rows since the latest block
+        self._n = 0
         self._arrays = {}
         self._envelope = None
+        self._keep = None
 
     @property
     def rows(self):
-        return len(self._rows)
+        return self._n
+
+    def _all(self):
+        import numpy as np
+
+        if self._rows:
+            self._blocks.append(np.array(self._rows, dtype=np.float64).reshape(len(self._rows), len(self.names)))
+            self._rows = []
+        if len(self._blocks) > 1:
+            self._blocks = [np.concatenate(self._blocks)]
+        return self._blocks[0] if self._blocks else np.zeros((0, len(self.names)))
 
     def __getitem__(self, name):
         import numpy as np
 
         got = self._arrays.get(name)
-        if got is None or len(got) != len(self._rows):
+        if got is None or len(got) != self._n:
             col = self.names.index(name)
             integer = name != "time" and self.types.get(name) not in ("Real", "Float64", "Float32")
-            got = self._arrays[name] = np.array([r[col] for r in self._rows],
-                                                dtype=np.int64 if integer else np.float64)
+            got = self._arrays[name] = self._all()[:, col].astype(np.int64 if integer else np.float64)
         return got
 
     def add(self, row):
-        self._rows.append(tuple(row))
+        self._rows.append(row)
+        self._n += 1
+        if len(self._rows) >= self._chunk:
+            self._all()
         self._envelope = None
+
+    def plot_only(self, names):
+        """The figure draws these signals only: its envelope keeps no other column."""
+        self._keep = [self.names.index(n) for n in names]
 
     def close(self, complete=True):
         pass
 
     def envelope(self) -> Envelope:
         if self._envelope is None:
-            import numpy as np
-
-            self._envelope = Envelope(self.span, len(self.names))
-            if self._rows:
-                self._envelope.add(np.array(self._rows, dtype=np.float64))
+            self._envelope = Envelope(self.span, len(self.names), keep=self._keep)
+            if self._n:
+                self._envelope.add(self._all())
         return self._envelope
 
 
@@ -123,7 +156,7 @@ class CSVStream:
     that fails leaves its rows so far in ``<stem>.incomplete.csv`` (never a truncated ``path``).
     """
 
-    CHUNK = 4096  # rows per write
+    CHUNK = 4096  # rows per write (at most; fewer for wide rows, chunk_rows)
 
     def __init__(self, path: Path, names, types, units, span):
         import csv
@@ -135,7 +168,9 @@ class CSVStream:
         self.types = dict(zip(names, types))
         self.units = dict(zip(names, units))
         self.rows, self.last_time = 0, None
+        self.span = span
         self._env = Envelope(span, len(self.names))
+        self._chunk = min(self.CHUNK, chunk_rows(len(self.names)))
         self._buf = []
         self._file = self.part.open("w", newline="")
         self._csv = csv.writer(self._file)  # floats as repr (shortest round trip), integers as integers
@@ -143,8 +178,13 @@ class CSVStream:
 
     def add(self, row):
         self._buf.append(row)
-        if len(self._buf) >= self.CHUNK:
+        if len(self._buf) >= self._chunk:
             self._flush()
+
+    def plot_only(self, names):
+        """The figure draws these signals only: its envelope keeps no other column (called
+        before the first row)."""
+        self._env = Envelope(self.span, len(self.names), keep=[self.names.index(n) for n in names])
 
     def _flush(self):
         if self._buf:
