@@ -6,7 +6,10 @@ use them). One module, so that no test imports another test for its reference.
 * :func:`reference_stick` — any stick (linear, mem, SMA) of given parameters, one mode per branch
   of the SMA flag, guards written in x instead of the FMUs' force differences; :func:`scipy_sma`
   the SMA stick from the default drop;
-* :func:`penetrator_reference` — the Penetrator (Eq. 50), :func:`hunt_crossley` its soil force.
+* :func:`penetrator_reference` — the Penetrator (Eq. 50), :func:`hunt_crossley` its soil force;
+* :func:`mirror_closed_loop` — a whole segmented mirror (docs/segmented-mirror.md): every
+  actuator with its stops, every PID loop and the edge-sensor reconstruction in one ODE, the
+  stops' contacts and releases as events.
 
 Checked-in outputs of these (``tests/data/references/<Model>_ref.csv``, event name and time) let
 a test compare an FMU without running scipy and show when a reference itself changes
@@ -263,6 +266,121 @@ def hunt_crossley(state, d0, **par):
     lam = 1.5 * (1 - P["c_r"]) * P["K"] / d0
     dd = _rhs(0.0, state[:3], 1, lam, P)[2]
     return P["K"] * max(0.0, state[2]) ** P["n"] * (1 + lam / P["K"] * dd)
+
+
+def mirror_closed_loop(actuators, controllers, reconstructor, edges, t_eval, method="DOP853", rtol=1e-12,
+                       atol=1e-16, locate_kinks=True):
+    """The closed loop of a segmented mirror as one ODE (scipy), the pistons ``z[i]`` at
+    ``t_eval`` and the stops' events ``[(segment, name, time)]``.
+
+    ``actuators[i]``, ``controllers[i]``: dicts of segment i's parameters (the names of the
+    .ssv files; a name missing is the model's default: n = 1, a_0 = I_0 = 0, spring_law 1);
+    ``reconstructor``: ``z_target``, ``G``; ``edges``: the neighbour pairs (i, j) of the edge
+    sensors, s = z_j - z_i.  Per segment the states are z, z', the absement a, the controller's
+    integral I and filtered piston w:
+
+        m z'' = F + F_w(t) - k z - c z' - k_m/(1 + beta |a|) z + F_stop,   a' = z
+        F_stop = -(K + lam z') max(0, z - z_s)^n on the upper stop, (K - lam z') max(0, -z_s - z)^n
+                 on the lower, lam = 1.5 (1 - c_r) K / d0dot (not clipped at 0: the Hunt-Crossley law)
+        r = z_target - G z_rel,  z_rel the minimum-norm least squares of D z_rel = D z (numpy pinv)
+        F_u = K_p (r - z) + K_i I - K_d (z - w)/T_f,  F = clip(F_u, +-F_max)
+        I' = (r - z) + (F - F_u)/(K_i T_t),  w' = (z - w)/T_f
+
+    Contact where z crosses +-z_s towards the stop, release where it crosses back (the modes
+    switch there, as in the FMU: a stop holds its mode until z crosses back).  The integration
+    restarts at every event, at the gust's start and end (its second derivative jumps there) and,
+    with ``locate_kinks``, where a clip's F_u crosses +-F_max (the right-hand side has a kink
+    there), so that no step of the integrator straddles a loss of smoothness."""
+    import numpy as np
+
+    n = len(actuators)
+    col = lambda d, key, default=None: np.array([float(x.get(key, default)) for x in d])  # noqa: E731
+    assert all(int(x.get("spring_law", 1)) == 1 for x in actuators), "the softening mem-spring only"
+    m, k, c, km, beta = (col(actuators, q) for q in ("m", "k", "c", "k_m", "beta"))
+    zs, Ks, nexp, cr, d0 = col(actuators, "z_s"), col(actuators, "K"), col(actuators, "n", 1.0), \
+        col(actuators, "c_r"), col(actuators, "d0dot")
+    Aw, tg, Tg = (col(actuators, q) for q in ("A_w", "t_g", "T_g"))
+    lam = 1.5 * (1 - cr) * Ks / d0
+    Kp, Ki, Kd, Tf, Tt, Fm = (col(controllers, q) for q in ("K_p", "K_i", "K_d", "T_f", "T_t", "F_max"))
+    D = np.zeros((len(edges), n))
+    for e, (i, j) in enumerate(edges):
+        D[e, i], D[e, j] = -1.0, 1.0
+    P = np.linalg.pinv(D) @ D  # z_rel = pinv(D) s = P z
+    zt, G = float(reconstructor["z_target"]), float(reconstructor["G"])
+
+    def unsaturated(z, I, w):
+        return Kp * ((zt - G * (P @ z)) - z) + Ki * I - Kd * (z - w) / Tf
+
+    def rhs(t, X, mode):
+        z, zd, a, I, w = X.reshape(5, n)
+        r = zt - G * (P @ z)
+        Fu = Kp * (r - z) + Ki * I - Kd * (z - w) / Tf
+        F = np.clip(Fu, -Fm, Fm)
+        on = (t > tg) & (t < tg + Tg)
+        Fw = np.where(on, 0.5 * Aw * (1 - np.cos(2 * np.pi * (t - tg) / Tg)), 0.0)
+        up = -(Ks + lam * zd) * np.maximum(z - zs, 0.0) ** nexp
+        low = (Ks - lam * zd) * np.maximum(-zs - z, 0.0) ** nexp
+        Fs = np.where(mode == 1, up, np.where(mode == -1, low, 0.0))
+        zdd = (F + Fw - k * z - c * zd - km / (1 + beta * np.abs(a)) * z + Fs) / m
+        return np.concatenate([zd, zdd, z, (r - z) + (F - Fu) / (Ki * Tt), (z - w) / Tf])
+
+    X = np.concatenate([col(actuators, "z_0"), np.zeros(n), col(actuators, "a_0", 0.0), col(controllers, "I_0", 0.0),
+                        col(controllers, "z_0")])
+    assert np.all(np.abs(X[:n]) < zs), "the actuators start off their stops"
+    mode = np.zeros(n, dtype=int)
+    t_eval = np.asarray(t_eval, dtype=float)
+    t, t_end = float(t_eval[0]), float(t_eval[-1])
+    breaks = sorted({float(b) for b in np.r_[tg, tg + Tg] if t < b < t_end} | {t_end})
+    out = np.full((n, len(t_eval)), np.nan)
+    events = []
+    F_u0 = unsaturated(X[:n], X[3 * n:4 * n], X[4 * n:])
+    side = {(i, sign): 1.0 if F_u0[i] > sign * Fm[i] else -1.0 for i in range(n) for sign in (1.0, -1.0)}
+    while t < t_end:
+        t_next = next(b for b in breaks if b > t)
+        fns, what = [], []
+        for i in range(n):  # the events the current modes arm
+            if mode[i] == 0:
+                cand = ((lambda tt, X, *_, i=i: X[i] - zs[i], 1, 1, "upper_contact"),
+                        (lambda tt, X, *_, i=i: X[i] + zs[i], -1, -1, "lower_contact"))
+            else:
+                s = mode[i]
+                cand = ((lambda tt, X, *_, i=i, s=s: X[i] - s * zs[i], -s, 0,
+                         "upper_release" if s == 1 else "lower_release"),)
+            for fun, direction, to, name in cand:
+                fun.terminal, fun.direction = True, direction
+                fns.append(fun)
+                what.append((i, to, name))
+            if locate_kinks:
+                for sign in (1.0, -1.0):  # F_u = +-F_max: a kink, no mode (a restart only)
+                    fun = (lambda tt, X, *_, i=i, sign=sign:
+                           unsaturated(X[:n], X[3 * n:4 * n], X[4 * n:])[i] - sign * Fm[i])
+                    # armed for the crossing away from the side F_u is on, which the restart right
+                    # after a crossing (its guard ~0, of either sign) knows from the crossing
+                    fun.terminal, fun.direction = True, -side[i, sign]
+                    fns.append(fun)
+                    what.append((i, sign, "kink"))
+        sol = solve_ivp(rhs, (t, t_next), X, method=method, rtol=rtol, atol=atol, events=fns,
+                        args=(mode.copy(),), dense_output=True)
+        assert sol.status >= 0, sol.message
+        hits = [(sol.t_events[q][0], q) for q in range(len(fns)) if len(sol.t_events[q])]
+        t_stop = min(hits)[0] if hits else t_next
+        take = (t_eval >= t) & (t_eval <= t_stop)
+        if take.any():
+            out[:, take] = sol.sol(t_eval[take])[:n]
+        if hits:
+            te, q = min(hits)
+            i, to, name = what[q]
+            X = sol.y_events[q][0]
+            if name == "kink":
+                side[i, to] = -side[i, to]
+            else:
+                events.append((i, name, te))
+                mode = mode.copy()
+                mode[i] = to
+        else:
+            te, X = t_next, sol.y[:, -1]
+        t = te
+    return out, events
 
 
 REFERENCE_OUTPUTS = {  # model: (its reference's events [(name, time)], the stop time)
