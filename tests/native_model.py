@@ -5,7 +5,7 @@ from __future__ import annotations
 import ctypes as C
 import math
 
-from pogofmu.runtime.engine.cengine import PG_ARITH, PG_OK, PG_RAISE, PgMsg, PgScale  # noqa: F401 (pg_model.h)
+from pogofmu.runtime.engine.cengine import PG_ARITH, PG_OK, PG_RAISE, PgMsg, layouts  # noqa: F401 (pg_model.h)
 
 D = C.POINTER(C.c_double)
 
@@ -21,8 +21,8 @@ FN = {
     "jump": C.CFUNCTYPE(C.c_int, C.c_int, D, D, D, D, D, D, MSG),
     "outputs": C.CFUNCTYPE(C.c_int, C.c_double, D, D, D, D, D, MSG),
     "domain": C.CFUNCTYPE(C.c_int, C.c_double, D, D, D, D, D, MSG),
-    "time_scales": C.CFUNCTYPE(C.c_int, D, C.POINTER(PgScale), C.POINTER(C.c_int), MSG),
-    "error_scales": C.CFUNCTYPE(C.c_int, D, C.POINTER(PgScale), C.POINTER(C.c_int), MSG),
+    "time_scales": C.CFUNCTYPE(C.c_int, D, C.c_void_p, C.POINTER(C.c_int), MSG),  # PgScale *out
+    "error_scales": C.CFUNCTYPE(C.c_int, D, C.c_void_p, C.POINTER(C.c_int), MSG),
 }
 STRS = C.POINTER(C.c_char_p)
 
@@ -105,8 +105,9 @@ class NativeModel:
         return ("ok", None) if rc == PG_OK else self._end(rc, msg, lambda: None)
 
     def scales(self, which, p):
-        msg, out, n = PgMsg(), (PgScale * 16)(), C.c_int()
-        rc = getattr(self.m, which)(arr(p), out, C.byref(n), C.byref(msg))
+        lay = layouts()
+        msg, out, n = PgMsg(), (lay.scale * lay.max_scales)(), C.c_int()
+        rc = getattr(self.m, which)(arr(p), C.addressof(out), C.byref(n), C.byref(msg))
 
         def value():
             return [(out[k].label.decode(), tuple(out[k].names[j].decode() for j in range(out[k].n_names)),

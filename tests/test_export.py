@@ -612,3 +612,38 @@ def test_a_users_fmus_run_in_a_venv_with_fmpy_only(exported):
     lines = proc.stdout.split()
     assert len(lines) == 8 and len(set(lines[0::2])) == 1 and int(lines[0]) >= 6  # the same events everywhere
     assert len(set(lines[1::2])) == 1  # and the same final height, to the bit
+
+
+def wide_ball(n_inputs):
+    """The ball with ``n_inputs`` unused inputs (the engine holds at most 1024: a reconstructor of a
+    12-ring segmented mirror takes 469)."""
+    return BALL.replace("inputs=(),", f'inputs=tuple(Variable(f"u{{i}}", "N", "unused force") for i in range({n_inputs})),')
+
+
+def test_a_model_wider_than_the_engine_is_refused_in_one_line_for_every_backend(tmp_path):
+    (tmp_path / "ball.py").write_text(wide_ball(1025))
+    for backend in ("python", "native"):
+        proc = pogofmu("export", "ball.py", "--check", "--backend", backend, cwd=tmp_path)
+        assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1, proc.stderr
+        assert "1025 inputs" in proc.stderr and "at most 1024 (PG_MAX_U" in proc.stderr, proc.stderr
+    (tmp_path / "ball.py").write_text(wide_ball(1024))
+    proc = pogofmu("export", "ball.py", "--check", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+
+
+def test_the_engine_itself_refuses_a_model_wider_than_it_naming_the_count(tmp_path):
+    """Past the exporter (a model handed to the engine directly): the engine's own refusal; one
+    input fewer runs."""
+    from pogofmu.build.source import load_model_file
+    from pogofmu.runtime.engine.cengine import Simulator
+    from pogofmu.runtime.model import ModelError
+
+    models = {}
+    for n in (1024, 1025):
+        (tmp_path / f"ball_{n}.py").write_text(wide_ball(n))
+        models[n] = load_model_file(tmp_path / f"ball_{n}.py")[0].model
+    with pytest.raises(ModelError, match=r"the model has 1025 inputs; the engine takes at most 1024 \(PG_MAX_U\)"):
+        Simulator(models[1025], u=[0.0] * 1025)
+    sim = Simulator(models[1024], u=[0.0] * 1024)
+    x, _ = sim.advance(0.1)
+    assert x[0] == pytest.approx(1.0 - 9.81 * 0.1 ** 2 / 2, rel=1e-9)

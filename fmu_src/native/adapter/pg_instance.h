@@ -40,7 +40,7 @@ typedef struct PgFmu {
 
 /* the served outputs: the model's, the engine's (n_events, t_last_event, last_event), then for
  * FMI 3.0 the states and the time */
-#define PG_MAX_OUT (64 + 3 + PG_MAX_X + 1)
+#define PG_MAX_OUT (PG_MAX_Y + 3 + PG_MAX_X + 1)
 
 /* what an FMU state holds (copied as a whole by fmi2GetFMUstate) */
 typedef struct PgState {

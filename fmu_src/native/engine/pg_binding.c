@@ -18,6 +18,9 @@
 
 PGB_API size_t pgb_sizeof(void) { return sizeof(PgEngine); }
 
+/* the fixed sizes the binding's mirrors of PgEvent and PgScale are laid out with */
+PGB_API void pgb_limits(int *out) { out[0] = PG_MAX_X, out[1] = PG_MAX_SCALES, out[2] = PG_MAX_SCALE_NAMES; }
+
 PGB_API const char *pgb_message(const PgEngine *e) { return e->msg.text; }
 
 /* a method switch (method = 0) handed on as its text, as the native FMUs log it */

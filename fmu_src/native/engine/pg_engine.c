@@ -651,9 +651,22 @@ int pg_engine_init(PgEngine *e, const PgModel *model, const double *p, const dou
     e->on_event = on_event, e->on_warning = on_warning, e->on_switch = on_switch, e->hook_ctx = ctx;
     e->model = model;
     e->nx = model->nx, e->nq = model->nq, e->nu = model->nu, e->np = model->np;
-    if (e->nx > PG_MAX_X || e->nq > PG_MAX_Q || e->nu > PG_MAX_U || e->np > PG_MAX_P || model->ne > PG_MAX_EVENTS ||
-        model->ns != PG_NS)
-        return raise_text(e, "the model is larger than the native engine's limits");
+    const struct { const char *what, *name; int n, limit; } sizes[] = {
+        {"states", "PG_MAX_X", model->nx, PG_MAX_X},      {"discrete state entries", "PG_MAX_Q", model->nq, PG_MAX_Q},
+        {"inputs", "PG_MAX_U", model->nu, PG_MAX_U},      {"parameters", "PG_MAX_P", model->np, PG_MAX_P},
+        {"events", "PG_MAX_EVENTS", model->ne, PG_MAX_EVENTS}, {"outputs", "PG_MAX_Y", model->ny, PG_MAX_Y}};
+    for (size_t i = 0; i < sizeof sizes / sizeof sizes[0]; i++)
+        if (sizes[i].n > sizes[i].limit) {
+            pg_msg_clear(&e->msg);
+            pg_msg_printf(&e->msg, "the model has %d %s; the engine takes at most %d (%s)", sizes[i].n, sizes[i].what,
+                          sizes[i].limit, sizes[i].name);
+            return PG_RAISE;
+        }
+    if (model->ns != PG_NS) {
+        pg_msg_clear(&e->msg);
+        pg_msg_printf(&e->msg, "the model has %d solver settings; the engine takes exactly %d (PG_NS)", model->ns, PG_NS);
+        return PG_RAISE;
+    }
     memcpy(e->p, p, sizeof(double) * (size_t)e->np);
     memcpy(e->s, s, sizeof(double) * PG_NS);
     memcpy(e->u, u, sizeof(double) * (size_t)e->nu);

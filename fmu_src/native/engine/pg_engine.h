@@ -19,7 +19,8 @@
 #include "pg_rodas.h"
 
 #define PG_MAX_Q 16
-#define PG_MAX_U 64
+#define PG_MAX_U 1024 /* a reconstructor of a 12-ring segmented mirror takes 469 */
+#define PG_MAX_Y 1024 /* the model's outputs */
 #define PG_MAX_P 64
 #define PG_NS 8 /* solver settings: method rel_tol abs_tol max_step initial_step log_events max_steps_per_second
                   max_steps_per_call (the order of SOLVER_PARAMETERS in engine/settings.py) */

@@ -32,34 +32,39 @@ class NativeRefusal(BuildError):
     """The native generator cannot follow the model (the Python-hosted FMUs are still written)."""
 
 
-def native_limits() -> dict:
-    """The native engine's fixed sizes (``#define PG_MAX_*`` of its headers, read from them)."""
+def engine_limits() -> dict:
+    """The engine's fixed sizes (``#define PG_MAX_*`` of its headers, read from them)."""
     import re
 
     from pogofmu.codegen.build import NATIVE
 
     out = {}
-    for header in ("engine/pg_engine.h", "engine/pg_pairs.h", "adapter/pg_instance.h"):
+    for header in ("engine/pg_engine.h", "engine/pg_pairs.h"):
         for name, value in re.findall(r"#define PG_MAX_(\w+) (\d+)\b", (NATIVE / header).read_text()):
             out[name] = int(value)
     return out
 
 
-def native_check(source: ModelSource) -> None:
-    """Trace the model as the native generator does; a construct it cannot follow, or a model larger
-    than the native engine's sizes, is a :class:`NativeRefusal` naming it and what to do."""
-    from pogofmu.codegen.cmodel import discrete_layout, generate
-    from pogofmu.codegen.trace import TraceError
+def engine_size_check(source: ModelSource) -> None:
+    """A model larger than the engine's fixed sizes is refused for every backend (both run the C
+    engine), naming the count, the limit and its constant."""
+    from pogofmu.codegen.cmodel import discrete_layout
 
-    model, limits = source.model, native_limits()
+    model, limits = source.model, engine_limits()
     sizes = {"X": ("states", len(model.states)), "U": ("inputs", len(model.inputs)),
              "P": ("parameters", len(model.parameters)), "EVENTS": ("events", len(model.events)),
-             "Q": ("discrete state entries", len(discrete_layout(model)))}
+             "Y": ("outputs", len(model.outputs)), "Q": ("discrete state entries", len(discrete_layout(model)))}
     for key, (what, n) in sizes.items():
-        if key in limits and n > limits[key]:
-            raise NativeRefusal(f"no native FMU of {model.name}: {n} {what}, the native engine takes at most "
-                                f"{limits[key]} (PG_MAX_{key} in fmu_src/native); the Python-hosted FMUs have no "
-                                f"such limit")
+        if n > limits[key]:
+            raise ModelFileError(f"{source.where()}: {model.name} has {n} {what}; the engine takes at most "
+                                 f"{limits[key]} (PG_MAX_{key} in fmu_src/native/engine)")
+
+
+def native_check(source: ModelSource) -> None:
+    """Trace the model as the native generator does; a construct it cannot follow is a
+    :class:`NativeRefusal` naming it and what to do."""
+    from pogofmu.codegen.cmodel import generate
+    from pogofmu.codegen.trace import TraceError
 
     try:
         generate(source.model)
@@ -128,6 +133,7 @@ class Exporter:
         from .checks import check_model
 
         check_model(source)
+        engine_size_check(source)
         if any(b == "native" for b, _ in self.kinds):
             try:
                 native_check(source)

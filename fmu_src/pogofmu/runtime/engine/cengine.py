@@ -38,24 +38,12 @@ from .settings import SOLVER_PARAMETERS, check_solver_parameters, domain_slack, 
 PG_OK, PG_RAISE, PG_ARITH = 0, 1, 2
 PG_ZERO_DIVISION, PG_OVERFLOW, PG_DOMAIN = 1, 2, 3
 PG_MSG_MAX = 2048
-PG_MAX_X, PG_MAX_Q, PG_MAX_U, PG_MAX_P, PG_MAX_EVENTS = 32, 16, 64, 64, 16  # pg_pairs.h, pg_engine.h
-PG_MAX_SCALES, PG_MAX_SCALE_NAMES = 16, 6  # pg_model.h
 _READ_HEAD = 11  # the scalars before the vectors in pgb_read
 D = C.POINTER(C.c_double)
 
 
 class PgMsg(C.Structure):
     _fields_ = [("text", C.c_char * PG_MSG_MAX), ("len", C.c_size_t), ("arith", C.c_int)]
-
-
-class PgScale(C.Structure):
-    _fields_ = [("label", C.c_char_p), ("names", C.c_char_p * PG_MAX_SCALE_NAMES), ("n_names", C.c_int),
-                ("value", C.c_double)]
-
-
-class PgEvent(C.Structure):
-    _fields_ = [("time", C.c_double), ("index", C.c_int), ("x_before", C.c_double * PG_MAX_X),
-                ("x_after", C.c_double * PG_MAX_X)]
 
 
 MSG = C.POINTER(PgMsg)
@@ -90,7 +78,7 @@ class PgModel(C.Structure):
                 *((n, FN[n]) for n in _FUNCTIONS)]
 
 
-EVENT_HOOK = C.CFUNCTYPE(None, C.c_void_p, C.c_void_p, C.POINTER(PgEvent), C.c_long)
+EVENT_HOOK = C.CFUNCTYPE(None, C.c_void_p, C.c_void_p, C.c_void_p, C.c_long)  # the PgEvent by address
 WARN_HOOK = C.CFUNCTYPE(None, C.c_void_p, C.c_char_p)
 SWITCH_HOOK = C.CFUNCTYPE(None, C.c_char_p)  # pg_binding.c: a method switch's text
 
@@ -142,8 +130,34 @@ def library():
             lib.pgb_read.restype = None
             lib.pgb_last_event.argtypes = [C.c_void_p, D, D]
             lib.pgb_last_event.restype = None
+            lib.pgb_limits.argtypes = [C.POINTER(C.c_int)]
+            lib.pgb_limits.restype = None
+            _layouts(lib)
             _LIB_PATH, _LIB = path, lib
     return _LIB
+
+
+class _Layouts:
+    """PgEvent and PgScale (pg_engine.h, pg_model.h) laid out with the sizes the library was built with."""
+    max_scales = max_scale_names = 0
+    event = scale = None
+
+
+def layouts() -> type:
+    """:class:`_Layouts` (``event``, ``scale``, ``max_scales``, ``max_scale_names``) of the loaded library."""
+    library()
+    return _Layouts
+
+
+def _layouts(lib) -> None:
+    sizes = (C.c_int * 3)()
+    lib.pgb_limits(sizes)
+    max_x, _Layouts.max_scales, _Layouts.max_scale_names = sizes
+    _Layouts.event = type("PgEvent", (C.Structure,), {"_fields_": [
+        ("time", C.c_double), ("index", C.c_int), ("x_before", C.c_double * max_x), ("x_after", C.c_double * max_x)]})
+    _Layouts.scale = type("PgScale", (C.Structure,), {"_fields_": [
+        ("label", C.c_char_p), ("names", C.c_char_p * _Layouts.max_scale_names), ("n_names", C.c_int),
+        ("value", C.c_double)]})
 
 
 # ---- a model's static description ---------------------------------------------------------------
@@ -452,14 +466,14 @@ class Simulator:
 
     def _scales(self, fn, out, n, m):
         try:
-            rows = list(fn(self.p))[:PG_MAX_SCALES]
-            table = (PgScale * PG_MAX_SCALES).from_address(out)
+            rows = list(fn(self.p))[:_Layouts.max_scales]
+            table = (_Layouts.scale * _Layouts.max_scales).from_address(out)
             keep = self._scale_keep = []
             for i, (label, names, value) in enumerate(rows):
                 sc = table[i]
                 keep.append(str(label).encode())
                 sc.label = keep[-1]
-                names = list(names)[:PG_MAX_SCALE_NAMES]
+                names = list(names)[:_Layouts.max_scale_names]
                 for j, name in enumerate(names):
                     keep.append(str(name).encode())
                     sc.names[j] = keep[-1]
@@ -479,7 +493,7 @@ class Simulator:
     def _cb_event(self, ctx, engine, ev, number):
         if self._history is None:
             return
-        e = ev[0]
+        e = _Layouts.event.from_address(ev)
         record = EventRecord(e.time, self.model.events[e.index].name, e.index, list(e.x_before[:self._nx]),
                              list(e.x_after[:self._nx]))
         self._history.append(record)
