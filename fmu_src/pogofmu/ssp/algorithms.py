@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 import time as _time
+from fractions import Fraction
 from typing import Dict, List
 
 from .components import REAL_TYPES, StepResult
@@ -196,9 +197,30 @@ class Progress:
                 self.next += 0.1
 
 
+def _grid(t0, step):
+    """``(A, P, D)``: the k-th communication point is ``(A + k P) / D`` (see :func:`grid_points`)."""
+    a, b = Fraction(repr(float(t0))).as_integer_ratio()
+    p, q = Fraction(repr(float(step))).as_integer_ratio()
+    return a * q, p * b, b * q
+
+
 def grid_points(t0, t_end, step):
+    """The communication points ``t0 + k h`` after ``t0`` up to ``t_end``, each the double nearest
+    the exact decimal sum of ``t0`` and ``k h`` as written (their shortest decimals, ``repr``): with
+    ``h = 1e-3`` the ninth point is 0.009, where the product ``9 * 0.001`` is 0.009000000000000001.
+    libcosim's points, integer nanoseconds divided by 1e9, are these whenever ``t0`` and ``h`` are
+    whole nanoseconds; a component's integrator started one ulp away takes other steps, and on
+    the 1-ring mirror that difference of round-off grew through the loops to 1e-2 N
+    (tests/test_mirror_libcosim.py)."""
+    A, P, D = _grid(t0, step)
     n = int(round((t_end - t0) / step))
-    return [t0 + k * step for k in range(1, n + 1)]
+    return [(A + k * P) / D for k in range(1, n + 1)]  # int / int: correctly rounded
+
+
+def grid_point(t0, step, k):
+    """The k-th communication point of :func:`grid_points`."""
+    A, P, D = _grid(t0, step)
+    return (A + k * P) / D
 
 
 # =============================================================================================

@@ -9,7 +9,7 @@ import tempfile
 from pathlib import Path
 from typing import Optional
 
-from .algorithms import Exchange, Progress, fixed_step, synchronized
+from .algorithms import Exchange, Progress, fixed_step, grid_point, synchronized
 from .components import Fmi2CoSimulation, Fmi3CoSimulation, Fmi3ModelExchange
 from .graph import algebraic_loop, loop_text
 from .package import SSPError, read_ssd, unpack
@@ -195,6 +195,7 @@ def simulate(ssp, parameters: Optional[str] = None, stop_time: Optional[float] =
         n_steps = int(round((t_end - t0) / step))
         if n_steps < 1 or not math.isclose(t0 + n_steps * step, t_end, rel_tol=1e-9, abs_tol=1e-12):
             raise SSPError(f"stop time {t_end} - start time {t0} is not a whole number of steps {step}")
+        t_last = grid_point(t0, step, n_steps)  # the last communication point
         check_step_against_time_constants(system, selected, step, algorithm)
         loop = algebraic_loop(system)
         if loop is not None:
@@ -212,7 +213,7 @@ def simulate(ssp, parameters: Optional[str] = None, stop_time: Optional[float] =
         cols = select_columns(system, order, record)
         columns = (["event"] + [f"{n}.{c.name}" for n, c in cols], ["Integer"] + [c.type for _, c in cols],
                    [None] + [c.unit or _fmu_unit(system.components[n].variables[c.name]) for n, c in cols],
-                   (t0, t0 + n_steps * step))
+                   (t0, t_last))
         res = (sink or Result)(*columns)
         if hasattr(res, "plot_only"):  # the figure's envelope: only the signals it draws
             from .plot import plotted
@@ -222,23 +223,23 @@ def simulate(ssp, parameters: Optional[str] = None, stop_time: Optional[float] =
             instances[name] = _instantiate(system.components[name], work, echo_log, algorithm, events)
         ex = Exchange(system, instances, order, res, threads=threads, columns=cols)
         initialize(ex, t0, selected)
-        prog = Progress(system.name, t0, t0 + n_steps * step, progress)
+        prog = Progress(system.name, t0, t_last, progress)
         if algorithm == "model-exchange":
             from .coupled import model_exchange
 
-            model_exchange(ex, t0, t0 + n_steps * step, step, rel_tol, abs_tol, progress=prog)
+            model_exchange(ex, t0, t_last, step, rel_tol, abs_tol, progress=prog)
         else:
             jacobi = algorithm == "jacobi"
             if events:
-                synchronized(ex, t0, t0 + n_steps * step, step, event_tolerance, jacobi, progress=prog, warn=_warn)
+                synchronized(ex, t0, t_last, step, event_tolerance, jacobi, progress=prog, warn=_warn)
             else:
                 ex.row(t0)
-                fixed_step(ex, t0, t0 + n_steps * step, step, jacobi, progress=prog)
+                fixed_step(ex, t0, t_last, step, jacobi, progress=prog)
         res.system = system.name
         res.parameter_set = ", ".join(sorted({ps.name for ps in selected.values() if ps is not None})) or "none"
         res.algorithm, res.events, res.step, res.connections = algorithm, events, step, list(system.connections)
         res.close(complete=True)
-        res.last_time = t0 + n_steps * step
+        res.last_time = t_last
         return res
     finally:
         if ex is not None:
