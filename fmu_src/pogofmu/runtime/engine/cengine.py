@@ -29,6 +29,7 @@ import ctypes as C
 import math
 import struct
 import threading
+import weakref
 from dataclasses import dataclass
 from typing import List, Optional
 
@@ -87,6 +88,50 @@ _LIB = None
 _LIB_PATH: Optional[str] = None
 _LIB_LOCK = threading.Lock()
 
+# ---- the hot functions in C (pg_binding.c's trampolines call the model through the C API) ---------
+_HOT = ("flow", "guard", "active", "outputs", "domain")  # pgb_py_functions' order
+_API_FUNCTIONS = ("PyFloat_FromDouble", "PyFloat_AsDouble", "PyList_New", "PyList_SetItem", "PyList_GetItem",
+                  "PyTuple_New", "PyTuple_SetItem", "PyTuple_GetItem", "PyObject_CallObject", "PySequence_Size",
+                  "PySequence_GetItem", "PyObject_GetItem", "PyNumber_Float", "PyObject_IsTrue", "PyErr_Occurred",
+                  "PyErr_Fetch", "PyErr_NormalizeException", "PyException_SetTraceback", "PyErr_SetString",
+                  "PyLong_FromVoidPtr", "PyLong_AsLong", "Py_IncRef", "Py_DecRef")
+
+
+class PgbPyApi(C.Structure):
+    """``PgbPyApi`` of pg_binding.c: this interpreter's C API functions, by address."""
+    _fields_ = [*((n, C.c_void_p) for n in _API_FUNCTIONS), ("none", C.c_void_p), ("value_error", C.c_void_p)]
+
+
+def _python_api() -> PgbPyApi:
+    api = PgbPyApi()
+    for name in _API_FUNCTIONS:
+        setattr(api, name, C.cast(getattr(C.pythonapi, name), C.c_void_p).value)
+    api.none, api.value_error = id(None), id(ValueError)  # (CPython: an object's id is its address)
+    return api
+
+
+def _forget_py(lib, py) -> None:
+    lib.pgb_py_forget(C.byref(py))
+
+
+class PgbPy(C.Structure):
+    """``PgbPy`` of pg_binding.c: one run's Python objects (borrowed: the Simulator keeps them) and the
+    trampolines' cache (owned by the C, dropped with pgb_py_forget)."""
+    _fields_ = [("switch_text", C.c_void_p),
+                *((n, C.c_void_p) for n in ("sync", "fail", "fun_for", "domain_text", "guards", "actives",
+                                            "output_fn", "output_names", "domain", "p", "slack")),
+                *((n, C.c_int) for n in ("nx", "nq", "nu", "ny", "q_ok", "u_ok")),
+                ("qdict", C.c_void_p), ("uc", C.c_void_p), ("bound", C.c_void_p)]
+    # then the cache's keys of q and u (sized by the engine's limits): an instance is made in a
+    # buffer of pgb_py_sizeof() bytes (:func:`_new_py`)
+
+
+def _new_py(lib):
+    buf = (C.c_byte * lib.pgb_py_sizeof())()
+    py = PgbPy.from_buffer(buf)
+    py._buffer = buf
+    return py
+
 
 def use_library(path) -> None:
     """Run the engine of the library at ``path`` (the FMU's launcher, named by its bootstrap)."""
@@ -117,8 +162,22 @@ def library():
             lib.pgb_message.restype = C.c_char_p
             lib.pgb_message.argtypes = [C.c_void_p]
             lib.pgb_init.argtypes = [C.c_void_p, C.c_void_p, D, D, D, C.c_double, C.c_double, C.c_int, C.c_double,
-                                     C.c_int, EVENT_HOOK, WARN_HOOK, SWITCH_HOOK]
-            lib.pgb_rebind.argtypes = [C.c_void_p, C.c_void_p, EVENT_HOOK, WARN_HOOK, SWITCH_HOOK]
+                                     C.c_int, EVENT_HOOK, WARN_HOOK, C.c_void_p]
+            lib.pgb_rebind.argtypes = [C.c_void_p, C.c_void_p, EVENT_HOOK, WARN_HOOK, C.c_void_p]
+            lib.pgb_py_sizeof.restype = C.c_size_t
+            if lib.pgb_py_sizeof() < C.sizeof(PgbPy):
+                raise ModelError(f"the engine library's PgbPy has {lib.pgb_py_sizeof()} bytes, fewer than "
+                                 f"{C.sizeof(PgbPy)}: another build of pg_binding.c")
+            lib.pgb_py_api.argtypes = [C.c_void_p]
+            lib.pgb_py_api.restype = None
+            lib.pgb_py_forget.argtypes = [C.c_void_p]
+            lib.pgb_py_forget.restype = None
+            lib.pgb_py_functions.argtypes = [C.c_void_p]
+            lib.pgb_py_functions.restype = None
+            lib.pgb_py_api(C.byref(_python_api()))
+            tramps = (C.c_void_p * 5)()
+            lib.pgb_py_functions(tramps)
+            lib.trampolines = dict(zip(_HOT, tramps))
             lib.pgb_rebind.restype = None
             lib.pgb_advance.argtypes = [C.c_void_p, C.c_double, D]
             lib.pgb_advance_to_event.argtypes = [C.c_void_p, C.c_double, C.POINTER(C.c_int), D]
@@ -292,7 +351,9 @@ class Simulator:
         self.new_events: List[EventRecord] = []
         self.new_warnings: List[str] = []
         self.new_switches: List[str] = []  # method = 0: the switches' texts not yet taken (logSolver)
-        lib = library()
+        # (this run's library for good: its PgModel holds that copy's trampolines, and a process may
+        # run FMUs each with its own copy of the library, use_library switching among them)
+        lib = self._lib = library()
         self._engine = C.create_string_buffer(lib.pgb_sizeof())
         self._attach()
         # (a value that is no number goes in as NaN: the rules, called back with the Python values,
@@ -301,7 +362,8 @@ class Simulator:
         pvals = [_number_or_nan(p[par.name]) for par in model.parameters]
         rc = lib.pgb_init(self._engine, C.byref(self._struct), _doubles(pvals),
                           _doubles(svals), _doubles(self.u, len(model.inputs)), float(t0), float(t_stop),
-                          int(zeno_max_events), float(zeno_window), int(keep), self._on_event, self._on_warning, self._on_switch)
+                          int(zeno_max_events), float(zeno_window), int(keep), self._on_event, self._on_warning,
+                          C.addressof(self._py))
         self._check(rc)
         self._read()
 
@@ -330,13 +392,49 @@ class Simulator:
         self._qfloat = tuple(i for i, (_, kind) in enumerate(self._layout) if kind != "i")
         st = self._struct = PgModel()
         C.pointer(st)[0] = static.struct  # the constant fields
-        self._callbacks = cbs = {name: FN[name](getattr(self, "_cb_" + name)) for name in _FUNCTIONS[:11]}
+        # the cold functions through ctypes callbacks, the hot ones through pg_binding.c's trampolines
+        lib = self._lib
+        self._callbacks = cbs = {name: FN[name](getattr(self, "_cb_" + name)) for name in _FUNCTIONS[:11]
+                                 if name not in _HOT}
+        cbs.update((name, FN[name](lib.trampolines[name])) for name in _HOT)
         for name, fn in cbs.items():
             setattr(st, name, fn)
         self._on_event = EVENT_HOOK(self._cb_event)
         self._on_warning = WARN_HOOK(self._cb_warning)
         self._on_switch = SWITCH_HOOK(self._cb_switch)
+        if getattr(self, "_py", None) is None:
+            self._py = _new_py(lib)
+            weakref.finalize(self, _forget_py, lib, self._py)  # (the cache's references, with this run)
+        self._fill_py()
         return static
+
+    def _fill_py(self):
+        """This run's PgbPy: the objects the trampolines call (kept alive here), the cache dropped."""
+        model, py = self.model, self._py
+        self._lib.pgb_py_forget(C.byref(py))
+        keep = self._py_keep = {
+            "sync": self._tsync, "fail": self._fail, "fun_for": self._fun_for, "domain_text": self._domain_text,
+            "guards": list(self._guards), "actives": [ev.active for ev in model.events],
+            "output_fn": model.output_fn, "output_names": tuple(v.name for v in model.outputs),
+            "domain": model.domain, "p": self.p, "slack": self._slack}
+        for name, obj in keep.items():
+            setattr(py, name, id(obj))
+        py.switch_text = C.cast(self._on_switch, C.c_void_p).value
+        py.nx, py.nq, py.nu, py.ny = self._nx, self._nq, self._nu, len(model.outputs)
+
+    def _forget(self):
+        """The trampolines' dict of q, tuple of u and bound flow dropped (changed by another route)."""
+        self._lib.pgb_py_forget(C.byref(self._py))
+
+    def _tsync(self, q, u):
+        """The trampolines' ``sync``: the model's dict of q (address ``q``) and tuple of u (address
+        ``u``, None: q only), as the callbacks had them."""
+        return self._q(q, u), self._uc
+
+    def _domain_text(self, text, m) -> int:
+        """The trampolines' domain condition that failed: its text into the message at ``m``."""
+        _write_text(PgMsg.from_address(m), str(text))
+        return PG_RAISE
 
     def _fail(self, exc, m) -> int:
         """A Python exception inside a callback: kept, to be raised again as itself."""
@@ -510,7 +608,7 @@ class Simulator:
         if rc == PG_OK:
             self._exc = None
             return
-        text = library().pgb_message(self._engine).decode("utf-8", "replace")
+        text = self._lib.pgb_message(self._engine).decode("utf-8", "replace")
         exc, self._exc = self._exc, None
         if exc is not None and (not isinstance(exc, ModelError) or str(exc) == text):
             raise exc
@@ -521,7 +619,7 @@ class Simulator:
         just returned wrote them into the buffer already)."""
         buf = self._buf
         if not filled:
-            library().pgb_read(self._engine, buf)
+            self._lib.pgb_read(self._engine, buf)
         v = buf[:]
         self.t_out, self.t, self.h, self.max_step, n_events, n_steps, n_rejected = v[:7]
         n_events, self.n_steps, self.n_rejected = int(n_events), int(n_steps), int(n_rejected)
@@ -541,7 +639,7 @@ class Simulator:
             if v[7]:
                 nx = self._nx
                 xb, xa = (C.c_double * max(nx, 1))(), (C.c_double * max(nx, 1))()
-                library().pgb_last_event(self._engine, xb, xa)
+                self._lib.pgb_last_event(self._engine, xb, xa)
                 i = int(v[9])
                 self.last_event = EventRecord(v[8], self.model.events[i].name, i, xb[:nx], xa[:nx])
             else:
@@ -583,11 +681,12 @@ class Simulator:
         if qd is not self._qdict or self._uc != self.u:
             self._qkey, self._qdict, self._bound = self._qdict_key(qd), qd, None
             self._ukey, self._uc = None, self.u
+            self._forget()
         return self._fun_for(qd)
 
     def advance(self, t_target: float):
         """Integrate to ``t_target`` (handling every event on the way); return ``(x, q)`` there."""
-        self._check(library().pgb_advance(self._engine, float(t_target), self._buf))
+        self._check(self._lib.pgb_advance(self._engine, float(t_target), self._buf))
         self._read(True)
         return self.x_out, self.q_out
 
@@ -596,7 +695,7 @@ class Simulator:
         an event lies in ``(t_out, t_target]`` (``t_out`` is then its exact time, the jump pending
         until the next :meth:`advance`); the step sequence is that of :meth:`advance`."""
         stopped = C.c_int()
-        self._check(library().pgb_advance_to_event(self._engine, float(t_target), C.byref(stopped), self._buf))
+        self._check(self._lib.pgb_advance_to_event(self._engine, float(t_target), C.byref(stopped), self._buf))
         self._read(True)
         return bool(stopped.value)
 
@@ -606,14 +705,17 @@ class Simulator:
         if u == self.u:
             return
         self._bound = None
-        rc = library().pgb_set_input(self._engine, _doubles(u, self._nu))
+        self._forget()
+        rc = self._lib.pgb_set_input(self._engine, _doubles(u, self._nu))
         self._read()  # (the engine's inputs: the new ones, or the old where it refused them)
         self._check(rc)
 
     def apply_event(self, index: int, t: float, x) -> list:
         """Apply the jump of event ``index`` at time ``t`` to the state ``x`` located by someone else
         (an FMI 3.0 model-exchange importer's solver); returns the new continuous state."""
-        self._check(library().pgb_apply_event(self._engine, int(index), float(t), _doubles(x, self._nx)))
+        rc = self._lib.pgb_apply_event(self._engine, int(index), float(t), _doubles(x, self._nx))
+        self._forget()
+        self._check(rc)
         self._read()
         return self.x
 
@@ -623,7 +725,8 @@ class Simulator:
         dropped."""
         u = tuple(float(v) for v in u)
         self.u, self._bound = u, None
-        self._check(library().pgb_restart_at(self._engine, float(t), _doubles(x, self._nx), _doubles(u, self._nu)))
+        self._forget()
+        self._check(self._lib.pgb_restart_at(self._engine, float(t), _doubles(x, self._nx), _doubles(u, self._nu)))
         self._read()
 
     def domain_problem(self, t: float, x) -> Optional[str]:
@@ -646,7 +749,9 @@ class Simulator:
         self._history = None if snap["history"] is None else list(snap["history"])
         self.new_events, self.new_warnings = list(snap["new_events"]), list(snap["new_warnings"])
         self.new_switches = list(snap.get("new_switches", ()))
-        lib = library()
+        if fresh:
+            self._lib = library()
+        lib = self._lib
         if fresh:
             self._engine = C.create_string_buffer(lib.pgb_sizeof())
             self._attach()
@@ -655,8 +760,9 @@ class Simulator:
             raise ModelError(f"the engine state has {len(raw)} bytes, not {len(self._engine.raw)}: it was taken "
                              f"from another build of the engine")
         C.memmove(self._engine, raw, len(raw))
-        lib.pgb_rebind(self._engine, C.byref(self._struct), self._on_event, self._on_warning, self._on_switch)
         self._qkey = self._qdict = self._bound = self._ukey = None
+        self._fill_py()  # (this snapshot's p; the cache dropped)
+        lib.pgb_rebind(self._engine, C.byref(self._struct), self._on_event, self._on_warning, C.addressof(self._py))
         self._qlast = self._qlast_dict = None
         self._uc = self.u
         self.n_events = -1
