@@ -274,6 +274,11 @@ def gate():
         def open(self):
             path.touch()
     yield Gate()
+    # Open the gate before removing it, so that a run still held by a failed test's sweep (its
+    # workers are the module's cluster's) ends now instead of after GATE_TIMEOUT; the runs poll
+    # every 5 ms.
+    path.touch()
+    time.sleep(0.5)
     path.unlink(missing_ok=True)
 
 
@@ -283,7 +288,10 @@ def _wait_for(predicate, proc=None, timeout=300.0):
     deadline = time.monotonic() + timeout
     while not predicate():
         assert time.monotonic() < deadline, "timed out waiting (the test would otherwise hang)"
-        assert proc is None or proc.poll() is None, "the sweep ended before the test could interrupt it"
+        if proc is not None and proc.poll() is not None:
+            out, err = proc.communicate()
+            raise AssertionError(f"the sweep ended (exit {proc.returncode}) before the test could interrupt it: "
+                                 f"{out[-2000:]} {err[-3000:]}")
         time.sleep(0.02)
 
 
@@ -315,9 +323,14 @@ def test_resume_after_an_interruption_runs_only_the_missing_points(tmp_path, sch
            "--stop-time", "0.1", "--step", "0.05", "--outputs", "y", "--chunk-size", "1", "--scheduler", scheduler,
            "--out", str(out), "--no-progress"]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    _wait_for(lambda: len(_saved(parts)) >= 2, proc)
-    proc.send_signal(signal.SIGINT)  # Ctrl-C
-    stdout, stderr = proc.communicate(timeout=120)
+    try:
+        _wait_for(lambda: len(_saved(parts)) >= 2, proc)
+        proc.send_signal(signal.SIGINT)  # Ctrl-C
+        stdout, stderr = proc.communicate(timeout=120)
+    finally:  # a failure above must not leave the sweep holding the module's workers
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
     assert proc.returncode == 130, (proc.returncode, stdout, stderr[-3000:])
     assert "--resume" in stdout and not out.exists()
     before = _saved(parts)
