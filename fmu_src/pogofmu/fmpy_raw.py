@@ -12,6 +12,9 @@ Host-side code; never imported inside an FMU.
 """
 from __future__ import annotations
 
+import itertools
+import threading
+
 FMPY_RANGE = ">=0.3.20,<0.4"  # pyproject.toml's dependency on fmpy (tests/test_fmpy_raw.py compares them)
 
 
@@ -49,7 +52,10 @@ def raw_call(fmu, name: str, *args) -> int:
 # hands back with every message.
 _FMI2_LOGGER = None  # the one ctypes function of _fmi2_dispatch (made on first use: fmpy is imported late)
 _FMI2_SINKS = {}  # componentEnvironment -> the instance's sink
-_FMI2_KEYS = None  # itertools.count: the componentEnvironment of the next instance
+_FMI2_KEYS = itertools.count(1)  # the componentEnvironment of the next instance (next() is atomic in CPython)
+# (two threads making their first instances at once must not make two loggers: the proxy could be
+# left pointing at the one freed with its instance)
+_FMI2_LOCK = threading.Lock()
 
 
 def _fmi2_dispatch(environment, instance, status, category, message):
@@ -66,8 +72,7 @@ class Fmi2Callbacks:
     after it is gone is dropped."""
 
     def __init__(self, sink):
-        global _FMI2_LOGGER, _FMI2_KEYS
-        import itertools
+        global _FMI2_LOGGER
         import weakref
         from ctypes import byref
 
@@ -76,8 +81,9 @@ class Fmi2Callbacks:
                                fmi2CallbackLoggerTYPE)
         from fmpy.logging import addLoggerProxy
 
-        if _FMI2_LOGGER is None:
-            _FMI2_LOGGER, _FMI2_KEYS = fmi2CallbackLoggerTYPE(_fmi2_dispatch), itertools.count(1)
+        with _FMI2_LOCK:
+            if _FMI2_LOGGER is None:
+                _FMI2_LOGGER = fmi2CallbackLoggerTYPE(_fmi2_dispatch)
         self.key = next(_FMI2_KEYS)
         _FMI2_SINKS[self.key] = sink
         weakref.finalize(self, _FMI2_SINKS.pop, self.key, None)
