@@ -273,11 +273,12 @@ def gate():
 
         def open(self):
             path.touch()
-    yield Gate()
+    gate = Gate()
+    yield gate
     # Open the gate before removing it, so that a run still held by a failed test's sweep (its
     # workers are the module's cluster's) ends now instead of after GATE_TIMEOUT; the runs poll
     # every 5 ms.
-    path.touch()
+    gate.open()
     time.sleep(0.5)
     path.unlink(missing_ok=True)
 
