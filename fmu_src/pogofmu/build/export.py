@@ -48,7 +48,7 @@ def engine_limits() -> dict:
 def engine_size_check(source: ModelSource) -> None:
     """A model larger than the engine's fixed sizes is refused for every backend (both run the C
     engine), naming the count, the limit and its constant."""
-    from pogofmu.codegen.cmodel import discrete_layout
+    from pogofmu.runtime.engine.cengine import discrete_layout
 
     model, limits = source.model, engine_limits()
     sizes = {"X": ("states", len(model.states)), "U": ("inputs", len(model.inputs)),

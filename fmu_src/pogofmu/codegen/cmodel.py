@@ -13,10 +13,11 @@ is what the Python does, operation by operation.
 from __future__ import annotations
 
 import sys
-from typing import Dict, List, Tuple
+from typing import Dict, List
 
 from pogofmu.memo import once_per_model
 from pogofmu.runtime.engine import SOLVER_PARAMETERS
+from pogofmu.runtime.engine.cengine import discrete_layout  # the engine's layout of q: one definition
 from pogofmu.runtime.engine.settings import check_solver_parameters, domain_slack
 from pogofmu.runtime.model import HybridModel, Params
 
@@ -44,17 +45,6 @@ ARGS = {
 }
 INPUTS = {"t": "t", "x": "x[{i}]", "q": "q[{i}]", "u": "u[{i}]", "p": "p[{i}]", "s": "s[{i}]",
           "sx": "sx[{i}]", "su": "su[{i}]"}
-
-
-def _kind_of(v) -> str:
-    return INT if isinstance(v, int) and not isinstance(v, (bool, float)) else FLOAT
-
-
-def discrete_layout(model: HybridModel) -> List[Tuple[str, str]]:
-    """The slots of the discrete state ``q``: (key, kind) in the order of the model's initial
-    ``q`` for the default parameters (the jumps keep the keys)."""
-    _, q = model.initial(model.params())
-    return [(k, _kind_of(v)) for k, v in q.items()]
 
 
 class Inputs:
