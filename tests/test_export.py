@@ -563,8 +563,14 @@ NATIVE_REFUSALS = {
     "a value that is not a float": (
         "flow=lambda t, x, q, u, p: [x[1], -p.g]", "flow=lambda t, x, q, u, p: [x[1], -p.g * int(p.e + 1)]",
         "int(p.e + 1)", "int() of a traced value", "math.trunc(v)"),
+    "a linear map whose matrix is not a constant": (
+        "flow=lambda t, x, q, u, p: [x[1], -p.g]", "flow=lambda t, x, q, u, p: [x[1], -fmath.matvec([[p.g]], [1.0])[0]]",
+        "fmath.matvec([[p.g]]", "Ball: flow: fmath.matvec: the matrix entry [0][0] is a computed value",
+        "rule: the matrix of fmath.matvec is a constant known when the model is built"),
 }
 HELPERS = '''import math
+
+from pogofmu import fmath
 
 
 def steps(h):

@@ -21,7 +21,7 @@ from pogofmu.runtime.engine.cengine import discrete_layout  # the engine's layou
 from pogofmu.runtime.engine.settings import check_solver_parameters, domain_slack
 from pogofmu.runtime.model import HybridModel, Params
 
-from .cprint import Printer, c_string, literal, message_lines, result_nodes
+from .cprint import Printer, c_string, literal, matrix_table, message_lines, result_nodes
 from .dual import Dual, value_and_tangent
 from .trace import BOOL, FLOAT, INT, Sym, TraceError, explore, symbol
 
@@ -96,6 +96,7 @@ class ModelWriter:
         self.layout = discrete_layout(model)
         self.inp = Inputs(model, self.layout)
         self.functions: List[str] = []
+        self.matrices: Dict[object, str] = {}  # each constant matrix of fmath.matvec -> its C table, once per file
 
     # ---- one traced function ----
     def function(self, name, args, fn, leaf, what):
@@ -108,11 +109,18 @@ class ModelWriter:
             if path.result[0] == "raise":
                 return _raise_lines(path, ref)
             return leaf(path.result[1], ref)
-        body = Printer(paths, INPUTS, any_leaf, roots).body()
+        body = Printer(paths, INPUTS, any_leaf, roots, self._matrix_name).body()
         unused = [a.split()[-1].lstrip("*") for a in args.split(", ")]
         self.functions.append("\n".join(
             [f"static int {name}({args})", "{", *[f"    (void){u};" for u in unused], *body, "}", ""]))
         return len(paths)
+
+    def _matrix_name(self, M) -> str:
+        """The C table of a constant matrix: the same matrix (by value) in several functions is one."""
+        name = self.matrices.get(M)
+        if name is None:
+            name = self.matrices[M] = f"pg_matrix_{len(self.matrices)}"
+        return name
 
     # ---- leaves ----
     def _vector(self, target, n, what):
@@ -277,7 +285,10 @@ class ModelWriter:
             "pg_domain, pg_time_scales, pg_error_scales, pg_flow_jvp, pg_outputs_jvp,",
             "};", "",
         ]
-        return "\n".join(head + self.functions + tail)
+        tables = []
+        for M, name in self.matrices.items():
+            tables += matrix_table(name, M) + [""]
+        return "\n".join(head + tables + self.functions + tail)
 
 
 @once_per_model

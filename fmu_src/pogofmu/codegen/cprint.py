@@ -8,11 +8,16 @@ same IEEE operations: the same bits). An operation that raises in Python (a divi
 ends the function with the error Python would raise (``pg_*`` helpers of ``pg_support.h``),
 even when its value is not used afterwards — as in Python. Leaves (what a path returns or
 raises) are printed by a callback of the caller, which knows what the function returns.
+
+A constant linear map (``fmath.matvec``: a ``matvec`` node and an ``elem`` node per row) is printed
+as its operands in an array and a loop over a ``static const double`` table that the caller names
+and prints once per file (``matrix_name``), the products added left to right from 0.0 as Python
+adds them.
 """
 from __future__ import annotations
 
 import math
-from typing import Callable, Dict, List, Sequence, Set
+from typing import Callable, Dict, List, Optional, Sequence, Set
 
 from .trace import BOOL, INT, Node, Path, Sym, split_message  # noqa: F401
 
@@ -57,11 +62,13 @@ class Printer:
     C expression of its element ``{i}``; ``leaf(path, ref) -> lines`` prints what a path does at
     its end, ``ref(value)`` giving the C expression of a traced value or a number."""
 
-    def __init__(self, paths: Sequence[Path], inputs: Dict[str, str], leaf: Callable, roots: Callable):
+    def __init__(self, paths: Sequence[Path], inputs: Dict[str, str], leaf: Callable, roots: Callable,
+                 matrix_name: Optional[Callable] = None):
         self.paths = list(paths)
         self.inputs = inputs
         self.leaf = leaf
         self.roots = roots  # (path) -> the node indices its result uses
+        self.matrix_name = matrix_name  # (fmath.Matrix) -> the C name of its table
         self._live = [self._live_set(p) for p in self.paths]
 
     # ---- liveness: what a path needs (its result, its decisions, every operation that may raise)
@@ -155,7 +162,28 @@ class Printer:
             return [f"const int {name} = isfinite({num(0)}) ? 1 : 0;"]
         if op == "isnumber":
             return [f"const int {name} = isnan({num(0)}) ? 0 : 1;"]
+        if op == "matvec":
+            M = n.args[0]
+            if self.matrix_name is None:
+                raise ValueError("a constant linear map (fmath.matvec) with no table to print it from")
+            table = self.matrix_name(M)
+            return [f"const double {name}_v[{M.n_cols}] = {{{', '.join(num(k) for k in range(1, len(n.args)))}}};",
+                    f"double {name}[{M.n_rows}];",
+                    f"for (int r = 0; r < {M.n_rows}; r++) {{",
+                    "    double acc = 0.0;",
+                    f"    for (int c = 0; c < {M.n_cols}; c++) acc += {table}[r][c] * {name}_v[c];",
+                    f"    {name}[r] = acc;",
+                    "}"]
+        if op == "elem":
+            return [f"const double {name} = v{n.args[0]}[{n.args[1][1]}];"]
         raise ValueError(f"no C for the operation {op}")
+
+
+def matrix_table(name: str, M) -> List[str]:
+    """The C definition of a constant matrix (``fmath.Matrix``): one line per row, each entry a
+    literal that parses to the same double."""
+    rows = [f"    {{{', '.join(literal(a) for a in row)}}}," for row in M.rows]
+    return [f"static const double {name}[{M.n_rows}][{M.n_cols}] = {{", *rows, "};"]
 
 
 def message_lines(text: str, ref, kind_of=None) -> List[str]:
@@ -189,4 +217,4 @@ def result_nodes(value) -> List[int]:
     return out
 
 
-__all__ = ["Printer", "literal", "c_string", "message_lines", "result_nodes", "INT", "BOOL"]
+__all__ = ["Printer", "literal", "c_string", "matrix_table", "message_lines", "result_nodes", "INT", "BOOL"]

@@ -12,6 +12,8 @@ A tangent that is known to be zero is the number ``0.0`` and costs no operation.
 """
 from __future__ import annotations
 
+from pogofmu.runtime import fmath
+
 from .trace import TRACED_MATH, Sym, TraceError
 
 
@@ -187,6 +189,16 @@ def _hypot(a, b):
     return Dual(value, _tangent_div(_add(_mul(av, ad), _mul(bv, bd)), 0.0, 0.0, value))
 
 
+def _matvec(M, v):
+    """``M v`` for a constant ``M``: the values' product and, the map being linear, the same map on
+    the tangents (none where every tangent is zero)."""
+    parts = [_parts(a) for a in v]
+    value = fmath.matvec(M, [a for a, _ in parts])
+    if all(_zero(d) for _, d in parts):
+        return value
+    return [Dual(a, d) for a, d in zip(value, fmath.matvec(M, [d for _, d in parts]))]
+
+
 DUAL_MATH = {
     "sqrt": _unary("sqrt", lambda v, r: 0.5 / r),
     "exp": _unary("exp", lambda v, r: r),
@@ -197,6 +209,7 @@ DUAL_MATH = {
     "hypot": _hypot,
     "isfinite": lambda x: TRACED_MATH["isfinite"](_parts(x)[0]),
     "is_number": lambda x: TRACED_MATH["is_number"](_parts(x)[0]),
+    "matvec": _matvec,
 }
 
 

@@ -12,6 +12,7 @@ with the decisions as ``if``/``else``.
 
 What a traced function may do: arithmetic (``+ - * / ** abs``, unary minus), comparisons, the
 math functions of :mod:`pogofmu.runtime.fmath` (which call a traced value's own, ``Sym.__fmath__``), ``math.trunc``,
+a constant linear map ``fmath.matvec(M, v)`` (one node, whatever the size of ``M``),
 ``min``/``max``, lists/tuples/dicts of values, f-strings formatting values (``{v!r}``,
 ``{v:.6g}``: recorded as placeholders that C formats the same way), raising a model error. What
 it may not: ``float(v)``, ``int(v)``, hashing a value (a dict or set keyed by one), ``math.*``
@@ -314,6 +315,17 @@ def _is_number(x):
     return isinstance(x, (int, float)) and not math.isnan(x)
 
 
+def _matvec(M, v):
+    """``fmath.matvec(M, v)`` with traced entries in ``v`` (``M`` a checked constant
+    :class:`~pogofmu.runtime.fmath.Matrix`): one ``matvec`` node of the matrix and the entries of
+    ``v``, and one ``elem`` node per row — O(rows + columns) nodes, however many entries."""
+    if M.n_rows == 0 or M.n_cols == 0:
+        return M.product(v)
+    rec = _rec()
+    node = rec.node("matvec", (M, *(_arg(a) for a in v)), FLOAT)
+    return [Sym(rec.node("elem", (node, const(k)), FLOAT), FLOAT) for k in range(M.n_rows)]
+
+
 TRACED_MATH = {
     "sqrt": _unary_fn("sqrt", math.sqrt),
     "exp": _unary_fn("exp", math.exp),
@@ -325,6 +337,7 @@ TRACED_MATH = {
     "trunc": math.trunc,  # on a traced value: Sym.__trunc__, an operation of the generated C
     "isfinite": _isfinite,
     "is_number": _is_number,
+    "matvec": _matvec,
 }
 
 
@@ -368,7 +381,7 @@ def explore(fn: Callable[[], Any], what: str) -> List[Path]:
                 result = ("return", fn())
             except ModelError as exc:
                 result = ("raise", type(exc).__name__, str(exc))
-            except TraceError as exc:
+            except (TraceError, fmath.NotConstantError) as exc:
                 raise TraceError(f"{_where(exc)}{what}: {exc}") from None
             except Exception as exc:  # noqa: BLE001 - a path that cannot be traced
                 raise TraceError(f"{_where(exc)}{what}: {type(exc).__name__}: {exc}{_hint(exc)} (on the path "

@@ -11,14 +11,20 @@ standard library's own function would not know a traced value.
 
 When several arguments carry a table, the class with the highest ``__fmath_rank__`` wins (a dual
 number holds traced values, so its table is the outer one).
+
+``matvec(M, v)`` is a constant linear map: ``M`` (a :class:`Matrix`, or rows of numbers) is known
+when the model is built, ``v`` may be computed. On numbers it is the plain Python loop below; the
+generator records it as one operation, printed as a C table and a loop doing the same
+multiplications and additions in the same order, and its derivative is the same map on the tangent.
 """
 import math
 
-__all__ = ["sqrt", "exp", "log", "cos", "sin", "atan2", "hypot", "trunc", "isfinite", "is_number"]
+__all__ = ["sqrt", "exp", "log", "cos", "sin", "atan2", "hypot", "trunc", "isfinite", "is_number", "matvec",
+           "Matrix", "NotConstantError"]
 
 # the functions a traced value's table must provide (``trunc`` is Python's own protocol,
 # ``__trunc__``, and needs no table)
-HOOKED = ("sqrt", "exp", "log", "cos", "sin", "atan2", "hypot", "isfinite", "is_number")
+HOOKED = ("sqrt", "exp", "log", "cos", "sin", "atan2", "hypot", "isfinite", "is_number", "matvec")
 
 
 def _table(args):
@@ -70,3 +76,89 @@ def is_number(v) -> bool:
         return not math.isnan(v)
     table = _table((v,))
     return table["is_number"](v) if table is not None else False
+
+
+class NotConstantError(TypeError):
+    """A matrix entry of :func:`matvec` that is a computed value (a traced or dual number), not a
+    constant known when the model is built."""
+
+
+CONSTANT_RULE = ("rule: the matrix of fmath.matvec is a constant known when the model is built (numbers computed "
+                 "at import or from constants, not from a state, an input, a parameter or the time); build it "
+                 "once with fmath.Matrix(rows) at module level")
+
+
+class Matrix:
+    """A constant matrix for :func:`matvec`: ``rows`` of finite ints or floats, all of one length,
+    checked once and kept as tuples of floats. Build it once (at module level): a model that
+    passes rows of numbers to :func:`matvec` has them checked at every call."""
+
+    __slots__ = ("rows", "n_rows", "n_cols", "_hash")
+
+    def __init__(self, rows):
+        if isinstance(rows, Matrix):
+            rows = rows.rows
+        try:
+            rows = [tuple(row) for row in rows]
+        except TypeError:
+            raise TypeError(f"fmath.Matrix: {type(rows).__name__} is not a sequence of rows of numbers") from None
+        n_cols = len(rows[0]) if rows else 0
+        out = []
+        for i, row in enumerate(rows):
+            if len(row) != n_cols:
+                raise ValueError(f"fmath.Matrix: row {i} has {len(row)} entries, row 0 has {n_cols}; "
+                                 f"rule: every row has the same length")
+            for j, a in enumerate(row):
+                if not isinstance(a, (int, float)):
+                    if _table((a,)) is not None:
+                        raise NotConstantError(f"fmath.matvec: the matrix entry [{i}][{j}] is a computed value; "
+                                               f"{CONSTANT_RULE}")
+                    raise TypeError(f"fmath.Matrix: entry [{i}][{j}] is {type(a).__name__} {a!r}; rule: every "
+                                    f"entry is a finite int or float")
+                if not math.isfinite(a):
+                    raise ValueError(f"fmath.Matrix: entry [{i}][{j}] = {a!r}; rule: every entry is a finite int "
+                                     f"or float")
+            out.append(tuple(float(a) for a in row))
+        self.rows, self.n_rows, self.n_cols, self._hash = tuple(out), len(out), n_cols, None
+
+    def __hash__(self):  # (the generator keys its operations and its C tables by the matrix)
+        if self._hash is None:
+            self._hash = hash(self.rows)
+        return self._hash
+
+    def __eq__(self, other):
+        return self is other or (isinstance(other, Matrix) and hash(self) == hash(other) and self.rows == other.rows)
+
+    def __repr__(self):
+        return f"fmath.Matrix({self.n_rows} x {self.n_cols})"
+
+    def product(self, v):
+        """``M v`` on numbers: row ``k`` is ``((0.0 + M[k][0] v[0]) + M[k][1] v[1]) + ...``, left to
+        right (the generated C's loop does the same operations: the same bits)."""
+        out = []
+        for row in self.rows:
+            acc = 0.0
+            for a, x in zip(row, v):
+                acc += a * x
+            out.append(acc)
+        return out
+
+
+def matvec(M, v) -> list:
+    """The product ``M v`` of a constant matrix ``M`` (a :class:`Matrix`, or rows of numbers) and a
+    vector ``v`` (a sequence of ``M``'s column count), as a list of ``M``'s row count of floats.
+
+    Each row is summed left to right from 0.0 (as ``sum(M[k][e] * v[e] for e in ...)``, on Python
+    before 3.12, whose ``sum`` of floats is not compensated). The native generator records it as one
+    operation: a constant table in the C and a loop, not one line per entry, and its derivative
+    along a tangent ``dv`` is ``M dv``. ``M`` must be a constant (:data:`CONSTANT_RULE`)."""
+    if not isinstance(M, Matrix):
+        M = Matrix(M)
+    v = tuple(v)
+    if len(v) != M.n_cols:
+        raise ValueError(f"fmath.matvec: a vector of {len(v)} entries for a matrix of {M.n_cols} columns; rule: "
+                         f"len(v) is the matrix's column count")
+    table = _table(v)
+    if table is not None:
+        return table["matvec"](M, v)
+    return M.product(v)
