@@ -60,15 +60,14 @@ class NativeEngine:
 
 def both_runs(native, model, p, s, steps, inputs=None, t_stop=float("inf"), early=False, outcome=None):
     """Run the binding (the Python model) and the native model side by side over ``steps`` communication points
-    (method 0 and 1 as 5, below; ``inputs[k]``: the inputs held from point k on); returns a list of differences (empty: the
+    (``inputs[k]``: the inputs held from point k on); returns a list of differences (empty: the
     same bits at every point, the same events, the same message if a run stops). ``outcome``, a
     set if given, collects how the run ended: init, input or advance (a message) or ok."""
     diffs = []
     outcome = set() if outcome is None else outcome
-    # the same bits hold for the explicit methods: where method 0 (the default) or 1 runs Rodas5P,
-    # its Jacobian is the generated exact one in C and central differences in the binding, so the
-    # two agree to the tolerance only (tests/test_stiff.py); those runs are compared as method 5
-    s = {**s, "method": 5} if s.get("method", 0) in (0, 1) else s
+    # every method, the stiff ones too: where method 0 (the default) or 1 runs Rodas5P, its Jacobian
+    # is the exact one on both sides (the generated flow_jvp in C, the model's flow on dual numbers
+    # in the binding), the same operations
     u0 = [float(v.start) for v in model.inputs] if not inputs else [float(x) for x in inputs[0]]
     params = {**p, **s}
     try:

@@ -16,7 +16,7 @@ from native_model import MSG, NativeModel, PgMsg, arr
 from pogofmu import HybridModel, Parameter, Variable, fmath
 from pogofmu.codegen.build import c_compiler, model_library
 from pogofmu.codegen.cmodel import generate
-from pogofmu.codegen.dual import Dual
+from pogofmu.runtime.dual import Dual
 from pogofmu.codegen.trace import TraceError, explore, symbol
 from pogofmu.runtime.model import Params
 

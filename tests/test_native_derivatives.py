@@ -1,5 +1,5 @@
 """Directional derivatives of the native FMUs: exact Jacobian-vector products generated
-from the Python model on dual numbers (pogofmu.codegen.dual), checked against finite differences
+from the Python model on dual numbers (pogofmu.runtime.dual), checked against finite differences
 of the FMU's own functions and against closed forms.
 
 * FMI 3.0 model exchange, along each model's default run under fmpy's CVode: at sample points in

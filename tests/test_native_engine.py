@@ -68,7 +68,7 @@ def demo_inputs(model, steps):
     return [[model.default_input(t - model.default_step, p)[v.name] for v in model.inputs] for t in steps]
 
 
-@pytest.mark.parametrize("method", [5, 8])
+@pytest.mark.parametrize("method", [5, 8, 1, 0])  # 1: Rodas5P throughout, its Jacobian exact on both sides
 @pytest.mark.parametrize("early", [False, True])
 @pytest.mark.parametrize("name", MODELS)
 def test_default_experiments_are_the_python_engines_to_the_bit(name, method, early, native):

@@ -6,7 +6,7 @@ import threading
 
 import pytest
 
-from pogofmu.codegen.dual import Dual
+from pogofmu.runtime.dual import Dual
 from pogofmu.codegen.trace import TraceError, explore, symbol
 from pogofmu.runtime import fmath
 

@@ -1,7 +1,7 @@
 /* pogofmu native FMUs: directional derivatives (fmi2GetDirectionalDerivative,
  * fmi3GetDirectionalDerivative) — exact, from the generated Jacobian-vector products of the flow
  * and the outputs (PgModel.flow_jvp, outputs_jvp: the model's own operations on dual numbers,
- * pogofmu.codegen.dual), at the point the outputs describe.
+ * pogofmu.runtime.dual), at the point the outputs describe.
  *
  * Knowns: the inputs, and in model exchange the continuous states. Unknowns: the outputs, the
  * states' derivatives der(x), the states; the event counters and the time have zero derivatives. */

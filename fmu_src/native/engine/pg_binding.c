@@ -443,14 +443,15 @@ PGB_API int pgb_event_due(const PgEngine *e) { return pg_engine_event_due(e); }
 /* Everything a caller reads after a call, into out[]:
  *   [0] t_out  [1] t (the integrator, may be ahead)  [2] h (the next step)  [3] max_step
  *   [4] n_events  [5] n_steps  [6] n_rejected  [7] has_last  [8] last time  [9] last index
- *   [10] event due  then x_out (nx), q_out (nq), x (nx), q (nq), u (nu) */
+ *   [10] event due  [11] the Jacobian by differences (the model's flow_jvp answered PG_NO_JVP)
+ *   then x_out (nx), q_out (nq), x (nx), q (nq), u (nu) */
 PGB_API void pgb_read(const PgEngine *e, double *out)
 {
     out[0] = e->t_out, out[1] = e->t, out[2] = e->h, out[3] = e->max_step;
     out[4] = (double)e->n_events, out[5] = (double)e->n_steps, out[6] = (double)e->n_rejected;
     out[7] = e->has_last, out[8] = e->last.time, out[9] = e->last.index;
-    out[10] = pg_engine_event_due(e);
-    double *o = out + 11;
+    out[10] = pg_engine_event_due(e), out[11] = e->jvp_off;
+    double *o = out + 12;
     memcpy(o, e->x_out, sizeof(double) * (size_t)e->nx), o += e->nx;
     memcpy(o, e->q_out, sizeof(double) * (size_t)e->nq), o += e->nq;
     memcpy(o, e->x, sizeof(double) * (size_t)e->nx), o += e->nx;

@@ -152,8 +152,9 @@ static const double NO_INPUT_MOVE[PG_MAX_U];
 #define CBRT_EPS 6.055454452393343e-06 /* cbrt(EPS) */
 
 /* J = d flow / dx at (t, y) and dT = d flow / dt, unless they are kept for this point: exact columns
- * from the model's flow_jvp (dual numbers) where it has one, central differences otherwise; dT by
- * a forward difference (exactly 0 for a flow that does not read t) */
+ * from the model's flow_jvp (dual numbers) where it has one, central differences otherwise, and
+ * from the first PG_NO_JVP of its flow_jvp on (the whole Jacobian again, by differences); dT by a
+ * forward difference (exactly 0 for a flow that does not read t) */
 static int jacobian(PgEngine *e, double t, const double *y, const double *f)
 {
     int n = e->nx;
@@ -161,10 +162,16 @@ static int jacobian(PgEngine *e, double t, const double *y, const double *f)
     if (e->jac_ok && e->jac_t == t && memcmp(e->jac_y, y, nb) == 0) return PG_OK;
     double col[PG_MAX_X], yp[PG_MAX_X];
     for (int j = 0; j < n; ++j) {
-        if (e->model->flow_jvp) {
+        if (e->model->flow_jvp && !e->jvp_off) {
             double sx[PG_MAX_X] = {0};
             sx[j] = 1.0;
-            TRY(e->model->flow_jvp(t, y, e->q, e->u, e->p, sx, NO_INPUT_MOVE, col, &e->msg));
+            int rc = e->model->flow_jvp(t, y, e->q, e->u, e->p, sx, NO_INPUT_MOVE, col, &e->msg);
+            if (rc == PG_NO_JVP) {
+                e->jvp_off = 1;
+                j = -1; /* every column again, by differences */
+                continue;
+            }
+            TRY(rc);
             for (int i = 0; i < n; ++i) e->J[i * PG_MAX_X + j] = col[i];
         } else { /* central differences: a Rosenbrock method's order rests on the Jacobian */
             double col_m[PG_MAX_X];

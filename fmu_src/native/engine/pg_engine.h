@@ -97,6 +97,8 @@ struct PgEngine {
      * jump or an input change */
     int jac_ok;
     double jac_t, jac_y[PG_MAX_X], jac_rho;
+    /* the model's flow_jvp answered PG_NO_JVP: the Jacobian by differences from then on */
+    int jvp_off;
     double J[PG_MAX_X * PG_MAX_X], dT[PG_MAX_X];
     /* not state: the hooks of the adapter, and scratch */
     PgEventHook on_event;

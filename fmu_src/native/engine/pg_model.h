@@ -9,7 +9,10 @@
  *   PG_OK     done;
  *   PG_RAISE  a model error: `m->text` holds the message Python's exception carries;
  *   PG_ARITH  an arithmetic failure (a division by zero, a math domain or range error):
- *             `m->text` holds Python's detail ("float division by zero", ...), `m->arith` its kind.
+ *             `m->text` holds Python's detail ("float division by zero", ...), `m->arith` its kind;
+ *   PG_NO_JVP (flow_jvp only) the model's derivative cannot be taken this way (the Python binding:
+ *             the model's flow does not run on dual numbers): the engine takes the Jacobian by
+ *             differences for the rest of the run. Generated C never returns it.
  *
  * Arrays: t time, x continuous states, q discrete state (every slot a double, integers exactly),
  * u inputs, p the model's parameters, s the solver's settings (in SOLVER_PARAMETERS order). */
@@ -20,7 +23,7 @@
 
 #define PG_MSG_MAX 2048
 
-enum { PG_OK = 0, PG_RAISE = 1, PG_ARITH = 2 };
+enum { PG_OK = 0, PG_RAISE = 1, PG_ARITH = 2, PG_NO_JVP = 3 };
 enum { PG_ZERO_DIVISION = 1, PG_OVERFLOW = 2, PG_DOMAIN = 3 };
 enum { PG_FALLING = -1, PG_RISING = 1 };
 
@@ -67,7 +70,7 @@ typedef struct PgModel {
                   PgMsg *m);
     int (*time_scales)(const double *p, PgScale *out, int *n, PgMsg *m);
     int (*error_scales)(const double *p, PgScale *out, int *n, PgMsg *m);
-    /* directional derivatives (the flow's and the outputs' on dual numbers, pogofmu.codegen.dual):
+    /* directional derivatives (the flow's and the outputs' on dual numbers, pogofmu.runtime.dual):
      * df = (d flow / dx) sx + (d flow / du) su, dy likewise, at (t, x) in mode q */
     int (*flow_jvp)(double t, const double *x, const double *q, const double *u, const double *p, const double *sx,
                     const double *su, double *df, PgMsg *m);

@@ -16,13 +16,13 @@ import sys
 from typing import Dict, List
 
 from pogofmu.memo import once_per_model
+from pogofmu.runtime.dual import Dual, value_and_tangent
 from pogofmu.runtime.engine import SOLVER_PARAMETERS
 from pogofmu.runtime.engine.cengine import discrete_layout  # the engine's layout of q: one definition
 from pogofmu.runtime.engine.settings import check_solver_parameters, domain_slack
 from pogofmu.runtime.model import HybridModel, Params
 
 from .cprint import Printer, c_string, literal, matrix_table, message_lines, result_nodes
-from .dual import Dual, value_and_tangent
 from .trace import BOOL, FLOAT, INT, Sym, TraceError, explore, symbol
 
 ARGS = {
@@ -203,7 +203,7 @@ class ModelWriter:
             "pg_outputs", ARGS["outputs"],
             lambda: model.output_fn(inp.t(), inp.x(), inp.q(), inp.u(), inp.p()), outputs_leaf, "outputs")
 
-        # directional derivatives: the flow and the outputs on dual numbers (codegen.dual)
+        # directional derivatives: the flow and the outputs on dual numbers (runtime.dual, over traced values)
         def flow_jvp():
             t, x, q, u, p = inp.t(), inp.x_seeded(), inp.q(), inp.u_seeded(), inp.p()
             f = model.bind(q, u, p)(t, x) if model.bind is not None else model.flow(t, x, q, u, p)

@@ -2,8 +2,8 @@
 
 On numbers they are the standard library's (the Python-hosted FMUs compute with them
 unchanged). A value that the standard library cannot take (a traced value of the code
-generator, :mod:`pogofmu.codegen.trace`, or a dual number of its derivatives,
-:mod:`pogofmu.codegen.dual`) carries its own versions: its class's ``__fmath__`` table, which
+generator, :mod:`pogofmu.codegen.trace`, or a dual number, :mod:`pogofmu.runtime.dual`, over
+numbers or traced values) carries its own versions: its class's ``__fmath__`` table, which
 these functions call instead. So the generator follows a model's calls without replacing anything
 of this module for the time it traces (another thread of the same process running a model on
 numbers meanwhile is not affected). A model calls ``fmath.<name>``, never ``math.<name>``: the

@@ -72,7 +72,8 @@ LOG_CATEGORIES = {
     "logStatusFatal": "messages with status Fatal",
     "logAll": "all other messages",
     "logEvents": "every state event: kind, exact time, state before the jump (parameter log_events = 1)",
-    "logSolver": "the solver's method switches (method = 0): time, methods, stiffness estimate",
+    "logSolver": "the solver's method switches (method = 0): time, methods, stiffness estimate; the Jacobian "
+                 "taken by differences (a model flow that does not run on dual numbers)",
 }
 
 

@@ -8,6 +8,13 @@ tests) — runs the same engine through this binding, with the model's Python fu
 guards, activity, jumps, outputs, domain, rules, scales) called back through ctypes.  A
 :class:`Simulator` is the engine for one run.
 
+The Rosenbrock method's Jacobian (``method`` 1, and 0 while stiff) is the exact one, as in the
+native FMUs: each column is the model's own flow on dual numbers (:mod:`..dual`), the same
+operations as the native FMU's generated ``flow_jvp``.  A flow that does not run on dual numbers
+(``math.sqrt(x)`` instead of ``fmath.sqrt(x)``, ``float(x)``) answers ``PG_NO_JVP`` once: the
+engine takes the Jacobian by central differences for the rest of the run, and the run says so
+(:attr:`Simulator.jacobian_by_differences`, a ``logSolver`` message).
+
 Where the library comes from:
 
 * inside a Python-hosted FMU, the FMU's launcher carries the engine (its ``pgb_*`` functions); the
@@ -33,13 +40,14 @@ import weakref
 from dataclasses import dataclass
 from typing import List, Optional
 
+from ..dual import Dual, value_and_tangent
 from ..model import FALLING, DomainError, HybridModel, ModelError, ParameterError, Params, ZenoError
 from .settings import SOLVER_PARAMETERS, check_solver_parameters, domain_slack, split_parameters
 
-PG_OK, PG_RAISE, PG_ARITH = 0, 1, 2
+PG_OK, PG_RAISE, PG_ARITH, PG_NO_JVP = 0, 1, 2, 3
 PG_ZERO_DIVISION, PG_OVERFLOW, PG_DOMAIN = 1, 2, 3
 PG_MSG_MAX = 2048
-_READ_HEAD = 11  # the scalars before the vectors in pgb_read
+_READ_HEAD = 12  # the scalars before the vectors in pgb_read
 D = C.POINTER(C.c_double)
 
 
@@ -67,6 +75,7 @@ FN = {
 STRS = C.POINTER(C.c_char_p)
 _FUNCTIONS = ("check_settings", "check", "initial", "flow", "guard", "active", "jump", "outputs", "domain",
               "time_scales", "error_scales", "flow_jvp", "outputs_jvp")
+_BOUND = _FUNCTIONS[:12]  # the ones a Simulator gives (outputs_jvp: NULL, the engine does not call it)
 
 
 class PgModel(C.Structure):
@@ -350,7 +359,10 @@ class Simulator:
         self._history: Optional[List[EventRecord]] = [] if keep else None
         self.new_events: List[EventRecord] = []
         self.new_warnings: List[str] = []
-        self.new_switches: List[str] = []  # method = 0: the switches' texts not yet taken (logSolver)
+        # the solver's messages not yet taken (logSolver): method = 0's switches, and the Jacobian
+        # going to differences (a flow that does not run on dual numbers; then jacobian_by_differences)
+        self.new_switches: List[str] = []
+        self.jacobian_by_differences = False
         # (this run's library for good: its PgModel holds that copy's trampolines, and a process may
         # run FMUs each with its own copy of the library, use_library switching among them)
         lib = self._lib = library()
@@ -394,7 +406,7 @@ class Simulator:
         C.pointer(st)[0] = static.struct  # the constant fields
         # the cold functions through ctypes callbacks, the hot ones through pg_binding.c's trampolines
         lib = self._lib
-        self._callbacks = cbs = {name: FN[name](getattr(self, "_cb_" + name)) for name in _FUNCTIONS[:11]
+        self._callbacks = cbs = {name: FN[name](getattr(self, "_cb_" + name)) for name in _BOUND
                                  if name not in _HOT}
         cbs.update((name, FN[name](lib.trampolines[name])) for name in _HOT)
         for name, fn in cbs.items():
@@ -519,6 +531,32 @@ class Simulator:
         except BaseException as exc:
             return self._fail(exc, m)
 
+    def _cb_flow_jvp(self, t, x, q, u, p, sx, su, df, m):
+        """A column of the flow's Jacobian for the engine: the model's flow on dual numbers, the states'
+        tangents ``sx`` (the inputs' tangents ``su`` are the engine's zeros, NO_INPUT_MOVE: the inputs
+        go in as numbers).  The engine computed the flow at this point already, so an exception here
+        comes from the duals: an arithmetic one (a derivative at a singular point) or a model error
+        is reported as the native FMU's generated flow_jvp reports it; any other means that the flow
+        does not run on dual numbers, and the engine takes differences from now on."""
+        try:
+            nx, X = self._nx, self._X
+            # (a state of zero tangent goes in as its number: the same values and tangents as a dual of
+            # tangent 0, which the duals' arithmetic skips, at a number's cost)
+            xs = [v if d == 0.0 else Dual(v, d) for v, d in zip(X.from_address(x)[:nx], X.from_address(sx)[:nx])]
+            f = self._fun_for(self._q(q, u))(t, xs)
+            if nx:
+                X.from_address(df)[:] = [v.d if v.__class__ is Dual else value_and_tangent(v)[1] for v in f]
+            return PG_OK
+        except (ArithmeticError, ValueError, ModelError) as exc:
+            return self._fail(exc, m)
+        except Exception as exc:  # noqa: BLE001 - not dual-traceable: differences, said once
+            self.new_switches.append(
+                f"the Jacobian by central differences from t = {t!r} s on: {self.model.name}'s flow does not "
+                f"run on dual numbers ({type(exc).__name__}: {exc})")
+            return PG_NO_JVP
+        except BaseException as exc:
+            return self._fail(exc, m)
+
     def _cb_guard(self, k, x, q, u, p, g, m):
         try:
             C.c_double.from_address(g).value = self._guards[k](self._X.from_address(x)[:self._nx], self._q(q, u), self._uc, self.p)
@@ -624,6 +662,7 @@ class Simulator:
         self.t_out, self.t, self.h, self.max_step, n_events, n_steps, n_rejected = v[:7]
         n_events, self.n_steps, self.n_rejected = int(n_events), int(n_steps), int(n_rejected)
         self._due = bool(v[10])
+        self.jacobian_by_differences = bool(v[11])
         a = _READ_HEAD
         b = a + self._nx
         c = b + self._nq

@@ -1,57 +1,71 @@
-"""Forward-mode derivatives of a model's functions, traced: dual numbers over traced values.
+"""Forward-mode derivatives of a model's own functions: dual numbers.
 
-A :class:`Dual` is a value and its tangent (the derivative along a seed direction), each a traced
-value (:class:`~.trace.Sym`) or a number. Calling a model function with duals in place of its
-states and inputs, inside :func:`~.trace.explore`, records the function's operations *and* those
-of the chain rule; printed as C (:mod:`.cprint`) it is the exact Jacobian-vector product of the
-function at a point — the directional derivatives the native FMUs provide, from the
-same Python model, with no second copy of any equation. Branches of the model (modes, ``max``,
-``abs``) are decisions on the *values*, so the derivative is that of the branch taken.
+A :class:`Dual` is a value and its tangent (the derivative along a seed direction). Calling a
+model function with duals in place of its states gives its value and its Jacobian-vector product
+from the model's own code, with no second copy of any equation. Branches of the model (modes,
+``max``, ``abs``) are decisions on the *values*, so the derivative is that of the branch taken.
 
-A tangent that is known to be zero is the number ``0.0`` and costs no operation.
+The parts are numbers or values that carry their own math (a class with an ``__fmath__`` table,
+:mod:`.fmath`):
+
+* on floats, inside a Python-hosted FMU and the host tools, a column of the flow's exact Jacobian
+  for the engine's Rosenbrock method (``flow_jvp`` of the Python binding, :mod:`.engine.cengine`);
+* on traced values (``pogofmu.codegen.trace.Sym``), inside the code generator's trace: the
+  function's operations *and* those of the chain rule, printed as C, are the native FMUs'
+  ``flow_jvp`` and ``outputs_jvp``.
+
+Both run the same operations in the same order, so the two give the same bits. A tangent that is
+known to be zero is a plain number ``0`` and costs no operation. A function a dual number cannot
+follow (``float(v)``, ``math.sqrt(v)`` instead of ``fmath.sqrt(v)``) raises
+:class:`NotDifferentiable`.
 """
 from __future__ import annotations
 
-from pogofmu.runtime import fmath
+from . import fmath
 
-from .trace import TRACED_MATH, Sym, TraceError
+
+class NotDifferentiable(TypeError):
+    """A model function did something a dual number cannot follow (its derivative is not taken)."""
+
+
+_NUMBER = (int, float)
 
 
 def _zero(d) -> bool:
-    return not isinstance(d, Sym) and d == 0
+    return isinstance(d, _NUMBER) and d == 0
 
 
+# (_zero written out in the three below: they run at every operation of a Jacobian's columns)
 def _add(a, b):
-    if _zero(a):
+    if isinstance(a, _NUMBER) and a == 0:
         return b
-    if _zero(b):
+    if isinstance(b, _NUMBER) and b == 0:
         return a
     return a + b
 
 
 def _sub(a, b):
-    if _zero(b):
+    if isinstance(b, _NUMBER) and b == 0:
         return a
-    if _zero(a):
+    if isinstance(a, _NUMBER) and a == 0:
         return -b
     return a - b
 
 
 def _mul(a, b):
     """A product where ``b`` is a tangent (zero skips the operation)."""
-    if _zero(b) or _zero(a):
+    if (isinstance(b, _NUMBER) and b == 0) or (isinstance(a, _NUMBER) and a == 0):
         return 0.0
     return a * b
 
 
 def _parts(v):
+    """(value, tangent) of an operand: a number or a value with its own math has a zero tangent."""
     if isinstance(v, Dual):
         return v.v, v.d
-    if isinstance(v, (Sym, int, float)) and not isinstance(v, bool):
+    if isinstance(v, _NUMBER) or hasattr(type(v), "__fmath__"):
         return v, 0.0
-    if isinstance(v, bool):
-        return v, 0.0
-    raise TraceError(f"a derivative of an operation on {type(v).__name__} {v!r}")
+    raise NotDifferentiable(f"a derivative of an operation on {type(v).__name__} {v!r}")
 
 
 class Dual:
@@ -116,9 +130,7 @@ class Dual:
         return Dual(abs(self.v), 0.0 if _zero(self.d) else -self.d)
 
     def __trunc__(self):
-        import math
-
-        return math.trunc(self.v)
+        return fmath.trunc(self.v)
 
     # ---- comparisons and truth: the value's ----
     def __lt__(self, o): return self.v < _parts(o)[0]
@@ -132,7 +144,9 @@ class Dual:
         return bool(self.v)
 
     def __float__(self):
-        raise TraceError("float() of a traced value (write v, or v * 1.0 for an int)")
+        raise NotDifferentiable("float() of a dual number, or a call into math that converts it (math.sqrt(v)): "
+                                "a derivative follows pogofmu.fmath only. Rewrite: fmath.sqrt(v) (exp, log, sin, cos, "
+                                "atan2, hypot) for math.*, and v (or v * 1.0 for an int) for float(v)")
 
     def __format__(self, spec):
         return format(self.v, spec)
@@ -157,24 +171,24 @@ def _pow(a, b):
     if not _zero(ad):  # b a^(b-1) da
         d = _mul(bv * av ** (bv - 1), ad)
     if not _zero(bd):  # a^b log(a) db
-        d = _add(d, _mul(value * TRACED_MATH["log"](av), bd))
+        d = _add(d, _mul(value * fmath.log(av), bd))
     return Dual(value, d)
 
 
 def _unary(name, derivative):
-    traced = TRACED_MATH[name]
+    of_value = getattr(fmath, name)
 
     def fn(x):
         if not isinstance(x, Dual):
-            return traced(x)
-        value = traced(x.v)
+            return of_value(x)
+        value = of_value(x.v)
         return Dual(value, 0.0 if _zero(x.d) else _mul(derivative(x.v, value), x.d))
     return fn
 
 
 def _atan2(y, x):
     (yv, yd), (xv, xd) = _parts(y), _parts(x)
-    value = TRACED_MATH["atan2"](yv, xv)
+    value = fmath.atan2(yv, xv)
     if _zero(yd) and _zero(xd):
         return value
     r2 = xv * xv + yv * yv
@@ -183,7 +197,7 @@ def _atan2(y, x):
 
 def _hypot(a, b):
     (av, ad), (bv, bd) = _parts(a), _parts(b)
-    value = TRACED_MATH["hypot"](av, bv)
+    value = fmath.hypot(av, bv)
     if _zero(ad) and _zero(bd):
         return value
     return Dual(value, _tangent_div(_add(_mul(av, ad), _mul(bv, bd)), 0.0, 0.0, value))
@@ -203,12 +217,12 @@ DUAL_MATH = {
     "sqrt": _unary("sqrt", lambda v, r: 0.5 / r),
     "exp": _unary("exp", lambda v, r: r),
     "log": _unary("log", lambda v, r: 1.0 / v),
-    "cos": _unary("cos", lambda v, r: -TRACED_MATH["sin"](v)),
-    "sin": _unary("sin", lambda v, r: TRACED_MATH["cos"](v)),
+    "cos": _unary("cos", lambda v, r: -fmath.sin(v)),
+    "sin": _unary("sin", lambda v, r: fmath.cos(v)),
     "atan2": _atan2,
     "hypot": _hypot,
-    "isfinite": lambda x: TRACED_MATH["isfinite"](_parts(x)[0]),
-    "is_number": lambda x: TRACED_MATH["is_number"](_parts(x)[0]),
+    "isfinite": lambda x: fmath.isfinite(_parts(x)[0]),
+    "is_number": lambda x: fmath.is_number(_parts(x)[0]),
     "matvec": _matvec,
 }
 
@@ -224,4 +238,4 @@ def value_and_tangent(v):
     return _parts(v)
 
 
-__all__ = ["Dual", "value_and_tangent"]
+__all__ = ["Dual", "NotDifferentiable", "value_and_tangent"]
