@@ -11,8 +11,9 @@ Each figure is a fresh process running the user's command, ``python -m pogofmu.s
 2. ``--threads 2`` against ``--threads 1`` on the 4-ring package (the same difference of two
    stop times); target >= 1.6x on 2 idle cores.
 
-A 12-ring native mirror cannot be built (its reconstructor's 469 inputs exceed the native
-engine's 64), so there is no 12-ring figure. The packages are generated into a temporary folder
+A 12-ring native mirror (939 FMUs) builds and runs (docs/ssp-master.md, "12 rings"), but its
+export takes 12 min of CPU (over an hour of wall time on the loaded shared machine), so it is not
+one of these cases. The packages are generated into a temporary folder
 (``--packages DIR`` reuses ``DIR/m1.ssp``, ``DIR/m4.ssp``; the 4-ring export takes minutes).
 
     python benchmarks/bench_mirror.py [--short 0.05] [--long 0.25] [--repeat 2] [--packages DIR]
