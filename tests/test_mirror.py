@@ -7,6 +7,7 @@ check``, and a 1-ring mirror run by ``pogofmu ssp run``.
 from __future__ import annotations
 
 import math
+import re
 import shutil
 import zipfile
 from pathlib import Path
@@ -185,6 +186,11 @@ def test_mirror_packages_of_one_ring_have_15_components_and_pass_ssp_check(tmp_p
             assert f'version="{version}"' in ssd
             with zipfile.ZipFile(z.open("resources/SegmentController.fmu")) as f:
                 assert f'fmiVersion="{fmi}.0"' in f.read("modelDescription.xml").decode()
+            # one parameter set per component and nothing else: each component bound to its own set,
+            # no part of another component's set (those made 2 N^2 files: 442 741 at 12 rings)
+            sets = sorted(n for n in z.namelist() if n.endswith(".ssv"))
+            assert len(sets) == 15 and "resources/reconstructor.ssv" in sets, sets
+            assert set(re.findall(r'ParameterBinding source="([^"]+)"', ssd)) == set(sets)
 
 
 @pytest.mark.parametrize("args", [("--rings", "0", "--out", "m.ssp"), ("--rings", "1", "--out", "m.zip")])

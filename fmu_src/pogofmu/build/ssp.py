@@ -45,6 +45,7 @@ def _variable_names(fmu: Path) -> set:
 _PARAMETER = re.compile(r'[ \t]*<ssv:Parameter\b[^>]*\bname="([^"]+)"[^>]*?(?:/>|>.*?</ssv:Parameter>)[ \t]*\n?', re.S)
 _COMPONENT = re.compile(r'(<ssd:Component\b[^>]*\bname="([^"]+)"[^>]*\bsource="(resources/[^"]+\.fmu)"[^>]*>)(.*?)'
                         r'(</ssd:Component>)', re.S)
+_BINDING = re.compile(r'<ssd:ParameterBinding\b[^>]*\bsource="resources/([^"/]+\.ssv)"')
 
 
 def component_parts(ssd_text: str, sets: dict, fmus: Path):
@@ -78,6 +79,12 @@ def component_parts(ssd_text: str, sets: dict, fmus: Path):
     for _, comp, source, _, _ in _COMPONENT.findall(ssd_text):
         variables[comp] = _variable_names(fmus / Path(source).name)
 
+    # the sets no component is bound to are the alternatives (moon.ssv beside a system bound to
+    # earth.ssv); a set bound to one component (the mirror's actuator_3.ssv) is only that one's:
+    # a part of it for every other component would make a system of N components N^2 files
+    bound = set(_BINDING.findall(ssd_text))
+    unbound = [name for name in sets if name not in bound]
+
     def rebind(m):
         head, comp, _, body, tail = m.groups()
 
@@ -85,12 +92,12 @@ def component_parts(ssd_text: str, sets: dict, fmus: Path):
             ssv_name = b.group(1)
             if ssv_name not in sets:
                 return b.group(0)
-            for other in sets:  # every set gets the component's part: --parameters or a rebinding picks one
-                part_of(other, comp)
+            for other in unbound:  # an alternative set gets the component's part: --parameters or a rebinding
+                part_of(other, comp)  # picks one (the sets other components are bound to are theirs)
             part = part_of(ssv_name, comp)
             return b.group(0) if part is None else b.group(0).replace(f"resources/{ssv_name}", f"resources/{part}")
 
-        return head + re.sub(r'<ssd:ParameterBinding\b[^>]*\bsource="resources/([^"/]+\.ssv)"', binding, body) + tail
+        return head + _BINDING.sub(binding, body) + tail
 
     return _COMPONENT.sub(rebind, ssd_text), parts
 
