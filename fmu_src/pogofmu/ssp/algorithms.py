@@ -112,54 +112,40 @@ class Exchange:
         released, and give a :class:`StepResult` of the step's end, or ``on_event(inst,
         n_events before the step)`` where their event counter changed; the others run
         ``fallback``. The first failure in ``insts``'s order is raised."""
-        from .native_level import OP_FEED, OP_READ, OP_SAVE, OP_STEP
-
         nat = self.native
         if nat is None:
             return self.map(fallback, insts)
-        base = (OP_FEED if feed else 0) | OP_STEP | OP_READ
-        pos, fast, ops = [], [], []
-        for k, inst in enumerate(insts):
-            saving = save and inst.must_save
-            # (a component that journals its calls for a restore, but is not saved here, keeps Python)
-            if nat.serves(inst) and (saving or inst._journal is None):
-                pos.append(k)
-                fast.append(inst)
-                ops.append(base | OP_SAVE if saving else base)
-        if not fast:
+        batch = nat.batch(insts, feed, save)
+        if batch.run is None:
             return self.map(fallback, insts)
-        out = [None] * len(insts)
-        errors = []
-        codes = {k: (code, before) for k, code, before in nat.run(fast, ops, t, h)}
-        end, done = t + h, StepResult(t + h)
-        for k, (inst, op) in enumerate(zip(fast, ops)):
-            code, before = codes.get(k, (0, 0.0))
-            if code > 1:
-                if code >> 8 in (4, 6):  # the read failed after the step
-                    inst.t = end
-                errors.append((pos[k], nat.error(inst, code, t, h)))
-                continue
-            if code < 0:
-                continue  # not run: another component failed
-            if op & OP_SAVE:  # the FMU state itself saved at t, then the step (see Component.save)
-                inst._journal, inst._mark, inst.saved_at = [(True, t, h)], 0, inst.t
+        bad = batch.go(t, h)
+        end = t + h
+        for inst in batch.saving:  # the FMU state itself saved at t, then the step (see Component.save)
+            inst._journal, inst._mark, inst.saved_at = [(True, t, h)], 0, inst.t
+        for inst in batch.fast:
             inst.t = end
-            out[pos[k]] = done if code == 0 else on_event(inst, before)
-        if len(fast) < len(insts):
-            where = {id(inst): k for k, inst in enumerate(insts)}
-            slow = [inst for inst in insts if out[where[id(inst)]] is None and id(inst) not in
-                    {id(f) for f in fast}]
+        out = [StepResult(end)] * len(insts)  # (one object: nobody changes a step's result)
+        errors = []
+        for k, code, before in bad:
+            inst = batch.fast[k]
+            if code > 1:
+                inst.t = end if code >> 8 in (4, 6) else t  # (a read fails after the step)
+                errors.append((batch.pos[k], nat.error(inst, code, t, h)))
+            elif code == 1:
+                out[batch.pos[k]] = on_event(inst, before)
+            # (code -1: not run, another component failed)
+        if batch.slow:
             failed = []
 
-            def guarded(inst):
+            def guarded(k):
                 try:
-                    return fallback(inst)
+                    return fallback(insts[k])
                 except BaseException:
-                    failed.append(where[id(inst)])
+                    failed.append(k)
                     raise
             try:
-                for inst, r in zip(slow, self.map(guarded, slow)):
-                    out[where[id(inst)]] = r
+                for k, r in zip(batch.slow, self.map(guarded, batch.slow)):
+                    out[k] = r
             except BaseException as exc:  # noqa: BLE001 - raised below, in order
                 errors.append((min(failed) if failed else -1, exc))
         if errors:
@@ -169,19 +155,18 @@ class Exchange:
     def feed_all(self, insts):
         """:meth:`feed` every one of ``insts`` (Jacobi: all inputs from the same outputs; those
         the C code serves in one call)."""
-        from .native_level import OP_FEED
-
         nat = self.native
-        fast = [inst for inst in insts if nat is not None and nat.serves(inst)]
-        if fast:
-            bad = nat.run(fast, [OP_FEED] * len(fast), 0.0, 0.0, parallel=False)
-            if bad:
-                k, code, _ = bad[0]
-                raise nat.error(fast[k], code, 0.0, 0.0)
-        served = {id(inst) for inst in fast}
-        for inst in insts:
-            if id(inst) not in served:
+        if nat is None:
+            for inst in insts:
                 self.feed(inst)
+            return
+        batch = nat.batch(insts, None, False)
+        bad = batch.go(0.0, 0.0) if batch.run is not None else ()
+        for k, code, _ in bad:
+            if code > 1:
+                raise nat.error(batch.fast[k], code, 0.0, 0.0)
+        for k in batch.slow:
+            self.feed(insts[k])
 
     def close(self):
         if self._pool is not None:

@@ -249,32 +249,14 @@ class NativeLevels:
         return plan
 
     # ---- running a batch --------------------------------------------------------------------------
-    def _batch(self, insts, ops):
-        key = (tuple(insts), tuple(ops))
+    def batch(self, insts, feed, save) -> "Batch":
+        """The C call for ``insts`` (cached): ``feed`` None: set the inputs only; else step and
+        read, setting the inputs first if ``feed``, saving first those that must if ``save``."""
+        key = (tuple(insts), feed, save)
         b = self._batches.get(key)
         if b is None:
-            n = len(insts)
-            comps = (ctypes.POINTER(PgmComp) * n)(*[ctypes.pointer(self._plan(i)[0]) for i in insts])
-            b = self._batches[key] = (n, comps, (ctypes.c_ubyte * n)(*ops), (ctypes.c_double * n)(),
-                                      (ctypes.c_int * n)())
+            b = self._batches[key] = Batch(self, insts, feed, save)
         return b
-
-    def run(self, insts, ops, t, h, parallel=True):
-        """``ops[i]`` (OP_* bits) on ``insts[i]`` in C: ``[(position, code, before)]`` of the
-        components whose code is not 0 (1: its event counter changed; -1 not run; else the failed
-        call << 8 | status), ``before`` its event counter before the step."""
-        for inst, op in zip(insts, ops):
-            if op & OP_SAVE and inst._state is None:
-                inst._save()  # the FMU state object, made once (the C code saves into it)
-                self._plan(inst)[0].state = ctypes.addressof(inst._state)
-            elif op & OP_SAVE and not self._plan(inst)[0].state:
-                self._plan(inst)[0].state = ctypes.addressof(inst._state)
-        n, comps, ops_arr, before, result = self._batch(insts, ops)
-        bad = self.lib.pgm_run(self.pool, self.parallel if parallel else 0, n, comps, ops_arr, t, h, self.arr,
-                               self.known, before, result)
-        if not bad:
-            return ()
-        return [(i, result[i], before[i]) for i in range(n) if result[i] != 0]
 
     def error(self, inst, code, t, h):
         """The master's error for a failed call of ``inst`` in C (as the Python path words it)."""
@@ -287,3 +269,47 @@ class NativeLevels:
         elif what == "reading its outputs":
             what = f"reading its outputs at t = {inst.t!r} s"
         return inst.fail(what, exc)
+
+
+class Batch:
+    """One C call over the served components of a list (``pos``: their places in it, ``fast``
+    them, ``saving`` those saved before their step, ``slow``: the places of the others)."""
+
+    def __init__(self, nat: NativeLevels, insts, feed, save):
+        self.nat, self.pos, self.fast, self.saving, self.slow = nat, [], [], [], []
+        ops = []
+        base = OP_FEED if feed is None else (OP_FEED if feed else 0) | OP_STEP | OP_READ
+        for k, inst in enumerate(insts):
+            saving = feed is not None and save and inst.must_save
+            # served: a component that keeps a journal of its calls for a restore is saved here
+            # (only the components that must save keep one: Component.save)
+            if nat.serves(inst) and (saving or inst._journal is None):
+                self.pos.append(k)
+                self.fast.append(inst)
+                ops.append(base | OP_SAVE if saving else base)
+                if saving:
+                    self.saving.append(inst)
+                    if inst._state is None:
+                        inst._save()  # the FMU state object, made once (the C code saves into it)
+                    nat._plan(inst)[0].state = ctypes.addressof(inst._state)
+            else:
+                self.slow.append(k)
+        n = len(self.fast)
+        self.run = None
+        if n:
+            self.args = (nat.pool, nat.parallel if feed is not None else 0, n,
+                         (ctypes.POINTER(PgmComp) * n)(*[ctypes.pointer(nat._plan(i)[0]) for i in self.fast]),
+                         (ctypes.c_ubyte * n)(*ops))
+            self.before, self.result = (ctypes.c_double * n)(), (ctypes.c_int * n)()
+            self.run = nat.lib.pgm_run
+
+    def go(self, t, h):
+        """Run it: ``[(index in fast, code, event counter before)]`` of the components whose code
+        is not 0 (1: the event counter changed; -1: not run, another failed; else the failed
+        call << 8 | its status)."""
+        pool, parallel, n, comps, ops = self.args
+        nat = self.nat
+        if not self.run(pool, parallel, n, comps, ops, t, h, nat.arr, nat.known, self.before, self.result):
+            return ()
+        result, before = self.result, self.before
+        return [(i, result[i], before[i]) for i in range(n) if result[i] != 0]
