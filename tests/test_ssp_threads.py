@@ -52,10 +52,11 @@ def test_two_threads_give_the_bits_of_one(mirror, algorithm):
         assert np.array_equal(one[col], two[col]), col
 
 
-def test_a_component_failing_on_a_worker_thread_ends_the_run_in_one_line(mirror):
-    """Actuator_2 is stepped on the worker thread (the level's components are dealt round-robin);
-    allowed 3 solver steps per call its first step fails, on that thread."""
+def _failing(mirror):
+    """The mirror with Actuator_2 allowed 3 solver steps per call: its first step fails."""
     edited = mirror / "failing.ssp"
+    if edited.exists():
+        return edited
     with zipfile.ZipFile(mirror / "m.ssp") as src, zipfile.ZipFile(edited, "w") as dst:
         for item in src.infolist():
             data = src.read(item.filename)
@@ -65,7 +66,13 @@ def test_a_component_failing_on_a_worker_thread_ends_the_run_in_one_line(mirror)
                     '    <ssv:Parameter name="max_steps_per_call"><ssv:Real value="3"/></ssv:Parameter>\n'
                     "  </ssv:Parameters>").encode()
             dst.writestr(item, data)
-    proc, _ = run(mirror, "failing", "--threads", "2", ssp=edited)
+    return edited
+
+
+def test_a_component_failing_on_a_worker_thread_ends_the_run_in_one_line(mirror):
+    """Actuator_2 is stepped on a worker thread (C: the level's components are taken in order by
+    both threads; the first step of Actuator_2 fails there)."""
+    proc, _ = run(mirror, "failing", "--threads", "2", ssp=_failing(mirror))
     assert proc.returncode == 1, proc.stderr
     assert "Traceback" not in proc.stderr + proc.stdout
     errors = [line for line in proc.stderr.splitlines() if line.startswith("error: ")]
@@ -90,3 +97,58 @@ def test_a_record_pattern_matching_nothing_is_one_line_naming_it(mirror):
     assert proc.returncode == 1
     assert proc.stderr.strip().count("\n") == 0 and "'Actuator_*.nothing'" in proc.stderr, proc.stderr
     assert "Traceback" not in proc.stderr
+
+
+# ---- the C stepping of a level (pogofmu/ssp/native_level.py) against the Python path ---------------
+
+def _simulate(ssp, monkeypatch, native, calls, **kw):
+    """The run in this process, with the C path on or off; ``calls`` gets the size of every C
+    level call it made."""
+    import pogofmu.ssp.native_level as nl
+    from pogofmu.ssp import simulate
+
+    monkeypatch.setenv("POGOFMU_SSP_NATIVE_LEVELS", "1" if native else "0")
+    go = nl.Batch.go
+
+    def counted(self, t, h):
+        calls.append(len(self.fast))
+        return go(self, t, h)
+    monkeypatch.setattr(nl.Batch, "go", counted)
+    try:
+        return simulate(str(ssp), stop_time=float(STOP), step=1e-3, echo_log=False, **kw)
+    finally:
+        monkeypatch.setattr(nl.Batch, "go", go)
+
+
+@pytest.mark.parametrize("algorithm,events", [("gauss-seidel", True), ("jacobi", True), ("gauss-seidel", False),
+                                              ("jacobi", False)])
+def test_the_c_path_gives_the_bits_of_the_python_path(mirror, monkeypatch, algorithm, events):
+    """Every column of the 1-ring mirror (actuators on their stops: rollbacks, cut steps), the C
+    path on two threads against the Python path (POGOFMU_SSP_NATIVE_LEVELS=0) on one."""
+    calls, none = [], []
+    c = _simulate(mirror / "m.ssp", monkeypatch, True, calls, algorithm=algorithm, events=events, threads=2)
+    py = _simulate(mirror / "m.ssp", monkeypatch, False, none, algorithm=algorithm, events=events)
+    assert max(calls) == (15 if algorithm == "jacobi" else 7) and not none  # every component in C: a level, or all
+    assert (c["event"] != 0).any() == events
+    modes = np.array([c[f"Actuator_{i}.mode"] for i in range(1, 8)])
+    assert (modes == 1).any() and (modes == -1).any()
+    assert c.names == py.names and len(c.names) > 80 and len(c["time"]) == len(py["time"])
+    for name in c.names:
+        a, b = np.asarray(c[name], dtype=np.float64), np.asarray(py[name], dtype=np.float64)
+        assert np.array_equal(a.view(np.int64), b.view(np.int64)), name
+
+
+def test_an_fmu_error_in_a_c_stepped_level_is_the_masters_error(mirror, monkeypatch):
+    """Actuator_2 fails its first step inside the C call (one thread, two threads): the run ends
+    with the master's error naming it, the call and the FMU's message, in the Python path's words."""
+    from pogofmu.ssp.package import SSPError
+
+    texts = []
+    for native, threads in ((True, 1), (True, 2), (False, 1)):
+        calls = []
+        with pytest.raises(SSPError) as exc:
+            _simulate(_failing(mirror), monkeypatch, native, calls, threads=threads)
+        assert bool(calls) == native
+        texts.append(str(exc.value))
+    assert texts[0] == texts[1] == texts[2], texts
+    assert texts[0].startswith("Component Actuator_2: fmi2DoStep from t = 0 s") and "max_steps_per_call" in texts[0]

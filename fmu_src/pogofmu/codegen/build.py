@@ -101,31 +101,47 @@ def cache_dir() -> Path:
     return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "pogofmu"
 
 
-def host_engine_library(cc: Optional[str] = None) -> Path:
-    """The engine as a shared library for this machine (its ``pgb_*`` functions exported), compiled
-    once per version of its sources, flags and compiler into :func:`cache_dir`: what the host-side
-    tools run a Python model's simulation with (:mod:`pogofmu.runtime.engine.cengine`)."""
+def _host_library(stem: str, sources: Sequence[Path], headers: Iterable[Path], include: Sequence[Path],
+                  extra: Sequence[str] = (), cc: Optional[str] = None, why: str = "") -> Path:
+    """A shared library of ``sources`` for this machine, compiled once per version of its sources,
+    headers, flags and compiler into :func:`cache_dir` as ``<stem>_<digest>.so``."""
     import hashlib
     import sys
 
     compiler = c_compiler(cc)
     if compiler is None:
-        raise CompileError("no C compiler found (cc, gcc or clang; or set CC): the engine is C and is compiled "
-                           "once on first use")
-    flags = [*CFLAGS, "-shared", "-fPIC", "-fvisibility=hidden"]
+        raise CompileError(f"no C compiler found (cc, gcc or clang; or set CC){why}")
+    flags = [*CFLAGS, "-shared", "-fPIC", *extra]
     digest = hashlib.sha256(" ".join([compiler, *flags, sys.platform]).encode())
-    for path in sorted({*(ENGINE / s for s in BINDING_SOURCES), *ENGINE.glob("*.h")}):
+    for path in sorted({*sources, *headers}):
         digest.update(path.name.encode() + b"\0" + path.read_bytes())
     folder = cache_dir()
     suffix = ".dll" if os.name == "nt" else ".dylib" if sys.platform == "darwin" else ".so"
-    out = folder / f"pogofmu_engine_{digest.hexdigest()[:16]}{suffix}"
+    out = folder / f"{stem}_{digest.hexdigest()[:16]}{suffix}"
     if not out.exists():
         folder.mkdir(parents=True, exist_ok=True)
         tmp = out.with_name(f"{out.stem}.{os.getpid()}.tmp{suffix}")
-        compile_c([ENGINE / s for s in BINDING_SOURCES], tmp, include=[ENGINE], cc=compiler,
-                  extra=["-fvisibility=hidden"])
+        compile_c(sources, tmp, include=include, cc=compiler, extra=list(extra))
         os.replace(tmp, out)
     return out
+
+
+def host_engine_library(cc: Optional[str] = None) -> Path:
+    """The engine as a shared library for this machine (its ``pgb_*`` functions exported), compiled
+    once per version of its sources, flags and compiler into :func:`cache_dir`: what the host-side
+    tools run a Python model's simulation with (:mod:`pogofmu.runtime.engine.cengine`)."""
+    return _host_library("pogofmu_engine", [ENGINE / s for s in BINDING_SOURCES], ENGINE.glob("*.h"), [ENGINE],
+                         ["-fvisibility=hidden"], cc, ": the engine is C and is compiled once on first use")
+
+
+MASTER = NATIVE / "master"
+
+
+def host_level_library(cc: Optional[str] = None) -> Path:
+    """The SSP master's C stepping of a level of components (``fmu_src/native/master/pg_level.c``,
+    :mod:`pogofmu.ssp.native_level`), compiled once per version like :func:`host_engine_library`."""
+    return _host_library("pogofmu_level", [MASTER / "pg_level.c"], (), [MASTER],
+                         ["-fvisibility=hidden", "-pthread"], cc)
 
 
 def engine_library(model, folder: Path, cc: Optional[str] = None) -> Path:

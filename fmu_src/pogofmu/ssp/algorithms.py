@@ -57,6 +57,17 @@ class Exchange:
         self.levels = update_levels(self.order, incoming)
         self.threads = max(1, int(threads))
         self._pool = None
+        self.native = None  # the C stepping of the components it serves (.native_level)
+        from .native_level import NativeLevels, library
+
+        lib = library()
+        if lib is not None:
+            native = NativeLevels(lib, self, self.threads)
+            if any(native.serves(inst) for inst in self.order):
+                self.native, self.value, self.held = native, native.value, native.held
+                self._row_arrays()
+            else:
+                native.close()
 
     # ---- parallel steps --------------------------------------------------------------------
     def map(self, fn, insts) -> list:
@@ -93,10 +104,76 @@ class Exchange:
             raise failed[min(failed)]
         return out
 
+    def step_level(self, insts, t, h, feed, fallback, save=False, on_event=None) -> list:
+        """``[fallback(inst) for inst in insts]`` (independent components, as :meth:`map`), where
+        ``fallback`` does on one component: ``feed`` its inputs, save its state if ``save`` and it
+        must (``must_save``), step from ``t`` by ``h``, read its outputs. The components the C code
+        serves (:mod:`.native_level`) do exactly those calls there, all in one call with the GIL
+        released, and give a :class:`StepResult` of the step's end, or ``on_event(inst,
+        n_events before the step)`` where their event counter changed; the others run
+        ``fallback``. The first failure in ``insts``'s order is raised."""
+        nat = self.native
+        if nat is None:
+            return self.map(fallback, insts)
+        batch = nat.batch(insts, feed, save)
+        if batch.run is None:
+            return self.map(fallback, insts)
+        bad = batch.go(t, h)
+        end = t + h
+        for inst in batch.saving:  # the FMU state itself saved at t, then the step (see Component.save)
+            inst._journal, inst._mark, inst.saved_at = [(True, t, h)], 0, inst.t
+        for inst in batch.fast:
+            inst.t = end
+        out = [StepResult(end)] * len(insts)  # (one object: nobody changes a step's result)
+        errors = []
+        for k, code, before in bad:
+            inst = batch.fast[k]
+            if code > 1:
+                inst.t = end if code >> 8 in (4, 6) else t  # (a read fails after the step)
+                errors.append((batch.pos[k], nat.error(inst, code, t, h)))
+            elif code == 1:
+                out[batch.pos[k]] = on_event(inst, before)
+            # (code -1: not run, another component failed)
+        if batch.slow:
+            failed = []
+
+            def guarded(k):
+                try:
+                    return fallback(insts[k])
+                except BaseException:
+                    failed.append(k)
+                    raise
+            try:
+                for k, r in zip(batch.slow, self.map(guarded, batch.slow)):
+                    out[k] = r
+            except BaseException as exc:  # noqa: BLE001 - raised below, in order
+                errors.append((min(failed) if failed else -1, exc))
+        if errors:
+            raise min(errors, key=lambda e: e[0])[1]
+        return out
+
+    def feed_all(self, insts):
+        """:meth:`feed` every one of ``insts`` (Jacobi: all inputs from the same outputs; those
+        the C code serves in one call)."""
+        nat = self.native
+        if nat is None:
+            for inst in insts:
+                self.feed(inst)
+            return
+        batch = nat.batch(insts, None, False)
+        bad = batch.go(0.0, 0.0) if batch.run is not None else ()
+        for k, code, _ in bad:
+            if code > 1:
+                raise nat.error(batch.fast[k], code, 0.0, 0.0)
+        for k in batch.slow:
+            self.feed(insts[k])
+
     def close(self):
         if self._pool is not None:
             self._pool.shutdown(wait=True)
             self._pool = None
+        if self.native is not None:
+            self.native.close()
 
     def ready(self, inst) -> bool:
         """Every input of ``inst`` has a source value."""
@@ -128,6 +205,8 @@ class Exchange:
     def also_read(self, inst, names):
         """Read these variables of ``inst`` with its outputs, into ``value`` (one FMI call per type)."""
         self.watch[inst.name] += [n for n in names if n not in self.watch[inst.name]]
+        if self.native is not None:
+            self.native.forget(inst)
 
     def read(self, inst) -> bool:
         """Read the output connectors of ``inst`` (and what :meth:`also_read` added); True if any
@@ -151,8 +230,25 @@ class Exchange:
         source's latest value; an unconnected input its own)."""
         self.record.add(self.row_values(t, kind))
 
+    def _row_arrays(self):
+        """The recorded columns as slots of the C value array (numpy views), when all have one."""
+        import numpy as np
+
+        index = self.value.index
+        self._row_slots = None
+        if self._keyed and all(k in index for k in self._row_keys):
+            self._row_slots = np.array([index[k] for k in self._row_keys], dtype=np.intp)
+            self._row_ints = [p for p, k in enumerate(self._row_keys) if self.value.ints[index[k]]]
+            self._np_values = np.ctypeslib.as_array(self.native.arr)
+            self._np_known = np.ctypeslib.as_array(self.native.known)
+
     def row_values(self, t: float, kind: int = GRID) -> list:
         v = self.value
+        if self.native is not None and self._row_slots is not None and self._np_known[self._row_slots].all():
+            out = self._np_values[self._row_slots].tolist()
+            for p in self._row_ints:
+                out[p] = int(out[p])
+            return [t, kind, *out]
         if self._keyed:
             return [t, kind, *[v[k] for k in self._row_keys]]
         out = [t, kind]
@@ -245,12 +341,11 @@ def fixed_step(ex: Exchange, t0, t_end, step, jacobi=False, progress=None):
             inst.do_step(t, h)
             ex.read(inst)
         if jacobi:
-            for inst in ex.order:
-                ex.feed(inst)
-            ex.map(held, ex.order)
+            ex.feed_all(ex.order)
+            ex.step_level(ex.order, t, h, False, held)
         else:
             for level in ex.levels:
-                ex.map(gauss_seidel, level)
+                ex.step_level(level, t, h, True, gauss_seidel)
         ex.row(T)
         t = T
         if progress:
@@ -356,20 +451,33 @@ class Synchronizer:
             n0, _ = self._counts(inst)
             r = inst.do_step(t, T - t)
             ex.read(inst)
-            n1, t_c = self._counts(inst)
+            n1, _ = self._counts(inst)
             if n1 == n0:
                 return r
-            while True:  # the first event of the step (t_last_event is the latest)
-                inst.restore()
-                left = math.nextafter(t_c, -math.inf)
-                if left <= t:
-                    return StepResult(t, event_at=t_c)
-                inst.do_step(t, left - t)
-                ex.read(inst)
-                n, t_last = self._counts(inst)
-                if n == n0:
-                    return StepResult(left, event_at=t_c)
-                t_c = t_last
+            return self._first_event(inst, t, n0)
+        return self._bisect(inst, t, T)
+
+    def _first_event(self, inst, t, n0) -> StepResult:
+        """``inst`` (a pogofmu FMU, saved at ``t``) counted events over its step from ``t``
+        (``n0`` before it): restored and stepped to just before the first of them."""
+        ex = self.ex
+        _, t_c = self._counts(inst)
+        while True:  # the first event of the step (t_last_event is the latest)
+            inst.restore()
+            left = math.nextafter(t_c, -math.inf)
+            if left <= t:
+                return StepResult(t, event_at=t_c)
+            inst.do_step(t, left - t)
+            ex.read(inst)
+            n, t_last = self._counts(inst)
+            if n == n0:
+                return StepResult(left, event_at=t_c)
+            t_c = t_last
+
+    def _bisect(self, inst, t, T) -> StepResult:
+        """An FMU of another tool (saved at ``t``) stepped to ``T``, stopped before the change of a
+        discrete output bisected to ``tolerance``."""
+        ex = self.ex
         d0 = inst.get_values(inst.discrete_outputs)
         r = inst.do_step(t, T - t)
         ex.read(inst)
@@ -411,8 +519,7 @@ class Synchronizer:
                 if t < t_next < target:
                     target = t_next
         if jacobi:
-            for inst in ex.order:
-                ex.feed(inst)
+            ex.feed_all(ex.order)
         for level in self.levels:
             # the level's components step together to ``target`` (in parallel with --threads);
             # the earliest event among them then cuts the macro step, as one after the other the
@@ -431,7 +538,8 @@ class Synchronizer:
                 r = inst.do_step(t, goal - t)
                 ex.read(inst)
                 return r
-            results = ex.map(one, todo)
+            results = ex.step_level(todo, t, goal - t, not jacobi, one, save=True,
+                                    on_event=lambda inst, n0: self._first_event(inst, t, int(n0)))
             cut = None
             for inst, r in zip(todo, results):
                 if r.terminate:

@@ -1,0 +1,243 @@
+/* The SSP master's hot path in C: one level of the update order stepped with the GIL released.
+ *
+ * For each component of a batch (FMI 2.0 co-simulation, called through the FMU's own functions,
+ * whose addresses the Python side takes from fmpy): set its inputs from slots of a flat value
+ * array, save its FMU state (fmi2GetFMUstate, the state object reused), fmi2DoStep, read its
+ * outputs into their slots — each part when the Python side asks for it (the ``ops`` bits). The
+ * components of a batch are independent (none feeds another within the call), so they are
+ * dealt to the pool's threads one at a time, in order; each does exactly the calls it would do
+ * alone, so the results do not depend on the thread count. Every decision about events stays in
+ * Python: this code only reports, per component, that its event counter changed over the step.
+ *
+ * Host-side only (pogofmu.ssp.native_level loads it); never part of an FMU. POSIX threads and the
+ * GCC/Clang atomic builtins. */
+#include <pthread.h>
+#include <stdlib.h>
+#include <string.h>
+
+#ifdef _WIN32
+#define PGM_EXPORT __declspec(dllexport)
+#else
+#define PGM_EXPORT __attribute__((visibility("default")))
+#endif
+
+typedef int (*set_real_f)(void *, const unsigned *, size_t, const double *);
+typedef int (*get_real_f)(void *, const unsigned *, size_t, double *);
+typedef int (*set_int_f)(void *, const unsigned *, size_t, const int *);
+typedef int (*get_int_f)(void *, const unsigned *, size_t, int *);
+typedef int (*do_step_f)(void *, double, double, int);
+typedef int (*get_state_f)(void *, void **);
+
+/* one component (filled by the Python side, pogofmu/ssp/native_level.py: keep the two in step) */
+typedef struct {
+    void *instance;
+    void *do_step, *set_real, *get_real, *set_int, *get_int, *get_state;
+    void **state; /* the fmi2FMUstate variable the Python side keeps (not NULL when SAVE is asked) */
+    int n_in_real, n_in_int, n_out_real, n_out_int;
+    int int_first; /* the integer inputs are set before the reals (the Python path's order) */
+    const unsigned *in_real_vr;  const int *in_real_src; const int *in_real_held; double *in_real_buf;
+    const unsigned *in_int_vr;   const int *in_int_src;  const int *in_int_held;  int *in_int_buf;
+    const unsigned *out_real_vr; const int *out_real_slot; double *out_real_buf;
+    const unsigned *out_int_vr;  const int *out_int_slot;  int *out_int_buf;
+    int event_slot; /* the slot of its event counter (n_events), or -1 */
+} pgm_comp;
+
+enum { OP_FEED = 1, OP_SAVE = 2, OP_STEP = 4, OP_READ = 8 };
+/* result codes: 0 done, 1 done and the event counter changed, -1 not run (another failed);
+ * (call << 8) | status for an error status > 1 of a call (pogofmu/ssp/native_level.py CALLS) */
+enum { CALL_SET_REAL = 1, CALL_SAVE = 2, CALL_STEP = 3, CALL_GET_REAL = 4, CALL_SET_INT = 5, CALL_GET_INT = 6 };
+
+typedef struct {
+    pgm_comp *const *comps;
+    const unsigned char *ops;
+    int n;
+    double t, h;
+    double *values;
+    unsigned char *known;
+    double *before;
+    int *result;
+    int next;   /* the next component to take (atomic) */
+    int failed; /* a component failed: take no more (atomic) */
+} job_t;
+
+typedef struct pgm_pool pgm_pool;
+PGM_EXPORT void pgm_pool_free(pgm_pool *p);
+
+struct pgm_pool {
+    int threads; /* workers besides the calling thread */
+    pthread_t *tid;
+    pthread_mutex_t mu;
+    pthread_cond_t go, done;
+    unsigned long generation;
+    int running; /* workers still in the current job */
+    int quit;
+    job_t *job;
+};
+
+static int one(job_t *j, int i)
+{
+    pgm_comp *c = j->comps[i];
+    unsigned char ops = j->ops[i];
+    double *v = j->values;
+    int k, st;
+    if (ops & OP_FEED) {
+        for (k = 0; k < c->n_in_real; k++) {
+            double x = v[c->in_real_src[k]];
+            c->in_real_buf[k] = x;
+            v[c->in_real_held[k]] = x;
+            j->known[c->in_real_held[k]] = 1;
+        }
+        for (k = 0; k < c->n_in_int; k++) {
+            double x = v[c->in_int_src[k]];
+            c->in_int_buf[k] = (int)x;
+            v[c->in_int_held[k]] = x;
+            j->known[c->in_int_held[k]] = 1;
+        }
+        for (int pass = 0; pass < 2; pass++) {
+            if (pass == c->int_first) {
+                if (c->n_in_real && (st = ((set_real_f)c->set_real)(c->instance, c->in_real_vr,
+                                                                      (size_t)c->n_in_real, c->in_real_buf)) > 1)
+                    return CALL_SET_REAL << 8 | st;
+            } else if (c->n_in_int && (st = ((set_int_f)c->set_int)(c->instance, c->in_int_vr, (size_t)c->n_in_int,
+                                                                      c->in_int_buf)) > 1) {
+                return CALL_SET_INT << 8 | st;
+            }
+        }
+    }
+    if ((ops & OP_SAVE) && (st = ((get_state_f)c->get_state)(c->instance, c->state)) > 1)
+        return CALL_SAVE << 8 | st;
+    if ((ops & OP_STEP) && (st = ((do_step_f)c->do_step)(c->instance, j->t, j->h, 1)) > 1)
+        return CALL_STEP << 8 | st;
+    if (!(ops & OP_READ))
+        return 0;
+    if (c->n_out_real && (st = ((get_real_f)c->get_real)(c->instance, c->out_real_vr, (size_t)c->n_out_real,
+                                                           c->out_real_buf)) > 1)
+        return CALL_GET_REAL << 8 | st;
+    if (c->n_out_int && (st = ((get_int_f)c->get_int)(c->instance, c->out_int_vr, (size_t)c->n_out_int,
+                                                        c->out_int_buf)) > 1)
+        return CALL_GET_INT << 8 | st;
+    double n0 = c->event_slot >= 0 ? v[c->event_slot] : 0.0;
+    for (k = 0; k < c->n_out_real; k++) {
+        v[c->out_real_slot[k]] = c->out_real_buf[k];
+        j->known[c->out_real_slot[k]] = 1;
+    }
+    for (k = 0; k < c->n_out_int; k++) {
+        v[c->out_int_slot[k]] = (double)c->out_int_buf[k];
+        j->known[c->out_int_slot[k]] = 1;
+    }
+    j->before[i] = n0;
+    return c->event_slot >= 0 && v[c->event_slot] != n0;
+}
+
+static void work(job_t *j)
+{
+    for (;;) {
+        if (__atomic_load_n(&j->failed, __ATOMIC_ACQUIRE))
+            return;
+        int i = __atomic_fetch_add(&j->next, 1, __ATOMIC_ACQ_REL);
+        if (i >= j->n)
+            return;
+        int r = one(j, i);
+        j->result[i] = r;
+        if (r > 1)
+            __atomic_store_n(&j->failed, 1, __ATOMIC_RELEASE);
+    }
+}
+
+static void *worker(void *arg)
+{
+    pgm_pool *p = arg;
+    unsigned long seen = 0;
+    pthread_mutex_lock(&p->mu);
+    for (;;) {
+        while (!p->quit && p->generation == seen)
+            pthread_cond_wait(&p->go, &p->mu);
+        if (p->quit)
+            break;
+        seen = p->generation;
+        job_t *j = p->job;
+        pthread_mutex_unlock(&p->mu);
+        work(j);
+        pthread_mutex_lock(&p->mu);
+        if (--p->running == 0)
+            pthread_cond_signal(&p->done);
+    }
+    pthread_mutex_unlock(&p->mu);
+    return NULL;
+}
+
+/* A pool of ``threads`` threads in all (the caller is one of them); NULL if a thread cannot be
+ * started. */
+PGM_EXPORT pgm_pool *pgm_pool_new(int threads)
+{
+    pgm_pool *p = calloc(1, sizeof *p);
+    if (!p)
+        return NULL;
+    p->threads = threads > 1 ? threads - 1 : 0;
+    pthread_mutex_init(&p->mu, NULL);
+    pthread_cond_init(&p->go, NULL);
+    pthread_cond_init(&p->done, NULL);
+    p->tid = calloc((size_t)(p->threads ? p->threads : 1), sizeof *p->tid);
+    if (!p->tid) {
+        free(p);
+        return NULL;
+    }
+    for (int k = 0; k < p->threads; k++) {
+        if (pthread_create(&p->tid[k], NULL, worker, p) != 0) {
+            p->threads = k;
+            pgm_pool_free(p);
+            return NULL;
+        }
+    }
+    return p;
+}
+
+PGM_EXPORT void pgm_pool_free(pgm_pool *p)
+{
+    if (!p)
+        return;
+    pthread_mutex_lock(&p->mu);
+    p->quit = 1;
+    pthread_cond_broadcast(&p->go);
+    pthread_mutex_unlock(&p->mu);
+    for (int k = 0; k < p->threads; k++)
+        pthread_join(p->tid[k], NULL);
+    pthread_cond_destroy(&p->go);
+    pthread_cond_destroy(&p->done);
+    pthread_mutex_destroy(&p->mu);
+    free(p->tid);
+    free(p);
+}
+
+/* Run the batch: ``ops[i]`` on ``comps[i]`` (steps from ``t`` of length ``h``), on the pool's
+ * threads when ``parallel`` and there are several components. ``result[i]`` as above;
+ * ``before[i]``: the event counter before the step (read components). Returns the number of
+ * components whose result is not 0; every call has ended when it returns. */
+PGM_EXPORT int pgm_run(pgm_pool *p, int parallel, int n, pgm_comp *const *comps, const unsigned char *ops,
+                       double t, double h, double *values, unsigned char *known, double *before, int *result)
+{
+    job_t j = {comps, ops, n, t, h, values, known, before, result, 0, 0};
+    int k, helpers = (p && parallel && n > 1) ? (p->threads < n - 1 ? p->threads : n - 1) : 0;
+    for (k = 0; k < n; k++)
+        result[k] = -1;
+    if (helpers) {
+        pthread_mutex_lock(&p->mu);
+        p->job = &j;
+        p->running = p->threads;
+        p->generation++;
+        pthread_cond_broadcast(&p->go);
+        pthread_mutex_unlock(&p->mu);
+    }
+    work(&j);
+    if (helpers) {
+        pthread_mutex_lock(&p->mu);
+        while (p->running > 0)
+            pthread_cond_wait(&p->done, &p->mu);
+        p->job = NULL;
+        pthread_mutex_unlock(&p->mu);
+    }
+    int count = 0;
+    for (k = 0; k < n; k++)
+        count += result[k] != 0;
+    return count;
+}
