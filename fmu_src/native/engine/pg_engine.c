@@ -402,22 +402,25 @@ static int check_time_scales(PgEngine *e)
     return PG_OK;
 }
 
-/* check_inputs */
-static int check_inputs(PgEngine *e, const double *u)
+/* check_inputs: the inputs (slopes = 0) or their slopes (set_inputs) finite, the first other one named */
+static int check_finite_inputs(PgEngine *e, const double *u, int slopes)
 {
     for (int i = 0; i < e->nu; ++i) {
         if (!isfinite(u[i])) {
             PgMsg *m = &e->msg;
             const char *name = e->model->input_names[i];
             pg_msg_clear(m);
-            pg_msg_printf(m, "input %s = ", name);
+            pg_msg_printf(m, slopes ? "input derivative d%s/dt = " : "input %s = ", name);
             pg_msg_value(m, u[i], 'f', "r");
-            pg_msg_printf(m, " violates the rule: %s must be finite", name);
+            pg_msg_printf(m, slopes ? " violates the rule: d%s/dt must be finite" : " violates the rule: %s must be finite",
+                          name);
             return PG_RAISE;
         }
     }
     return PG_OK;
 }
+
+static int check_inputs(PgEngine *e, const double *u) { return check_finite_inputs(e, u, 0); }
 
 /* check_abs_tol */
 static int check_abs_tol(PgEngine *e)
@@ -1325,23 +1328,6 @@ static int crossed_in(PgEngine *e, double t0, const double *y0, double t1, const
     return PG_OK;
 }
 
-/* the finite slopes of set_inputs (check_inputs' rule, the derivative named) */
-static int check_slopes(PgEngine *e, const double *du)
-{
-    for (int i = 0; i < e->nu; ++i) {
-        if (!isfinite(du[i])) {
-            PgMsg *m = &e->msg;
-            const char *name = e->model->input_names[i];
-            pg_msg_clear(m);
-            pg_msg_printf(m, "input derivative d%s/dt = ", name);
-            pg_msg_value(m, du[i], 'f', "r");
-            pg_msg_printf(m, " violates the rule: d%s/dt must be finite", name);
-            return PG_RAISE;
-        }
-    }
-    return PG_OK;
-}
-
 int pg_engine_set_input(PgEngine *e, const double *u) { return pg_engine_set_inputs(e, u, NULL); }
 
 int pg_engine_set_inputs(PgEngine *e, const double *u, const double *du)
@@ -1357,7 +1343,7 @@ int pg_engine_set_inputs(PgEngine *e, const double *u, const double *du)
     }
     if (same) return PG_OK;
     TRY(check_inputs(e, u));
-    if (sloped) TRY(check_slopes(e, du));
+    if (sloped) TRY(check_finite_inputs(e, du, 1));
     int crossed = -1;
     if (e->t > e->t_out) {
         double x[PG_MAX_X];
