@@ -25,13 +25,18 @@ N = 7
 EDGES = [(0, j) for j in range(1, 7)] + [(j, j % 6 + 1) for j in range(1, 7)]
 
 
-@pytest.fixture(scope="module")
-def package(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("mirror_validation")
-    out = folder / "m3.ssp"
-    proc = run_pogofmu("ssp", "mirror", "--rings", "1", "--fmi", "3", "--out", out, cwd=folder, timeout=900)
+def mirror_package(tmp_path_factory, fmi):
+    """``pogofmu ssp mirror --rings 1 --fmi <fmi>`` (Python-hosted FMUs) in a folder of its own."""
+    folder = tmp_path_factory.mktemp(f"mirror_validation{fmi}")
+    out = folder / f"m{fmi}.ssp"
+    proc = run_pogofmu("ssp", "mirror", "--rings", "1", "--fmi", fmi, "--out", out, cwd=folder, timeout=900)
     assert proc.returncode == 0, proc.stderr
     return out
+
+
+@pytest.fixture(scope="module")
+def package(tmp_path_factory):
+    return mirror_package(tmp_path_factory, "3")
 
 
 def ssv(z, name):
@@ -113,12 +118,8 @@ def test_the_synchronized_master_converges_at_first_order_or_better(package):
 
 @pytest.fixture(scope="module")
 def package2(tmp_path_factory):
-    """The FMI 2.0 package (Python-hosted FMUs, canInterpolateInputs)."""
-    folder = tmp_path_factory.mktemp("mirror_validation2")
-    out = folder / "m2.ssp"
-    proc = run_pogofmu("ssp", "mirror", "--rings", "1", "--fmi", "2", "--out", out, cwd=folder, timeout=900)
-    assert proc.returncode == 0, proc.stderr
-    return out
+    """The FMI 2.0 package (its FMUs declare canInterpolateInputs)."""
+    return mirror_package(tmp_path_factory, "2")
 
 
 def test_interpolated_inputs_bring_the_synchronized_master_within_1e_5_m_at_1_ms(package2):
