@@ -55,6 +55,8 @@ int pgb_get_real(PgBackend *b, const unsigned vr[], size_t n, double out[]);
 int pgb_get_integer(PgBackend *b, const unsigned vr[], size_t n, int out[]);
 int pgb_set_real(PgBackend *b, const unsigned vr[], size_t n, const double values[]);
 int pgb_set_integer(PgBackend *b, const unsigned vr[], size_t n, const int values[]);
+/* FMI 2.0 fmi2SetRealInputDerivatives (order 1, Real inputs; the refusals name variable, order, rule) */
+int pgb_set_input_derivatives(PgBackend *b, const unsigned vr[], size_t n, const int order[], const double values[]);
 /* Boolean and String: the FMUs have none; an Error naming the first value reference ("Boolean",
  * "String") unless n == 0 */
 int pgb_no_such_type(PgBackend *b, const unsigned vr[], size_t n, const char *type);

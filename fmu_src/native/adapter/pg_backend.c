@@ -89,6 +89,11 @@ int pgb_set_real(PgBackend *b, const unsigned vr[], size_t n, const double value
     return pg_inst_set_real(&b->inst, vr, n, values);
 }
 
+int pgb_set_input_derivatives(PgBackend *b, const unsigned vr[], size_t n, const int order[], const double values[])
+{
+    return pg_inst_set_input_derivatives(&b->inst, vr, n, order, values);
+}
+
 int pgb_set_integer(PgBackend *b, const unsigned vr[], size_t n, const int values[])
 {
     return pg_inst_set_integer(&b->inst, vr, n, values);

@@ -66,7 +66,7 @@ int pg_inst_directional(PgInstance *in, const unsigned *unknowns, size_t n_unkno
     } else if (model_exchange) {
         t = st->me_t, x = st->me_x, q = e->q, u = e->u, p = e->p;
     } else {
-        t = e->t_out, x = e->x_out, q = e->q_out, u = e->u, p = e->p;
+        t = e->t_out, x = e->x_out, q = e->q_out, u = pg_engine_inputs_at(e, e->t_out), p = e->p;
     }
     double df[PG_MAX_X], dy[64];
     int have_df = 0, have_dy = 0;

@@ -9,7 +9,7 @@
 #include "pg_sha256.h"
 #include "pg_support.h"
 
-#define STATE_FORMAT "pogofmu-native-state-2"
+#define STATE_FORMAT "pogofmu-native-state-3" /* 3: the input derivatives */
 
 /* ---- messages ------------------------------------------------------------------------------ */
 static void say(PgInstance *in, int status, const char *category, const char *text)
@@ -236,6 +236,7 @@ static int set_value(PgInstance *in, const PgVar *v, double value, char kind)
     }
     if (v->role == 'u') {
         st->u[v->index] = value;
+        st->du[v->index] = 0.0; /* a value set without a derivative is held */
         in->inputs_changed = 1;
         if (!st->has_sim) st->has_out = 0;
         return PG_ST_OK;
@@ -404,6 +405,14 @@ static double fast_step_limit(const PgInstance *in)
     return 1e300;
 }
 
+/* the derivatives of the inputs set so far: any not zero */
+static int any_slope(const PgInstance *in)
+{
+    for (int i = 0; i < in->fmu->model->nu; ++i)
+        if (in->st.du[i] != 0.0) return 1;
+    return 0;
+}
+
 /* exit_initialization_mode */
 int pg_inst_exit_initialization(PgInstance *in)
 {
@@ -423,11 +432,48 @@ int pg_inst_exit_initialization(PgInstance *in)
         return refuse(in, &m);
     }
     st->has_sim = 1;
-    in->inputs_changed = 0;
+    in->inputs_changed = any_slope(in); /* derivatives set before: the first step takes them */
     in->h_fast = fast_step_limit(in);
     notes_end(in, &nt);
     update_outputs(in);
     if (in->fmu->fmi == 3) pg3_after_exit_initialization(in);
+    return PG_ST_OK;
+}
+
+/* fmi2.py set_real_input_derivatives */
+int pg_inst_set_input_derivatives(PgInstance *in, const unsigned vr[], size_t n, const int order[],
+                                  const double values[])
+{
+    const char *fn = "fmi2SetRealInputDerivatives";
+    PgMsg m;
+    pg_msg_clear(&m);
+    for (size_t i = 0; i < n; ++i) {
+        const PgVar *v = variable(in, vr[i], 'R');
+        if (!v) return PG_ST_ERROR;
+        if (v->role != 'u') {
+            pg_msg_printf(&m, "%s refused: variable %s is %s, not an input: only a continuous Real input has a "
+                          "derivative to set", fn, v->name, v->causality == 'p' ? "a parameter" : v->causality == 'o' ?
+                          "an output" : "not an input");
+            return refuse(in, &m);
+        }
+        if (order[i] != 1) {
+            pg_msg_printf(&m, "%s refused: order = %d for input %s violates the rule: order = 1 (this FMU "
+                          "interpolates its inputs linearly, u(t) = u + du (t - t_c) over a step; it takes no "
+                          "derivative of order 0 or 2 and higher)", fn, order[i], v->name);
+            return refuse(in, &m);
+        }
+        if (!isfinite(values[i])) {
+            pg_msg_printf(&m, "%s refused: the derivative of input %s = ", fn, v->name);
+            pg_msg_value(&m, values[i], 'f', "r");
+            pg_msg_printf(&m, " violates the rule: it must be a finite number");
+            return refuse(in, &m);
+        }
+    }
+    for (size_t i = 0; i < n; ++i) {
+        const PgVar *v = pg_inst_variable(in->fmu, vr[i]);
+        in->st.du[v->index] = values[i];
+    }
+    if (n) in->inputs_changed = 1;
     return PG_ST_OK;
 }
 
@@ -559,7 +605,7 @@ int pg_inst_do_step(PgInstance *in, double t, double h)
     notes_begin(in, &nt);
     int rc = PG_OK;
     if (in->inputs_changed) {
-        rc = pg_engine_set_input(e, st->u);
+        rc = pg_engine_set_inputs(e, st->u, st->du);
         in->inputs_changed = 0;
     }
     if (!rc) rc = in->fmu->fmi == 3 ? pg3_advance_engine(in, end) : pg_engine_advance(e, end);

@@ -45,6 +45,9 @@ typedef struct PgFmu {
 /* what an FMU state holds (copied as a whole by fmi2GetFMUstate) */
 typedef struct PgState {
     double par[PG_MAX_P], set[PG_NS], u[PG_MAX_U];
+    /* FMI 2.0: the inputs' first derivatives (fmi2SetRealInputDerivatives), from the communication
+     * point the step starts at; an fmi2SetReal of the input sets its derivative back to 0 */
+    double du[PG_MAX_U];
     int has_sim;
     PgEngine sim;
     int has_out;
@@ -82,6 +85,9 @@ int pg_inst_get_real(PgInstance *in, const unsigned vr[], size_t n, double out[]
 int pg_inst_get_integer(PgInstance *in, const unsigned vr[], size_t n, int out[]);
 int pg_inst_set_real(PgInstance *in, const unsigned vr[], size_t n, const double values[]);
 int pg_inst_set_integer(PgInstance *in, const unsigned vr[], size_t n, const int values[]);
+/* fmi2SetRealInputDerivatives: order 1 of Real inputs only, finite; all checked before any is set */
+int pg_inst_set_input_derivatives(PgInstance *in, const unsigned vr[], size_t n, const int order[],
+                                  const double values[]);
 /* no Boolean or String variables: names the problem */
 int pg_inst_no_such_type(PgInstance *in, const unsigned vr[], size_t n, const char *type);
 

@@ -422,6 +422,22 @@ PGB_API int pgb_set_input(PgEngine *e, const double *u)
     return rc;
 }
 
+/* pg_engine_set_inputs: inputs on a line from the time served last (du NULL: held) */
+PGB_API int pgb_set_inputs(PgEngine *e, const double *u, const double *du)
+{
+    ENTER(e);
+    int rc = pg_engine_set_inputs(e, u, du);
+    LEAVE();
+    return rc;
+}
+
+/* the inputs the model sees at t into out[nu]; 1 if they lie on a line (a slope set), 0 if held */
+PGB_API int pgb_inputs_at(PgEngine *e, double t, double *out)
+{
+    memcpy(out, pg_engine_inputs_at(e, t), sizeof(double) * (size_t)e->nu);
+    return e->has_du;
+}
+
 PGB_API int pgb_apply_event(PgEngine *e, int index, double t, const double *x)
 {
     ENTER(e);

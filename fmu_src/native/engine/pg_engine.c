@@ -136,15 +136,25 @@ static int at_time(PgEngine *e, int rc, const char *prefix, double t, const char
 }
 
 /* ---- the model, in the current (q, u) ----------------------------------------------------- */
+/* the inputs at time t: held (e->u, today's arithmetic untouched) or on their line from t_u */
+static const double *u_at(PgEngine *e, double t)
+{
+    if (!e->has_du) return e->u;
+    double dt = t - e->t_u;
+    for (int i = 0; i < e->nu; ++i) e->u_t[i] = e->u[i] + e->du[i] * dt;
+    return e->u_t;
+}
+
 static int model_fun(void *ctx, double t, const double *y, double *dy, PgMsg *m)
 {
     PgEngine *e = ctx;
-    return e->model->flow(t, y, e->q, e->u, e->p, dy, m);
+    return e->model->flow(t, y, e->q, u_at(e, t), e->p, dy, m);
 }
 
-static int guard_at(PgEngine *e, int i, const double *x, double *g)
+/* guard i at the state x of time t (the model's guard takes no time: it sees the inputs of t) */
+static int guard_at(PgEngine *e, int i, double t, const double *x, double *g)
 {
-    return e->model->guard(i, x, e->q, e->u, e->p, g, &e->msg);
+    return e->model->guard(i, x, e->q, u_at(e, t), e->p, g, &e->msg);
 }
 
 /* ---- the Jacobian (Rodas5P) ---------------------------------------------------------------- */
@@ -165,7 +175,7 @@ static int jacobian(PgEngine *e, double t, const double *y, const double *f)
         if (e->model->flow_jvp && !e->jvp_off) {
             double sx[PG_MAX_X] = {0};
             sx[j] = 1.0;
-            int rc = e->model->flow_jvp(t, y, e->q, e->u, e->p, sx, NO_INPUT_MOVE, col, &e->msg);
+            int rc = e->model->flow_jvp(t, y, e->q, u_at(e, t), e->p, sx, NO_INPUT_MOVE, col, &e->msg);
             if (rc == PG_NO_JVP) {
                 e->jvp_off = 1;
                 j = -1; /* every column again, by differences */
@@ -399,22 +409,25 @@ static int check_time_scales(PgEngine *e)
     return PG_OK;
 }
 
-/* check_inputs */
-static int check_inputs(PgEngine *e, const double *u)
+/* check_inputs: the inputs (slopes = 0) or their slopes (set_inputs) finite, the first other one named */
+static int check_finite_inputs(PgEngine *e, const double *u, int slopes)
 {
     for (int i = 0; i < e->nu; ++i) {
         if (!isfinite(u[i])) {
             PgMsg *m = &e->msg;
             const char *name = e->model->input_names[i];
             pg_msg_clear(m);
-            pg_msg_printf(m, "input %s = ", name);
+            pg_msg_printf(m, slopes ? "input derivative d%s/dt = " : "input %s = ", name);
             pg_msg_value(m, u[i], 'f', "r");
-            pg_msg_printf(m, " violates the rule: %s must be finite", name);
+            pg_msg_printf(m, slopes ? " violates the rule: d%s/dt must be finite" : " violates the rule: %s must be finite",
+                          name);
             return PG_RAISE;
         }
     }
     return PG_OK;
 }
+
+static int check_inputs(PgEngine *e, const double *u) { return check_finite_inputs(e, u, 0); }
 
 /* check_abs_tol */
 static int check_abs_tol(PgEngine *e)
@@ -471,7 +484,7 @@ static int check_abs_tol(PgEngine *e)
 static int domain_violation(PgEngine *e, double t, const double *x, PgSeg *seg, double *t_v, int *rc)
 {
     *rc = PG_OK;
-    int r = e->model->domain(t, x, e->q, e->u, e->p, e->s, &e->msg);
+    int r = e->model->domain(t, x, e->q, u_at(e, t), e->p, e->s, &e->msg);
     if (r == PG_ARITH) {
         *rc = r;
         return 0;
@@ -510,7 +523,7 @@ static int domain_violation(PgEngine *e, double t, const double *x, PgSeg *seg, 
                 *rc = s1;
                 return 0;
             }
-            int d = e->model->domain(c, y, e->q, e->u, e->p, e->s, &e->scratch);
+            int d = e->model->domain(c, y, e->q, u_at(e, c), e->p, e->s, &e->scratch);
             if (d == PG_ARITH) {
                 e->msg = e->scratch;
                 *rc = d;
@@ -562,8 +575,8 @@ static int bind(PgEngine *e)
 {
     TRY(rebind(e));
     e->jac_ok = 0; /* a new mode or new inputs: another flow */
-    TRY(e->model->flow(e->t, e->x, e->q, e->u, e->p, e->f, &e->msg));
-    for (int k = 0; k < e->n_active; ++k) TRY(guard_at(e, e->active[k], e->x, &e->g[k]));
+    TRY(e->model->flow(e->t, e->x, e->q, u_at(e, e->t), e->p, e->f, &e->msg));
+    for (int k = 0; k < e->n_active; ++k) TRY(guard_at(e, e->active[k], e->t, e->x, &e->g[k]));
     e->has_g_prev = 0;
     return PG_OK;
 }
@@ -835,7 +848,7 @@ static int locate(PgEngine *e, PgSeg *seg, int i, double a, double ga, double gb
         if (!(a < c && c < b)) c = 0.5 * (a + b);
         double gc;
         TRY(seg_at(e, seg, c, y));
-        TRY(guard_at(e, i, y, &gc));
+        TRY(guard_at(e, i, c, y, &gc));
         double fc = sgn * gc;
         if (fc >= 0.0) {
             b = c, fb = fc;
@@ -861,7 +874,7 @@ static int locate_from_zero(PgEngine *e, PgSeg *seg, int i, double g1, int at_st
     for (int k = 0; k < 5; ++k) {
         double tp = seg->t0 + fracs[k] * h, gp;
         TRY(seg_at(e, seg, tp, y));
-        TRY(guard_at(e, i, y, &gp));
+        TRY(guard_at(e, i, tp, y, &gp));
         if (sgn * gp < 0.0) {
             *found = 1;
             return locate(e, seg, i, tp, gp, g1, NULL, out);
@@ -884,11 +897,11 @@ static int turning_point(PgEngine *e, PgSeg *seg, int i, double sgn, double g0, 
     *found = 0;
     if (eps == 0.0) return pg_arith(&e->msg, PG_ZERO_DIVISION);
     for (int k = 0; k < e->nx; ++k) y[k] = seg->y0[k] + eps * seg->f0[k];
-    TRY(guard_at(e, i, y, &ga));
+    TRY(guard_at(e, i, t0 + eps, y, &ga));
     double d0 = sgn * (ga - g0) / eps * h;
     if (!(d0 > 0.0)) return PG_OK;
     for (int k = 0; k < e->nx; ++k) y[k] = seg->y1[k] + eps * f1[k];
-    TRY(guard_at(e, i, y, &gb));
+    TRY(guard_at(e, i, seg->t1 + eps, y, &gb));
     double d1 = sgn * (gb - g1) / eps * h;
     if (!(d1 < 0.0)) return PG_OK;
     double G0 = sgn * g0, G1 = sgn * g1;
@@ -904,7 +917,7 @@ static int turning_point(PgEngine *e, PgSeg *seg, int i, double sgn, double g0, 
     double tp = t0 + lo * h;
     if (!(t0 < tp && tp < seg->t1)) return PG_OK;
     TRY(seg_at(e, seg, tp, y));
-    TRY(guard_at(e, i, y, gp_out));
+    TRY(guard_at(e, i, tp, y, gp_out));
     *tp_out = tp;
     *found = 1;
     return PG_OK;
@@ -961,14 +974,14 @@ static int land_on_event(PgEngine *e, PgSeg *seg, int i, double te, double *te_o
     size_t n = sizeof(double) * (size_t)e->nx;
     double g_a, g_b, g_te, g_d;
     TRY(pair_step(e, t0, seg->y0, seg->f0, te - t0, y_a, f_a, K_a_local));
-    TRY(guard_at(e, i, y_a, &g_a));
+    TRY(guard_at(e, i, te, y_a, &g_a));
     double best = fabs(g_a), best_t = te;
     memcpy(y_out, y_a, n), memcpy(f_out, f_a, n), memcpy(K_out, K_a_local, sizeof K_a_local);
     double d = 1e-3 * (te - t0);
     TRY(seg_at(e, seg, te, yd));
-    TRY(guard_at(e, i, yd, &g_te));
+    TRY(guard_at(e, i, te, yd, &g_te));
     TRY(seg_at(e, seg, te - d, yd));
-    TRY(guard_at(e, i, yd, &g_d));
+    TRY(guard_at(e, i, te - d, yd, &g_d));
     if (d == 0.0) return pg_arith(&e->msg, PG_ZERO_DIVISION);
     double slope = (g_te - g_d) / d;
     double ta = te, tb = slope != 0.0 ? te - g_a / slope : te;
@@ -976,7 +989,7 @@ static int land_on_event(PgEngine *e, PgSeg *seg, int i, double te, double *te_o
     for (int k = 0; k < 8; ++k) {
         if (g_a == 0.0 || !(t0 < tb && tb < t1) || fabs(tb - ta) <= tol) break;
         TRY(pair_step(e, t0, seg->y0, seg->f0, tb - t0, y_b, f_b, K_b_local));
-        TRY(guard_at(e, i, y_b, &g_b));
+        TRY(guard_at(e, i, tb, y_b, &g_b));
         if (fabs(g_b) < best) {
             best = fabs(g_b), best_t = tb;
             memcpy(y_out, y_b, n), memcpy(f_out, f_b, n), memcpy(K_out, K_b_local, sizeof K_b_local);
@@ -1007,7 +1020,7 @@ static int end_step(PgEngine *e, PgSeg *seg, double t_target, int *cut)
         e->has_seg = 1;
         e->t = t_target;
         memcpy(e->x, y_c, sizeof y_c), memcpy(e->f, f_c, sizeof f_c);
-        for (int k = 0; k < e->n_active; ++k) TRY(guard_at(e, e->active[k], y_c, &e->g[k]));
+        for (int k = 0; k < e->n_active; ++k) TRY(guard_at(e, e->active[k], t_target, y_c, &e->g[k]));
         e->has_g_prev = 0;
         *cut = 1;
         return PG_OK;
@@ -1065,7 +1078,7 @@ static int step(PgEngine *e, double t_target)
     PgSeg seg;
     make_seg(e, &seg, t, t_new, y, y_new, f, K);
     double g_new[PG_MAX_EVENTS];
-    for (int k = 0; k < e->n_active; ++k) TRY(guard_at(e, e->active[k], y_new, &g_new[k]));
+    for (int k = 0; k < e->n_active; ++k) TRY(guard_at(e, e->active[k], t_new, y_new, &g_new[k]));
     if (at_start)
         for (int k = 0; k < e->n_active; ++k)
             if (e->g[k] == 0.0 && g_new[k] == 0.0) e->at_start = 1;
@@ -1092,7 +1105,7 @@ static int step(PgEngine *e, double t_target)
         if (hit < 0 || te < hit_t) hit = k, hit_t = te;
     }
     if (hit < 0) {
-        int rc = e->model->domain(t_new, y_new, e->q, e->u, e->p, e->s, &e->msg);
+        int rc = e->model->domain(t_new, y_new, e->q, u_at(e, t_new), e->p, e->s, &e->msg);
         if (rc == PG_ARITH) return rc;
         int finite = 1;
         for (int i = 0; i < e->nx; ++i) finite &= isfinite(y_new[i]) != 0;
@@ -1182,7 +1195,7 @@ static int apply_pending_event(PgEngine *e)
 {
     int i = e->pending_index;
     double x_new[PG_MAX_X], q_new[PG_MAX_Q];
-    TRY(e->model->jump(i, e->x, e->q, e->u, e->p, x_new, q_new, &e->msg));
+    TRY(e->model->jump(i, e->x, e->q, u_at(e, e->t), e->p, x_new, q_new, &e->msg));
     size_t nx = sizeof(double) * (size_t)e->nx;
     e->last.time = e->t, e->last.index = i;
     memcpy(e->last.x_before, e->pending_x, nx);
@@ -1304,15 +1317,15 @@ int pg_engine_advance_to_event(PgEngine *e, double t_target, int *stopped)
 int pg_engine_event_due(const PgEngine *e) { return e->has_pending && e->t == e->t_out; }
 
 /* _crossed_in: the first active event whose guard went from its before side to its after side */
-static int crossed_in(PgEngine *e, const double *y0, const double *y1, int *index)
+static int crossed_in(PgEngine *e, double t0, const double *y0, double t1, const double *y1, int *index)
 {
     int disarmed = e->has_last && e->last.time == e->seg.t0 ? e->last.index : -1;
     *index = -1;
     for (int k = 0; k < e->n_active; ++k) {
         int i = e->active[k];
         double sgn = sgn_of(e, i), a, b;
-        TRY(guard_at(e, i, y0, &a));
-        TRY(guard_at(e, i, y1, &b));
+        TRY(guard_at(e, i, t0, y0, &a));
+        TRY(guard_at(e, i, t1, y1, &b));
         double g0 = sgn * a, g1 = sgn * b;
         if (g1 >= 0.0 && (g0 < 0.0 || (g0 == 0.0 && 0.0 < g1 && i != disarmed))) {
             *index = i;
@@ -1322,12 +1335,22 @@ static int crossed_in(PgEngine *e, const double *y0, const double *y1, int *inde
     return PG_OK;
 }
 
-int pg_engine_set_input(PgEngine *e, const double *u)
+int pg_engine_set_input(PgEngine *e, const double *u) { return pg_engine_set_inputs(e, u, NULL); }
+
+int pg_engine_set_inputs(PgEngine *e, const double *u, const double *du)
 {
+    int sloped = 0;
+    if (du)
+        for (int i = 0; i < e->nu; ++i) sloped |= du[i] != 0.0;
     int same = 1;
     for (int i = 0; i < e->nu; ++i) same &= u[i] == e->u[i];
+    if (sloped || e->has_du) { /* the same line only if the same value and slope from the same point */
+        same &= sloped && e->has_du && e->t_u == e->t_out;
+        for (int i = 0; same && i < e->nu; ++i) same &= du[i] == e->du[i];
+    }
     if (same) return PG_OK;
     TRY(check_inputs(e, u));
+    if (sloped) TRY(check_finite_inputs(e, du, 1));
     int crossed = -1;
     if (e->t > e->t_out) {
         double x[PG_MAX_X];
@@ -1338,7 +1361,7 @@ int pg_engine_set_input(PgEngine *e, const double *u)
             double K_c[PG_MAX_STAGES * PG_MAX_X];
             int rc = pair_step_of(e, e->seg.method, e->seg.t0, e->seg.y0, e->seg.f0, e->t_out - e->seg.t0, x,
                                   f_c, K_c);
-            if (!rc) rc = crossed_in(e, e->seg.y0, x, &crossed);
+            if (!rc) rc = crossed_in(e, e->seg.t0, e->seg.y0, e->t_out, x, &crossed);
             if (rc) return at_time(e, rc, "the input change at t = ", e->t_out, " s");
         }
         e->t = e->t_out;
@@ -1347,6 +1370,10 @@ int pg_engine_set_input(PgEngine *e, const double *u)
         e->has_seg = 0;
     }
     memcpy(e->u, u, sizeof(double) * (size_t)e->nu);
+    e->has_du = sloped;
+    e->t_u = e->t;
+    if (sloped) memcpy(e->du, du, sizeof(double) * (size_t)e->nu);
+    else memset(e->du, 0, sizeof(double) * (size_t)e->nu);
     int rc = bind(e);
     double h0 = 0;
     if (!rc) rc = initial_step(e, &h0);
@@ -1385,22 +1412,24 @@ int pg_engine_restart_at(PgEngine *e, double t, const double *x, const double *u
     return pg_engine_set_input(e, u);
 }
 
+const double *pg_engine_inputs_at(PgEngine *e, double t) { return u_at(e, t); }
+
 int pg_engine_domain_problem(PgEngine *e, double t, const double *x)
 {
-    int rc = e->model->domain(t, x, e->q, e->u, e->p, e->s, &e->msg);
+    int rc = e->model->domain(t, x, e->q, u_at(e, t), e->p, e->s, &e->msg);
     return rc == PG_RAISE;
 }
 
 int pg_engine_flow(PgEngine *e, double t, const double *x, double *dx)
 {
-    return e->model->flow(t, x, e->q, e->u, e->p, dx, &e->msg);
+    return e->model->flow(t, x, e->q, u_at(e, t), e->p, dx, &e->msg);
 }
 
-int pg_engine_guard(PgEngine *e, int k, const double *x, double *g) { return guard_at(e, k, x, g); }
+int pg_engine_guard(PgEngine *e, int k, const double *x, double *g) { return guard_at(e, k, e->t_out, x, g); }
 
 int pg_engine_outputs(PgEngine *e, double t, const double *x, const double *q, double *y)
 {
-    return e->model->outputs(t, x, q, e->u, e->p, y, &e->msg);
+    return e->model->outputs(t, x, q, u_at(e, t), e->p, y, &e->msg);
 }
 
 size_t pg_engine_sizeof(void) { return sizeof(PgEngine); }

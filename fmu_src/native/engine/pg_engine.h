@@ -63,6 +63,10 @@ struct PgEngine {
     double rtol, atol, max_step, t_stop, zeno_window;
     int zeno_max_events;
     double u[PG_MAX_U];
+    /* linear inputs (FMI 2.0 fmi2SetRealInputDerivatives): u(t) = u + du (t - t_u) from the
+     * communication point t_u on; has_du = 0 (every slope zero) is held inputs, u itself */
+    int has_du;
+    double t_u, du[PG_MAX_U];
     double t, t_out;
     double x[PG_MAX_X], q[PG_MAX_Q];
     double x_out[PG_MAX_X], q_out[PG_MAX_Q];
@@ -107,6 +111,7 @@ struct PgEngine {
     void *hook_ctx;
     PgMsg msg; /* the message of the latest PG_RAISE */
     PgMsg scratch;
+    double u_t[PG_MAX_U]; /* the inputs at the time of a model call (has_du) */
 };
 
 /* a run of the model from t0 to t_stop with the parameters p, the settings s and the inputs u:
@@ -115,6 +120,11 @@ struct PgEngine {
 int pg_engine_init(PgEngine *e, const PgModel *model, const double *p, const double *s, const double *u,
                    double t0, double t_stop);
 int pg_engine_set_input(PgEngine *e, const double *u);
+/* the inputs from the time served last (t_out) on: u(t) = u + du (t - t_out), du NULL for held
+ * inputs (pg_engine_set_input); a change restarts the integrator there, as for held inputs */
+int pg_engine_set_inputs(PgEngine *e, const double *u, const double *du);
+/* the inputs the model sees at time t (e->u itself for held inputs) */
+const double *pg_engine_inputs_at(PgEngine *e, double t);
 int pg_engine_advance(PgEngine *e, double t_target);
 /* stops before the jump of the first event in (t_out, t_target]: *stopped = 1 and t_out is its time */
 int pg_engine_advance_to_event(PgEngine *e, double t_target, int *stopped);
@@ -126,7 +136,7 @@ int pg_engine_restart_at(PgEngine *e, double t, const double *x, const double *u
 int pg_engine_domain_problem(PgEngine *e, double t, const double *x);
 /* the flow and the active guards at (t, x) in the current mode (for model exchange) */
 int pg_engine_flow(PgEngine *e, double t, const double *x, double *dx);
-int pg_engine_guard(PgEngine *e, int k, const double *x, double *g);
+int pg_engine_guard(PgEngine *e, int k, const double *x, double *g); /* (at t_out) */
 int pg_engine_outputs(PgEngine *e, double t, const double *x, const double *q, double *y);
 
 size_t pg_engine_sizeof(void);

@@ -378,10 +378,14 @@ fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReferenc
 fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                                        const fmi2Integer order[], const fmi2Real value[])
 {
-    (void)vr, (void)nvr, (void)order, (void)value;
     CHECK(c);
     REQUIRE(fmi2SetRealInputDerivatives, "fmi2SetRealInputDerivatives");
-    return unsupported(INST, "fmi2SetRealInputDerivatives (canInterpolateInputs = false)");
+    if (nvr) {
+        NOT_NULL(vr, "fmi2SetRealInputDerivatives", "vr");
+        NOT_NULL(order, "fmi2SetRealInputDerivatives", "order");
+        NOT_NULL(value, "fmi2SetRealInputDerivatives", "value");
+    }
+    return (fmi2Status)pgb_set_input_derivatives(INST->b, vr, nvr, order, value);
 }
 
 fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,

@@ -950,6 +950,16 @@ int pgb_set_real(PgBackend *in, const unsigned vr[], size_t n, const double valu
     return set_values(in, "set_real", 'd', vr, n, values);
 }
 
+int pgb_set_input_derivatives(PgBackend *in, const unsigned vr[], size_t n, const int order[], const double values[])
+{
+    if (n == 0) return ST_OK;
+    if (refused_when_dead(in)) return ST_ERROR;
+    GIL g = py.PyGILState_Ensure();
+    PyObject *vrs = vr_list(vr, n), *orders = value_list('i', order, n), *vals = value_list('d', values, n);
+    py.PyGILState_Release(g);
+    return call(in, "set_real_input_derivatives", NULL, NULL, "(NNN)", vrs, orders, vals);
+}
+
 int pgb_set_integer(PgBackend *in, const unsigned vr[], size_t n, const int values[])
 {
     return set_values(in, "set_integer", 'i', vr, n, values);

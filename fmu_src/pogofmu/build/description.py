@@ -103,7 +103,7 @@ def model_description_fmi2(cls, token: str, source_files=(), directional=False) 
         "numberOfEventIndicators": "0"})
     ET.SubElement(root, "CoSimulation", {
         "modelIdentifier": model.name, "needsExecutionTool": "false",
-        "canHandleVariableCommunicationStepSize": "true", "canInterpolateInputs": "false",
+        "canHandleVariableCommunicationStepSize": "true", "canInterpolateInputs": "true",
         "maxOutputDerivativeOrder": "0", "canRunAsynchronuously": "false",
         "canBeInstantiatedOnlyOncePerProcess": "false", "canNotUseMemoryManagementFunctions": "true",
         "canGetAndSetFMUstate": "true", "canSerializeFMUstate": "true",

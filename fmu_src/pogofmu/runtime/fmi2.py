@@ -60,7 +60,7 @@ from .status import ERROR, FATAL, OK, WARNING, log_category
 
 __all__ = ["HybridSlave", "FMUError", "FmiVariable", "fmi2_variables", "LOG_CATEGORIES"]
 
-_STATE_FORMAT = "pogofmu-fmu-state-3"
+_STATE_FORMAT = "pogofmu-fmu-state-4"  # 4: the input derivatives ("du")
 # the package this module was imported as: "_pogofmu_<Model>_<hash>" inside an FMU (one name per
 # build of one model, see build_fmu.py), "pogofmu" from the source tree
 _BUILD = __name__.rpartition(".")[0]
@@ -198,6 +198,9 @@ class HybridSlave:
         model = type(self).model
         self._par = {**model.defaults(), **solver_defaults()}
         self._u = [float(v.start) for v in model.inputs]
+        # the inputs' first derivatives (fmi2SetRealInputDerivatives) from the communication point
+        # the step starts at; fmi2SetReal of an input sets its derivative back to 0
+        self._du = [0.0] * len(model.inputs)
         self._sim = None
         self._out = None
         self._t_start = 0.0
@@ -292,6 +295,7 @@ class HybridSlave:
             elif kind == "input":
                 # checked in fmi2DoStep, which can refuse the step without ending the instance
                 self._u[key] = float(value)
+                self._du[key] = 0.0  # a value set without a derivative is held
                 self._inputs_changed = True
                 if self._sim is None:
                     self._out = None
@@ -317,6 +321,34 @@ class HybridSlave:
 
     def set_integer(self, vrs, values):
         self._set(vrs, values, "Integer")
+
+    def set_real_input_derivatives(self, vrs, orders, values):
+        """fmi2SetRealInputDerivatives: the first derivatives of Real inputs at the current
+        communication point; over the next step the model sees ``u(t) = u + du (t - t_c)``. Every
+        value reference, order and value is checked before any is set."""
+        fn = "fmi2SetRealInputDerivatives"
+        keys = []
+        for vr, order, value in zip(vrs, orders, values):
+            var = self._variable(vr, "Real")
+            kind, key = var.role
+            if kind != "input":
+                what = {"parameter": "a parameter", "output": "an output"}.get(kind, "not an input")
+                return self._refuse(f"{fn} refused: variable {var.name} is {what}, not an input: only a continuous "
+                                    f"Real input has a derivative to set")
+            if order != 1:
+                return self._refuse(f"{fn} refused: order = {int(order)} for input {var.name} violates the rule: "
+                                    f"order = 1 (this FMU interpolates its inputs linearly, u(t) = u + du (t - t_c) "
+                                    f"over a step; it takes no derivative of order 0 or 2 and higher)")
+            value = float(value)
+            if not math.isfinite(value):
+                return self._refuse(f"{fn} refused: the derivative of input {var.name} = {value!r} violates the "
+                                    f"rule: it must be a finite number")
+            keys.append((key, value))
+        for key, value in keys:
+            self._du[key] = value
+        if keys:
+            self._inputs_changed = True
+        return None
 
     def set_boolean(self, vrs, values):
         self._set(vrs, values, "Boolean")
@@ -348,7 +380,7 @@ class HybridSlave:
         the importer's time and states)."""
         sim = self._sim
         t, x, q = (sim.t_out, sim.x_out, sim.q_out) if point is None else point
-        out = self._output_fn(t, x, q, sim.u, sim.p)
+        out = self._output_fn(t, x, q, sim.inputs_at(t) if sim.sloped else sim.u, sim.p)
         last = sim.last_event
         if last is None:
             out["n_events"], out["t_last_event"], out["last_event"] = sim.n_events, self._t_start, 0
@@ -392,7 +424,7 @@ class HybridSlave:
             self._sim = None
             raise FMUError(f"{model.name}: initialization failed: {exc}",
                            ERROR if self._launcher else FATAL) from None
-        self._inputs_changed = False
+        self._inputs_changed = any(self._du)  # derivatives set before: the first step takes them
         self._h_fast = self._fast_step_limit()
         self._drain_engine()
         self._update_outputs()
@@ -412,7 +444,7 @@ class HybridSlave:
                 end = sim.t_out
         try:
             if self._inputs_changed:
-                sim.set_input(self._u)
+                sim.set_inputs(self._u, self._du)
                 self._inputs_changed = False
             if self._own_advance:
                 self._advance_engine(sim, end)
@@ -527,7 +559,8 @@ class HybridSlave:
         return {
             "owner": self._owner(),
             "sim": None if sim is None else sim.snapshot(),
-            "par": dict(self._par) if sim is None else self._par, "u": list(self._u), "out": self._out,
+            "par": dict(self._par) if sim is None else self._par, "u": list(self._u), "du": list(self._du),
+            "out": self._out,
             "t_start": self._t_start, "t_stop": self._t_stop, "t_ok": self._t_ok, "failed": self._failed,
         }
 
@@ -552,6 +585,7 @@ class HybridSlave:
         self._check_owner(state, "SetFMUstate")
         self._par = dict(state["par"])
         self._u = list(state["u"])
+        self._du = list(state["du"])
         self._inputs_changed = True
         self._t_start, self._t_stop = state["t_start"], state["t_stop"]
         self._t_ok, self._failed = state["t_ok"], state["failed"]
@@ -619,7 +653,7 @@ class HybridSlave:
         try:
             if state["sim"] is not None:
                 state["sim"] = snapshot_from_data(type(self).model, state["sim"])
-            for key in ("par", "u", "out", "t_start", "t_stop", "t_ok", "failed"):
+            for key in ("par", "u", "du", "out", "t_start", "t_stop", "t_ok", "failed"):
                 state[key]  # noqa: B018 - every record is there
         except (ValueError, KeyError, TypeError, IndexError, AttributeError) as exc:
             raise FMUError(f"{call} refused: the state record is incomplete ({type(exc).__name__}: {exc})") from None

@@ -20,6 +20,7 @@ from typing import Dict, List
 from .components import REAL_TYPES, StepResult
 from .package import SSPError
 
+INPUTS = ("hold", "interpolate")  # --inputs: how a Gauss-Seidel component sees the inputs over a step
 MAX_EVENT_ITERATIONS = 100  # discrete iterations at one instant before the master gives up
 GRID, LEFT, RIGHT = 0, -1, 1  # the ``event`` column: output grid, left and right limit at an event
 
@@ -57,6 +58,12 @@ class Exchange:
         self.levels = update_levels(self.order, incoming)
         self.threads = max(1, int(threads))
         self._pool = None
+        # --inputs interpolate: component -> its real input connections it takes as lines over a
+        # step (Gauss-Seidel, FMUs with canInterpolateInputs); set by interpolate_inputs()
+        self._lines = {}
+        self._start_keys = []
+        self._start = {}  # the outputs feeding them at the macro step's start t_mark
+        self.t_mark = None
         self.native = None  # the C stepping of the components it serves (.native_level)
         from .native_level import NativeLevels, library
 
@@ -68,6 +75,30 @@ class Exchange:
                 self._row_arrays()
             else:
                 native.close()
+
+    def interpolate_inputs(self):
+        """Gauss-Seidel with ``--inputs interpolate``: every component that can interpolate its
+        inputs (FMI 2.0 canInterpolateInputs) gets each real input whose source has already
+        stepped in the macro step as a line, its source's value at the step's start and the slope
+        to its value at the source's time: ``u(t) = u(t_mark) + (u_src - u(t_mark)) (t - t_mark) /
+        (t_src - t_mark)``. Inputs from sources that step later stay held."""
+        keys = set()
+        for inst in self.order:
+            if not getattr(inst, "can_interpolate", False):
+                continue
+            lines = {c.end_connector for c in self.incoming[inst.name] if inst.type_of(c.end_connector) in REAL_TYPES}
+            if lines:
+                self._lines[inst.name] = lines
+                keys.update((c.start_element, c.start_connector) for c in self.incoming[inst.name]
+                            if c.end_connector in lines)
+        self._start_keys = sorted(keys)
+
+    def mark(self, t):
+        """A macro step starts at ``t`` (every output read there): the start of the input lines."""
+        if self._lines:
+            v = self.value
+            self.t_mark = t
+            self._start = {k: v[k] for k in self._start_keys}
 
     # ---- parallel steps --------------------------------------------------------------------
     def map(self, fn, insts) -> list:
@@ -179,17 +210,28 @@ class Exchange:
         """Every input of ``inst`` has a source value."""
         return all((c.start_element, c.start_connector) in self.value for c in self.incoming[inst.name])
 
-    def feed(self, inst, only=None, continuous=False) -> bool:
+    def feed(self, inst, only=None, continuous=False, lines=False) -> bool:
         """Set the inputs of ``inst`` from the latest outputs (``only``: of those components;
-        ``continuous``: the real-valued inputs only, as FMI 3.0 allows in Continuous-Time Mode);
+        ``continuous``: the real-valued inputs only, as FMI 3.0 allows in Continuous-Time Mode;
+        ``lines``: a Gauss-Seidel step from the macro step's start, see :meth:`interpolate_inputs`);
         True if any value changed."""
         names, values, changed = [], [], False
+        lined = self._lines.get(inst.name) if lines and inst.t == self.t_mark else None
+        slope_names, slopes = [], []
         for c in self.incoming[inst.name]:
             if only is not None and c.start_element not in only:
                 continue
             if continuous and inst.type_of(c.end_connector) not in REAL_TYPES:
                 continue
-            v = self.value[(c.start_element, c.start_connector)]
+            src = (c.start_element, c.start_connector)
+            v = self.value[src]
+            if lined is not None and c.end_connector in lined:
+                span = self.instances[c.start_element].t - self.t_mark
+                if span > 0:  # the source has stepped: the line from its value at the start
+                    v0 = self._start[src]
+                    slope_names.append(c.end_connector)
+                    slopes.append((v - v0) / span)
+                    v = v0
             key = (c.end_element, c.end_connector)
             changed |= self.held.get(key) != v
             self.held[key] = v
@@ -198,6 +240,8 @@ class Exchange:
         if names:
             try:
                 inst.set_values(names, values)
+                if slope_names:
+                    inst.set_input_slopes(slope_names, slopes)
             except Exception as exc:  # noqa: BLE001 - fmpy raises FMICallException on an error status
                 raise inst.fail(f"setting its inputs {names} at t = {inst.t!r} s", exc) from None
         return changed
@@ -333,7 +377,7 @@ def fixed_step(ex: Exchange, t0, t_end, step, jacobi=False, progress=None):
         h = T - t
 
         def gauss_seidel(inst):
-            ex.feed(inst)
+            ex.feed(inst, lines=True)
             inst.do_step(t, h)
             ex.read(inst)
 
@@ -344,6 +388,7 @@ def fixed_step(ex: Exchange, t0, t_end, step, jacobi=False, progress=None):
             ex.feed_all(ex.order)
             ex.step_level(ex.order, t, h, False, held)
         else:
+            ex.mark(t)
             for level in ex.levels:
                 ex.step_level(level, t, h, True, gauss_seidel)
         ex.row(T)
@@ -520,6 +565,8 @@ class Synchronizer:
                     target = t_next
         if jacobi:
             ex.feed_all(ex.order)
+        else:
+            ex.mark(t)
         for level in self.levels:
             # the level's components step together to ``target`` (in parallel with --threads);
             # the earliest event among them then cuts the macro step, as one after the other the
@@ -530,7 +577,7 @@ class Synchronizer:
 
             def one(inst):
                 if not jacobi:
-                    ex.feed(inst)
+                    ex.feed(inst, lines=True)
                 if inst.must_save:
                     inst.save()
                 if inst.rollback:
@@ -556,6 +603,8 @@ class Synchronizer:
 
                 def redo(prev, inst=inst):
                     prev.restore()
+                    if not jacobi and prev.name in ex._lines:  # its input lines over the shorter span
+                        ex.feed(prev, lines=True)
                     try:
                         if target > t:
                             prev.do_step(t, target - t)
@@ -563,7 +612,11 @@ class Synchronizer:
                         raise SSPError(f"{exc} (the step shortened to the event of Component {inst.name} at "
                                        f"t = {target!r} s)") from None
                     ex.read(prev)
-                ex.map(redo, back)
+                if not jacobi and any(prev.name in ex._lines for prev in back):
+                    for prev in back:  # in update order: a line's source is redone before it is fed
+                        redo(prev)
+                else:
+                    ex.map(redo, back)
         if event is None and next_event and target in next_event.values():
             event = StepResult(target, event_at=target, event_mode=True)
         if event is None and switch0:
@@ -623,7 +676,7 @@ class Synchronizer:
                 inst.restore()
             if inst.t == t:
                 if not jacobi:
-                    ex.feed(inst, only=done)
+                    ex.feed(inst, only=done, lines=True)
                 if tau > t:
                     inst.do_step(t, tau - t)
                 ex.read(inst)

@@ -7,7 +7,8 @@ import sys
 import tempfile
 from pathlib import Path
 
-from .master import ALGORITHMS, DEFAULT_EVENT_TOLERANCE, simulate
+from .algorithms import INPUTS
+from .master import ALGORITHMS, DEFAULT_EVENT_TOLERANCE, DEFAULT_INPUTS, simulate
 from .package import SSPError, read_ssd, unpack
 from .plot import plot
 from .record import CSVStream
@@ -111,6 +112,11 @@ def main(argv=None, prog="pogofmu ssp"):
     r.add_argument("--event-tolerance", type=float, default=DEFAULT_EVENT_TOLERANCE,
                    help="[s] bisection tolerance of an event of an FMI 2.0 FMU of another tool (a change of a "
                         "discrete output; this project's FMUs report the exact time)")
+    r.add_argument("--inputs", choices=INPUTS, default=DEFAULT_INPUTS,
+                   help="Gauss-Seidel: interpolate (default): a component that can interpolate its inputs "
+                        "(FMI 2.0 canInterpolateInputs) gets each real input from a component already stepped "
+                        "as the line between its values at the step's start and end; hold: every input held "
+                        "over a step")
     r.add_argument("--rel-tol", type=float, default=1e-10, help="model-exchange integrator's relative tolerance")
     r.add_argument("--abs-tol", type=float, default=1e-12, help="model-exchange integrator's absolute tolerance")
     r.add_argument("--threads", type=_threads, default=1, metavar="N",
@@ -137,7 +143,7 @@ def main(argv=None, prog="pogofmu ssp"):
             return 0
         run(args.ssp, args.parameters, args.stop_time, args.step, args.out, args.algorithm, not args.quiet,
             events=args.events, event_tolerance=args.event_tolerance, rel_tol=args.rel_tol, abs_tol=args.abs_tol,
-            threads=args.threads, record=args.record)
+            threads=args.threads, record=args.record, inputs=args.inputs)
     except SSPError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1

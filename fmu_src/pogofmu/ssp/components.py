@@ -232,6 +232,8 @@ class Component:
             for is_step, a, b in j[:mark]:
                 if is_step:
                     self._do_step_call(a, b)
+                elif is_step is None:
+                    self._set_slopes(a, b)
                 else:
                     self._set_values(a, b)
             try:
@@ -279,6 +281,34 @@ class Fmi2CoSimulation(Component):
             and "t_last_event" in self.variables
         self._do_step = raw_function(self.fmu, "fmi2DoStep")
         self._get_state = raw_function(self.fmu, "fmi2GetFMUstate") if self.can_save else None
+        # it takes its real inputs as lines over a step (fmi2SetRealInputDerivatives, order 1);
+        # the master decides whether to use that (``interpolates``, --inputs interpolate)
+        self.can_interpolate = bool(getattr(md.coSimulation, "canInterpolateInputs", False))
+        self._slope_calls = {}
+
+    def set_input_slopes(self, names, slopes):
+        """The first derivatives of these real inputs from the current communication point
+        (after their values: an fmi2SetReal of an input sets its derivative back to 0); journaled
+        with the values, so a restore makes them again."""
+        if self._journal is not None:
+            self._journal.append((None, tuple(names), tuple(slopes)))
+        self._set_slopes(names, slopes)
+
+    def _set_slopes(self, names, slopes):
+        key = tuple(names)
+        call = self._slope_calls.get(key)
+        if call is None:
+            n = len(key)
+            vrs = (ctypes.c_uint32 * n)(*(self.vr(x) for x in key))
+            orders = (ctypes.c_int32 * n)(*([1] * n))
+            buf = (ctypes.c_double * n)()
+            f = raw_function(self.fmu, "fmi2SetRealInputDerivatives")
+            call = self._slope_calls[key] = (f, vrs, orders, buf, n)
+        f, vrs, orders, buf, n = call
+        buf[:] = [float(v) for v in slopes]
+        status = f(self.fmu.component, vrs, n, orders, buf)
+        if status > 1:
+            raise _call_failed("fmi2SetRealInputDerivatives", status)
 
     def _set(self, kind, vrs, values):
         f = {"real": self.fmu.setReal, "int": self.fmu.setInteger, "boolean": self.fmu.setBoolean,

@@ -9,7 +9,7 @@ import tempfile
 from pathlib import Path
 from typing import Optional
 
-from .algorithms import Exchange, Progress, fixed_step, grid_point, synchronized
+from .algorithms import INPUTS, Exchange, Progress, fixed_step, grid_point, synchronized
 from .components import Fmi2CoSimulation, Fmi3CoSimulation, Fmi3ModelExchange
 from .graph import algebraic_loop, loop_text
 from .package import SSPError, read_ssd, unpack
@@ -17,6 +17,7 @@ from .record import Result
 from .validate import _fmu_unit, validate
 
 ALGORITHMS = ("gauss-seidel", "jacobi", "model-exchange")
+DEFAULT_INPUTS = "interpolate"  # --inputs (docs/ssp-master.md, "Inputs over a step": why)
 DEFAULT_EVENT_TOLERANCE = 1e-10  # s: bisection of a discrete output's change (FMUs of other tools)
 
 
@@ -141,13 +142,20 @@ def select_columns(system, order, record=None):
 def simulate(ssp, parameters: Optional[str] = None, stop_time: Optional[float] = None, step: float = 1e-3,
              start_time: Optional[float] = None, algorithm: str = "gauss-seidel", progress: bool = False,
              echo_log: bool = True, sink=None, events: bool = True, event_tolerance: float = DEFAULT_EVENT_TOLERANCE,
-             rel_tol: float = 1e-10, abs_tol: float = 1e-12, threads: int = 1, record=None):
+             rel_tol: float = 1e-10, abs_tol: float = 1e-12, threads: int = 1, record=None,
+             inputs: str = DEFAULT_INPUTS):
     """Run an SSP package; return a :class:`~.record.Result` (see the package docstring).
 
     ``algorithm``: ``gauss-seidel`` or ``jacobi`` co-simulation, with every component brought to
     each event instant (``events=True``) or a fixed communication step (``events=False``); or
     ``model-exchange``, the strongly coupled solution (FMI 3.0 model exchange, ``rel_tol`` and
     ``abs_tol`` its integrator's tolerances). ``step`` is the communication step, the output grid.
+
+    ``inputs``: ``interpolate`` (the default) — with Gauss–Seidel, a component whose FMU can
+    interpolate its inputs (FMI 2.0 ``canInterpolateInputs``) gets every real input whose source has
+    already stepped as the line between the source's values at the step's start and end
+    (``fmi2SetRealInputDerivatives``); ``hold`` — every input held over a step. Jacobi and model
+    exchange are not affected.
 
     ``threads``: the components of one level of the update order (none feeding another, e.g. the
     mirror's actuators) step in parallel on this many threads; the results are those of one
@@ -162,6 +170,8 @@ def simulate(ssp, parameters: Optional[str] = None, stop_time: Optional[float] =
     # no scipy import here: it would cost the master 50 MB of its memory budget
     if algorithm not in ALGORITHMS:
         raise SSPError(f"algorithm {algorithm!r} is not one of {', '.join(ALGORITHMS)}")
+    if inputs not in INPUTS:
+        raise SSPError(f"--inputs {inputs!r} is not one of {', '.join(INPUTS)}")
     for what, value in (("communication step (--step)", step), ("stop time (--stop-time)", stop_time),
                         ("start time", start_time), ("event tolerance (--event-tolerance)", event_tolerance),
                         ("relative tolerance (--rel-tol)", rel_tol), ("absolute tolerance (--abs-tol)", abs_tol)):
@@ -222,6 +232,8 @@ def simulate(ssp, parameters: Optional[str] = None, stop_time: Optional[float] =
         for name in order:
             instances[name] = _instantiate(system.components[name], work, echo_log, algorithm, events)
         ex = Exchange(system, instances, order, res, threads=threads, columns=cols)
+        if inputs == "interpolate" and algorithm == "gauss-seidel":
+            ex.interpolate_inputs()
         initialize(ex, t0, selected)
         prog = Progress(system.name, t0, t_last, progress)
         if algorithm == "model-exchange":
@@ -238,6 +250,7 @@ def simulate(ssp, parameters: Optional[str] = None, stop_time: Optional[float] =
         res.system = system.name
         res.parameter_set = ", ".join(sorted({ps.name for ps in selected.values() if ps is not None})) or "none"
         res.algorithm, res.events, res.step, res.connections = algorithm, events, step, list(system.connections)
+        res.inputs = inputs
         res.close(complete=True)
         res.last_time = t_last
         return res

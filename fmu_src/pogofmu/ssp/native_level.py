@@ -14,7 +14,9 @@ and write the same values as the C one.
 
 Served: FMI 2.0 co-simulation FMUs of pogofmu's native backend (their calls need no GIL), whose
 inputs and watched outputs are reals and integers. Every other component (FMI 3.0, another
-tool's FMU, a Python-hosted FMU) keeps the Python path. ``POGOFMU_SSP_NATIVE_LEVELS=0`` turns
+tool's FMU, a Python-hosted FMU) keeps the Python path, and so does a component that takes its
+inputs as lines over the step (Gauss-Seidel with ``--inputs interpolate``: the slopes are set by
+:meth:`~.algorithms.Exchange.feed`; setting them in C as well is not done). ``POGOFMU_SSP_NATIVE_LEVELS=0`` turns
 the C path off (the tests compare the two to the bit); without a C compiler it is off.
 
 Host-side code; never imported inside an FMU.
@@ -182,6 +184,8 @@ class NativeLevels:
     def serves(self, inst) -> bool:
         if not self._capable.get(inst.name):
             return False
+        if inst.name in self.ex._lines:
+            return False  # inputs taken as lines (--inputs interpolate): their slopes are set in Python
         if getattr(inst, "rollback", False) and not inst.counts_events:
             return False  # another tool's events: bisected in Python
         return self._plan(inst) is not None

@@ -191,6 +191,8 @@ def library():
             lib.pgb_advance.argtypes = [C.c_void_p, C.c_double, D]
             lib.pgb_advance_to_event.argtypes = [C.c_void_p, C.c_double, C.POINTER(C.c_int), D]
             lib.pgb_set_input.argtypes = [C.c_void_p, D]
+            lib.pgb_set_inputs.argtypes = [C.c_void_p, D, D]
+            lib.pgb_inputs_at.argtypes = [C.c_void_p, C.c_double, D]
             lib.pgb_apply_event.argtypes = [C.c_void_p, C.c_int, C.c_double, D]
             lib.pgb_restart_at.argtypes = [C.c_void_p, C.c_double, D, D]
             lib.pgb_event_due.argtypes = [C.c_void_p]
@@ -393,6 +395,8 @@ class Simulator:
         self._U, self._ubytes, self._ukey, self._uc = C.c_double * max(self._nu, 1), 8 * self._nu, None, self.u
         self._guards = [ev.guard for ev in model.events]
         self._buf = (C.c_double * (_READ_HEAD + 2 * self._nx + 2 * self._nq + self._nu))()
+        self._ubuf = (C.c_double * max(self._nu, 1))()
+        self.sloped = False  # the inputs lie on a line (set_inputs with a slope), not held
         self._slack = domain_slack(self.solver)
         self._exc = None
         self._qkey = None
@@ -741,13 +745,34 @@ class Simulator:
     def set_input(self, u):
         """Change the inputs from the latest communication time on."""
         u = tuple(float(v) for v in u)
-        if u == self.u:
+        if u == self.u and not self.sloped:
             return
         self._bound = None
         self._forget()
         rc = self._lib.pgb_set_input(self._engine, _doubles(u, self._nu))
         self._read()  # (the engine's inputs: the new ones, or the old where it refused them)
+        if self.sloped:
+            self.sloped = bool(self._lib.pgb_inputs_at(self._engine, self.t_out, self._ubuf))
         self._check(rc)
+
+    def set_inputs(self, u, du):
+        """Inputs on a line from the latest communication time ``t_c`` on: ``u + du (t - t_c)``
+        (FMI 2.0 input derivatives); all ``du`` zero is :meth:`set_input`, to the bit."""
+        if not any(du) and not self.sloped:
+            self.set_input(u)
+            return
+        u = tuple(float(v) for v in u)
+        self._bound = None
+        self._forget()
+        rc = self._lib.pgb_set_inputs(self._engine, _doubles(u, self._nu), _doubles(du, self._nu))
+        self._read()
+        self.sloped = bool(self._lib.pgb_inputs_at(self._engine, self.t_out, self._ubuf))
+        self._check(rc)
+
+    def inputs_at(self, t: float) -> tuple:
+        """The inputs the model sees at ``t`` (computed by the engine: the same bits as its own calls)."""
+        self._lib.pgb_inputs_at(self._engine, float(t), self._ubuf)
+        return tuple(self._ubuf[:self._nu])
 
     def apply_event(self, index: int, t: float, x) -> list:
         """Apply the jump of event ``index`` at time ``t`` to the state ``x`` located by someone else
@@ -807,6 +832,7 @@ class Simulator:
         self.n_events = -1
         self.last_event = None
         self._read()
+        self.sloped = bool(lib.pgb_inputs_at(self._engine, self.t_out, self._ubuf))
 
 
 def snapshot_to_data(snap: dict) -> dict:
