@@ -12,12 +12,14 @@ from __future__ import annotations
 import ctypes
 import textwrap
 import zipfile
+from pathlib import Path
 from xml.etree import ElementTree as ET
 
 import pytest
 
 from support import fmu_path, run_pogofmu
 
+ROOT = Path(__file__).resolve().parents[1]
 G, Y0 = 2.0, 0.5  # the example's defaults
 Z, W = [1.0, -2.5, 0.75], 0.25
 
@@ -249,3 +251,95 @@ def test_an_array_state_is_refused(tmp_path):
     assert proc.returncode == 2 and "state 'x' has shape=(2,), which violates the rule: a state is a scalar" \
         in proc.stderr, proc.stderr
 
+
+# ---------------------------------------------------------------------------------------------
+# SSP 2.0: array connectors (ssc:Dimension) and connections into and out of their elements
+# ---------------------------------------------------------------------------------------------
+
+def _connector(name, kind, size=None):
+    dim = f'<ssc:Dimension size="{size}"/>' if size else ""
+    return f'<ssd:Connector name="{name}" kind="{kind}"><ssc:Float64/>{dim}</ssd:Connector>'
+
+
+def _two_gains(tmp_path, connections, b_connectors=None):
+    """An SSP 2.0 package of two ArrayGain instances A and B (FMI 3.0, native), A's y_0 = 0.25."""
+    a = [_connector("y", "output"), _connector("s", "output", 2)]
+    b = b_connectors or [_connector("z", "input", 3), _connector("y", "output"), _connector("r", "output", 3)]
+
+    def comp(name, connectors, binding=""):
+        return (f'<ssd:Component name="{name}" source="resources/ArrayGain.fmu"><ssd:Connectors>'
+                + "".join(connectors) + "</ssd:Connectors>" + binding + "</ssd:Component>")
+
+    ssd = ('<?xml version="1.0" encoding="UTF-8"?>\n'
+           '<ssd:SystemStructureDescription xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription" '
+           'xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon" version="2.0" name="TwoGains">'
+           '<ssd:System name="TwoGains"><ssd:Elements>'
+           + comp("A", a, '<ssd:ParameterBindings><ssd:ParameterBinding source="resources/a.ssv"/>'
+                          '</ssd:ParameterBindings>')
+           + comp("B", b) + "</ssd:Elements><ssd:Connections>" + "".join(
+               f'<ssd:Connection {c}/>' for c in connections)
+           + '</ssd:Connections></ssd:System><ssd:DefaultExperiment startTime="0" stopTime="1"/>'
+           '</ssd:SystemStructureDescription>\n')
+    ssv = ('<?xml version="1.0" encoding="UTF-8"?>\n'
+           '<ssv:ParameterSet xmlns:ssv="http://ssp-standard.org/SSP1/SystemStructureParameterValues" '
+           'version="2.0" name="a"><ssv:Parameters><ssv:Parameter name="y_0"><ssv:Float64 value="0.25"/>'
+           '</ssv:Parameter></ssv:Parameters></ssv:ParameterSet>\n')
+    path = tmp_path / "two_gains.ssp"
+    with zipfile.ZipFile(path, "w") as z:
+        z.writestr("SystemStructure.ssd", ssd)
+        z.writestr("resources/a.ssv", ssv)
+        z.write(fmu_path("examples/native/fmi3/ArrayGain"), "resources/ArrayGain.fmu")
+    return path, ssd
+
+
+ELEMENTS = ['startElement="A" startConnector="y" endElement="B" endConnector="z" endIndices="1"',
+            'startElement="A" startConnector="s" startIndices="2" endElement="B" endConnector="z" endIndices="3"']
+
+
+def test_the_element_connections_validate_against_the_ssp_2_0_schema(tmp_path):
+    from lxml import etree
+
+    from pogofmu.ssp.package import read_ssd, unpack
+
+    schema = etree.XMLSchema(file=str(ROOT / "ssp" / "schema" / "ssp-2.0" / "SystemStructureDescription.xsd"))
+    path, ssd = _two_gains(tmp_path, ELEMENTS)
+    assert schema.validate(etree.fromstring(ssd.encode())), schema.error_log
+    system = read_ssd(unpack(path, tmp_path / "x"))
+    assert [(c.start_connector, c.end_connector) for c in system.connections] == [("y", "z[1]"), ("s[2]", "z[3]")]
+    assert list(system.components["B"].connectors)[:3] == ["z[1]", "z[2]", "z[3]"]
+
+
+@pytest.mark.parametrize("algorithm, events", [("gauss-seidel", False), ("gauss-seidel", True), ("jacobi", False),
+                                               ("model-exchange", True)])
+def test_the_master_runs_connections_into_array_elements(tmp_path, algorithm, events):
+    """A.y = y_A (constant: A's inputs are 0) into B.z[1], A.s[2] = 2 y_A into B.z[3]; B.z[2]
+    keeps its start 0: B.y = y_0 + t (1 y_A + 2 * 0 + 3 * 2 y_A) = 0.5 + 1.75 t, and the weights
+    1, 2, 3 tell which element each value reached; B.r = [g y_A, 0, g 2 y_A] (w = 0)."""
+    from pogofmu.ssp import master
+
+    path, _ = _two_gains(tmp_path, ELEMENTS)
+    res = master.simulate(path, stop_time=1.0, step=0.125, algorithm=algorithm, events=events, echo_log=False)
+    t = res["time"]
+    assert len(t) == 9 and abs(t[-1] - 1.0) < 1e-12
+    for k in range(len(t)):
+        assert abs(res["B.y"][k] - (0.5 + 1.75 * t[k])) < 1e-9, (k, t[k], res["B.y"][k])
+        assert res["B.z[1]"][k] == 0.25 and res["B.z[2]"][k] == 0.0 and res["B.z[3]"][k] == 0.5
+        assert [res[f"B.r[{i}]"][k] for i in (1, 2, 3)] == [0.5, 0.0, 1.0]
+
+
+@pytest.mark.parametrize("connection, b, expected", [
+    ('startElement="A" startConnector="y" endElement="B" endConnector="z" endIndices="4"', None,
+     'endIndices=\'4\' violates the rule: one index from 1 to 3 (B.z is a 1-D array of 3)'),
+    ('startElement="A" startConnector="y" endElement="B" endConnector="z"', None,
+     "1 value(s) into 3: connect arrays of the same size"),
+    ('startElement="A" startConnector="y" startIndices="1" endElement="B" endConnector="z" endIndices="1"', None,
+     "startIndices='1' on A.y, which is not an array connector"),
+    ('startElement="A" startConnector="y" endElement="B" endConnector="z" endIndices="1"',
+     [_connector("z", "input", 2)], "Connector B.z: ssc:Dimension size=2 but the FMU's variable z has the dimensions [3]"),
+    ('startElement="A" startConnector="y" endElement="B" endConnector="z"', [_connector("z", "input")],
+     "Connector B.z: the FMU's variable z is an array of [3]: declare the connector with <ssc:Dimension size=\"3\"/>"),
+])
+def test_ssp_check_refuses_bad_array_connections(tmp_path, connection, b, expected):
+    path, _ = _two_gains(tmp_path, [connection], b)
+    proc = run_pogofmu("ssp", "check", path, cwd=tmp_path, timeout=300)
+    assert proc.returncode != 0 and expected in proc.stderr + proc.stdout, proc.stderr + proc.stdout
