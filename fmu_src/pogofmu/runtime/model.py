@@ -236,14 +236,16 @@ class HybridModel:
     time_scales: Optional[Callable] = None  # p -> ((label, parameter names, seconds), ...)
     error_scales: Optional[Callable] = None  # p -> ((label, parameter names, magnitude), ...)
     site: Optional[tuple] = field(default=None, compare=False, repr=False)  # (file, line) of the declaration
-    # what the model file declared, where it has arrays (see __post_init__): a dict with the keys
-    # inputs, outputs, output_fn, default_input; None for a model of scalars only
+    # what the model file declared, where it has arrays (see _expand_arrays): a dict with the keys
+    # inputs, outputs, output_fn, default_input, feedthrough, sizes; None for a model of scalars only
     declared: Optional[dict] = field(default=None, compare=False, repr=False)
 
     def __post_init__(self):
         if self.site is None:
             object.__setattr__(self, "site", _site())
-        if self.declared is None and any(array_size(v) for v in self.inputs + self.outputs):
+        # (inputs or outputs that are not tuples are left to the build's checks, which name the rule)
+        if self.declared is None and isinstance(self.inputs, tuple) and isinstance(self.outputs, tuple) \
+                and any(array_size(v) for v in self.inputs + self.outputs):
             self._expand_arrays()
 
     def _expand_arrays(self):
