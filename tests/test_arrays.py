@@ -5,7 +5,7 @@ element (both backends: the entry file expands an array's value reference), the 
 model file that refuse a bad declaration.
 
 The reference is the model's closed form, written here: for constant inputs
-``r[i] = g z[i] + w i``, ``y(t) = y_0 + t (z[1] + 2 z[2] + 3 z[3])``, ``s = [y, 2 y]``.
+``r[i] = g z[i] + w i``, ``y(t) = y_0 + t (z[1] + 2 z[2] + 3 z[3]) / tau`` (tau = 1 s), ``s = [y, 2 y]``.
 """
 from __future__ import annotations
 
@@ -258,7 +258,7 @@ def test_an_array_state_is_refused(tmp_path):
 
 def _connector(name, kind, size=None):
     dim = f'<ssc:Dimension size="{size}"/>' if size else ""
-    return f'<ssd:Connector name="{name}" kind="{kind}"><ssc:Float64/>{dim}</ssd:Connector>'
+    return f'<ssd:Connector name="{name}" kind="{kind}"><ssc:Float64 unit="m"/>{dim}</ssd:Connector>'
 
 
 def _two_gains(tmp_path, connections, b_connectors=None):
