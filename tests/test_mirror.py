@@ -205,6 +205,8 @@ def test_mirror_packages_of_one_ring_have_15_components_and_pass_ssp_check(tmp_p
         assert check.returncode == 0, check.stderr
         listed = check.stdout.split("components [")[1].split("]")[0].split(", ")
         assert len(listed) == 15 and sum(c.startswith("'Actuator_") for c in listed) == 7
+        assert update_order(out, tmp_path / f"unpacked{fmi}") == \
+            [f"Actuator_{i}" for i in range(1, 8)] + ["Reconstructor"] + [f"Controller_{i}" for i in range(1, 8)]
         with zipfile.ZipFile(out) as z:
             ssd = z.read("SystemStructure.ssd").decode()
             assert f'version="{version}"' in ssd
@@ -222,6 +224,18 @@ def test_mirror_packages_of_one_ring_have_15_components_and_pass_ssp_check(tmp_p
                 assert 'endConnector="z[4]"' in ssd and 'startConnector="r[4]"' in ssd
             with zipfile.ZipFile(z.open("resources/SegmentController.fmu")) as f:
                 assert f'fmiVersion="{fmi}.0"' in f.read("modelDescription.xml").decode()
+
+
+def update_order(ssp, folder):
+    """The master's update order of a package: the Reconstructor's inputs feed its outputs directly,
+    element by element in FMI 2.0 and as the arrays z -> r in FMI 3.0, so it comes after every
+    actuator and before every controller."""
+    from pogofmu.ssp.package import read_ssd, unpack
+    from pogofmu.ssp.validate import validate
+
+    system = read_ssd(unpack(ssp, folder))
+    validate(system)
+    return system.update_order()
 
 
 @pytest.mark.parametrize("args", [("--rings", "0", "--out", "m.ssp"), ("--rings", "1", "--out", "m.zip")])
