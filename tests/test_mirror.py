@@ -159,16 +159,41 @@ def test_reconstructor_commands_are_the_least_squares_relative_pistons(user):
     for trial in range(3):
         z = rng.uniform(-1e-3, 1e-3, 7)
         rel = np.linalg.lstsq(D, D @ z, rcond=None)[0]
-        start = {"z_target": zt, "G": G, **{f"z_{i + 1}": z[i] for i in range(7)}}
+        start = {"z_target": zt, "G": G, **{f"z[{i + 1}]": z[i] for i in range(7)}}  # FMI 2.0: scalars
         rows = []
         for backend in ("python", "native"):
             res, _ = simulate(fmu(user, "Reconstructor_R1", backend), 0.002, 1e-3, start)
             rows.append(res)
-            got = np.array([res[f"r_{i + 1}"][-1] for i in range(7)])
+            got = np.array([res[f"r[{i + 1}]"][-1] for i in range(7)])
             assert np.max(np.abs(got - (zt - G * rel))) < 1e-15, backend
             assert res["piston_rms"][-1] == pytest.approx(np.sqrt(np.mean(rel ** 2)), rel=1e-12)
+            # FMI 3.0: the arrays z and r, one value reference each, the same bits
+            assert fmi3_commands(fmu(user, "Reconstructor_R1", backend, 3), zt, G, z) == list(got), backend
         for col in rows[0].dtype.names:
             assert np.array_equal(rows[0][col], rows[1][col]), col
+
+
+def fmi3_commands(path, zt, G, z):
+    """The FMI 3.0 Reconstructor's ``r`` for the pistons ``z``: ``z`` and ``r`` are arrays of 7
+    (``<Dimension start="7"/>``), set and got with one value reference and nValues = 7."""
+    from fmpy import extract, read_model_description
+    from fmpy.fmi3 import FMU3Slave
+
+    md = read_model_description(str(path))
+    v = {var.name: var for var in md.modelVariables}
+    assert [int(d.start) for d in v["z"].dimensions] == [7] and [int(d.start) for d in v["r"].dimensions] == [7]
+    f = FMU3Slave(guid=md.guid, unzipDirectory=extract(str(path)), modelIdentifier=md.coSimulation.modelIdentifier,
+                  instanceName="rec")
+    f.instantiate()
+    f.enterInitializationMode()
+    f.setFloat64([v["z_target"].valueReference, v["G"].valueReference], [zt, G])
+    f.setFloat64([v["z"].valueReference], [float(e) for e in z])
+    f.exitInitializationMode()
+    f.doStep(0.0, 1e-3)
+    out = f.getFloat64([v["r"].valueReference], nValues=7)
+    f.terminate()
+    f.freeInstance()
+    return out
 
 
 def test_mirror_packages_of_one_ring_have_15_components_and_pass_ssp_check(tmp_path):
@@ -181,9 +206,23 @@ def test_mirror_packages_of_one_ring_have_15_components_and_pass_ssp_check(tmp_p
         assert check.returncode == 0, check.stderr
         listed = check.stdout.split("components [")[1].split("]")[0].split(", ")
         assert len(listed) == 15 and sum(c.startswith("'Actuator_") for c in listed) == 7
+        assert update_order(out, tmp_path / f"unpacked{fmi}") == \
+            [f"Actuator_{i}" for i in range(1, 8)] + ["Reconstructor"] + [f"Controller_{i}" for i in range(1, 8)]
         with zipfile.ZipFile(out) as z:
             ssd = z.read("SystemStructure.ssd").decode()
             assert f'version="{version}"' in ssd
+            if fmi == "3":  # the Reconstructor's arrays, each segment connected to its element
+                from lxml import etree
+
+                schema = etree.XMLSchema(file=str(EXAMPLE.parents[1] / "ssp" / "schema" / "ssp-2.0"
+                                                  / "SystemStructureDescription.xsd"))
+                assert schema.validate(etree.fromstring(ssd.encode())), schema.error_log
+                assert ssd.count('<ssc:Dimension size="7"/>') == 2
+                assert 'startElement="Actuator_4" startConnector="z" endElement="Reconstructor" ' \
+                    'endConnector="z" endIndices="4"' in ssd
+                assert 'startConnector="r" startIndices="4" endElement="Controller_4" endConnector="r"' in ssd
+            else:
+                assert 'endConnector="z[4]"' in ssd and 'startConnector="r[4]"' in ssd
             with zipfile.ZipFile(z.open("resources/SegmentController.fmu")) as f:
                 assert f'fmiVersion="{fmi}.0"' in f.read("modelDescription.xml").decode()
             # one parameter set per component and nothing else: each component bound to its own set,
@@ -191,6 +230,18 @@ def test_mirror_packages_of_one_ring_have_15_components_and_pass_ssp_check(tmp_p
             sets = sorted(n for n in z.namelist() if n.endswith(".ssv"))
             assert len(sets) == 15 and "resources/reconstructor.ssv" in sets, sets
             assert set(re.findall(r'ParameterBinding source="([^"]+)"', ssd)) == set(sets)
+
+
+def update_order(ssp, folder):
+    """The master's update order of a package: the Reconstructor's inputs feed its outputs directly,
+    element by element in FMI 2.0 and as the arrays z -> r in FMI 3.0, so it comes after every
+    actuator and before every controller."""
+    from pogofmu.ssp.package import read_ssd, unpack
+    from pogofmu.ssp.validate import validate
+
+    system = read_ssd(unpack(ssp, folder))
+    validate(system)
+    return system.update_order()
 
 
 @pytest.mark.parametrize("args", [("--rings", "0", "--out", "m.ssp"), ("--rings", "1", "--out", "m.zip")])

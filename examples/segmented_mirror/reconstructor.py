@@ -13,8 +13,8 @@ and the global piston is held by the target: each controller's command is
 
     r_i = z_target - G z_rel_i.
 
-FMI 3.0 arrays are not available in pogofmu yet, so the pistons and commands are scalars
-``z_1 .. z_N`` and ``r_1 .. r_N``, one model per ring count: :func:`reconstructor_model` builds it,
+The pistons and commands are the arrays ``z`` and ``r`` of N (one FMI 3.0 array each; the
+scalars ``z[i]``, ``r[i]`` in FMI 2.0), one model per ring count: :func:`reconstructor_model` builds it,
 and the module defines the models for 1 and 2 rings.  Everything here runs in plain Python inside
 the FMU (no numpy): the reconstruction matrix is a constant computed once at import, applied with
 ``fmath.matvec`` (in the native FMU a C table and a loop: at 12 rings the 469 x 1332 products
@@ -100,7 +100,7 @@ def reconstructor_model(rings):
 
     def output_fn(t, x, q, u, p):
         rel = relative(u)
-        out = {f"r_{k + 1}": p.z_target - p.G * rel[k] for k in range(n)}
+        out = {"r": [p.z_target - p.G * rel[k] for k in range(n)]}
         out["piston_rms"] = fmath.sqrt(sum(v * v for v in rel) / n)
         return out
 
@@ -113,8 +113,6 @@ def reconstructor_model(rings):
         check(p)
         return [], {}
 
-    names = [f"r_{k + 1}" for k in range(n)]
-    pistons = tuple(f"z_{k + 1}" for k in range(n))
     return HybridModel(
         name=f"Reconstructor_R{rings}",
         description=f"edge-sensor reconstructor of a {rings}-ring segmented mirror ({n} segments, "
@@ -122,17 +120,17 @@ def reconstructor_model(rings):
         states=(),
         parameters=(Parameter("z_target", 5.0e-4, "m", "global piston the mirror is commanded to"),
                     Parameter("G", 0.5, "", "gain of the global loop on the reconstructed relative pistons")),
-        inputs=tuple(Variable(f"z_{k + 1}", "m", f"piston of segment {k + 1}", 0.0) for k in range(n)),
-        outputs=tuple(Variable(f"r_{k + 1}", "m", f"piston command of segment {k + 1}") for k in range(n))
-        + (Variable("piston_rms", "m", "rms of the reconstructed relative pistons (0: phased)"),),
+        inputs=(Variable("z", "m", "pistons of the segments", 0.0, shape=(n,)),),
+        outputs=(Variable("r", "m", "piston commands of the segments", shape=(n,)),
+                 Variable("piston_rms", "m", "rms of the reconstructed relative pistons (0: phased)")),
         flow=lambda t, x, q, u, p: [],
         events=(),
         initial=initial,
         output_fn=output_fn,
         check=check,
-        feedthrough={name: pistons for name in names + ["piston_rms"]},
-        default_input=lambda t, p: {f"z_{k + 1}": 1e-4 * k for k in range(n)},
-        plots=((tuple(names[:3]), ("piston_rms",)),),
+        feedthrough={"r": ("z",), "piston_rms": ("z",)},
+        default_input=lambda t, p: {"z": [1e-4 * k for k in range(n)]},
+        plots=((("r[1]", "r[2]", "r[3]"), ("piston_rms",)),),
         default_stop_time=0.01,
         default_step=1e-3,
     )

@@ -43,6 +43,11 @@ void pgb_free(PgBackend *b);
 const char *const *pgb_log_categories(PgBackend *b, size_t *n);
 /* FMI 3.0: the numbers of continuous states and event indicators */
 void pgb_counts(PgBackend *b, size_t *nx, size_t *nz);
+/* FMI 3.0: the array variables, as (value reference, number of elements) pairs, flat (*n pairs;
+ * the table lives as long as the backend). An array's value reference is its first element's; its
+ * elements have the consecutive ones after it, and every function below takes those (scalars only):
+ * the entry file expands an array's value reference, and refuses an element's. */
+const unsigned *pgb_arrays(PgBackend *b, size_t *n);
 
 int pgb_setup_experiment(PgBackend *b, int tolerance_defined, double tolerance, double start, int stop_defined,
                          double stop);

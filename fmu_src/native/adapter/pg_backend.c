@@ -47,6 +47,13 @@ void pgb_counts(PgBackend *b, size_t *nx, size_t *nz)
     *nz = (size_t)PG_FMU.model->ne;
 }
 
+const unsigned *pgb_arrays(PgBackend *b, size_t *n)
+{
+    (void)b;
+    *n = (size_t)PG_FMU.n_arrays;
+    return PG_FMU.arrays;
+}
+
 int pgb_setup_experiment(PgBackend *b, int tolerance_defined, double tolerance, double start, int stop_defined,
                          double stop)
 {

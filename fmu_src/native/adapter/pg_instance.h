@@ -36,6 +36,8 @@ typedef struct PgFmu {
     int fmi;           /* 2 or 3 */
     const char *const *log_categories; /* the modelDescription's LogCategories */
     int n_log_categories;
+    const unsigned *arrays; /* FMI 3.0: the array variables, (value reference, elements) pairs (pgb_arrays) */
+    int n_arrays;
 } PgFmu;
 
 /* the served outputs: the model's, the engine's (n_events, t_last_event, last_event), then for

@@ -36,6 +36,8 @@ typedef struct {
     int event_mode_used; /* co-simulation: fixed at instantiation */
     int event_pending;   /* co-simulation: the last fmi3DoStep returned eventHandlingNeeded (Event Mode next) */
     size_t nx, nz;       /* continuous states, event indicators */
+    const unsigned *arrays; /* the backend's array table (pgb_arrays): n_arrays pairs (vr, elements) */
+    size_t n_arrays;
     PgBackend *b;
 } Inst;
 
@@ -90,6 +92,80 @@ static int counts_match(Inst *in, const char *function, size_t nvr, size_t n_val
     return 0;
 }
 
+/* The number of values of value reference vr: an array's elements, 1 for a scalar, 0 for an
+ * element of an array after its first (no FMI 3.0 variable: *array is then the array's vr). */
+static size_t values_of(const Inst *in, unsigned vr, unsigned *array)
+{
+    for (size_t k = 0; k < in->n_arrays; ++k) {
+        unsigned head = in->arrays[2 * k], n = in->arrays[2 * k + 1];
+        if (vr == head) return n;
+        if (vr > head && vr < head + n) {
+            *array = head;
+            return 0;
+        }
+    }
+    return 1;
+}
+
+/* The value references of a get, set or directional derivative as the backends take them: each
+ * array's expanded into its elements' (row-major, the order of the values). nValues must count
+ * every element: else Error naming the call, the counts and the first array. Returns vr itself
+ * when the FMU has no arrays, else a list in *tmp (freed by the caller); NULL after an Error. */
+static const unsigned *expand(Inst *in, const char *function, const char *count, const fmi3ValueReference vr[],
+                              size_t nvr, size_t n_values, unsigned **tmp)
+{
+    char msg[400];
+    *tmp = NULL;
+    if (in->n_arrays == 0) {
+        if (nvr == n_values) return vr;
+        snprintf(msg, sizeof msg, "%s refused: %s = %zu for nValueReferences = %zu (every variable of this FMU is a "
+                 "scalar: %s must equal nValueReferences)", function, count, n_values, nvr, count);
+        emit(in, ST_ERROR, "logStatusError", msg);
+        return NULL;
+    }
+    size_t total = 0, first_array = (size_t)-1;
+    for (size_t i = 0; i < nvr; ++i) {
+        unsigned array = 0;
+        size_t n = values_of(in, vr[i], &array);
+        if (n == 0) {
+            snprintf(msg, sizeof msg, "%s refused: value reference %u is not a variable of this FMU (it is element %u "
+                     "of the array at value reference %u: address the array, with nValues counting its elements)",
+                     function, (unsigned)vr[i], (unsigned)vr[i] - array + 1, array);
+            emit(in, ST_ERROR, "logStatusError", msg);
+            return NULL;
+        }
+        if (n > 1 && first_array == (size_t)-1) first_array = i;
+        total += n;
+    }
+    if (total != n_values) {
+        if (first_array != (size_t)-1) {
+            snprintf(msg, sizeof msg, "%s refused: %s = %zu, but the %zu value reference(s) hold %zu values (value "
+                     "reference %u is an array of %zu elements): %s must count every array element", function, count,
+                     n_values, nvr, total, (unsigned)vr[first_array], values_of(in, vr[first_array], &(unsigned){0}),
+                     count);
+        } else {
+            snprintf(msg, sizeof msg, "%s refused: %s = %zu for nValueReferences = %zu (these variables are scalars: "
+                     "%s must equal nValueReferences)", function, count, n_values, nvr, count);
+        }
+        emit(in, ST_ERROR, "logStatusError", msg);
+        return NULL;
+    }
+    if (total == nvr) return vr; /* scalars only */
+    unsigned *out = malloc(total * sizeof *out);
+    if (!out) {
+        emit(in, ST_ERROR, "logStatusError", "out of memory");
+        return NULL;
+    }
+    size_t j = 0;
+    for (size_t i = 0; i < nvr; ++i) {
+        unsigned array = 0;
+        size_t n = values_of(in, vr[i], &array);
+        for (size_t e = 0; e < n; ++e) out[j++] = (unsigned)vr[i] + (unsigned)e;
+    }
+    *tmp = out;
+    return out;
+}
+
 static fmi3Status unsupported(Inst *in, const char *what)
 {
     char msg[300];
@@ -111,14 +187,20 @@ static char *copy_text(const char *text)
 /* a live instance (nothing to log to otherwise) */
 #define CHECK(c) do { if (!LIVE(c)) return fmi3Error; } while (0)
 #define NOT_NULL(p, function, argument) do { if (!(p)) return null_argument(INST, function, argument); } while (0)
-/* nvr scalar values: the counts equal, the arrays given */
-#define VALUES(nvr, n_values, vr, values, function)                                                 \
+/* Float64 and Int32 values: the arrays given, nValues counting every array element; `call`
+ * the backend's function with the value references expanded (expand) */
+#define VALUES(nvr, n_values, vr, values, function, call)                                           \
     do {                                                                                            \
-        if (!counts_match(INST, function, nvr, n_values)) return fmi3Error;                         \
         if (nvr) {                                                                                  \
             NOT_NULL(vr, function, "valueReferences");                                              \
-            NOT_NULL(values, function, "values");                                                   \
+            if (n_values) NOT_NULL(values, function, "values");                                     \
         }                                                                                           \
+        unsigned *tmp_;                                                                             \
+        const unsigned *vrs_ = expand(INST, function, "nValues", vr, nvr, n_values, &tmp_);         \
+        if (!vrs_) return fmi3Error;                                                                \
+        fmi3Status st_ = (fmi3Status)call(INST->b, vrs_, n_values, values);                         \
+        free(tmp_);                                                                                 \
+        return st_;                                                                                 \
     } while (0)
 #define REQUIRE(rule, function) do { if (!allowed(INST, RULE_##rule, function)) return fmi3Error; } while (0)
 #define LEADS_TO(st, m) do { if ((st) <= ST_WARNING) INST->mode = (m); } while (0)
@@ -167,6 +249,7 @@ static Inst *instantiate(const char *function, fmi3String instanceName, fmi3Stri
         in->b = pgb_new(&setup);
         if (in->b) {
             pgb_counts(in->b, &in->nx, &in->nz);
+            in->arrays = pgb_arrays(in->b, &in->n_arrays);
             in->mode = MODE_INSTANTIATED;
             in->magic = INST_MAGIC;
             return in;
@@ -309,16 +392,14 @@ fmi3Status fmi3GetFloat64(fmi3Instance c, const fmi3ValueReference vr[], size_t 
 {
     CHECK(c);
     REQUIRE(fmi3GetValues, "fmi3GetFloat64");
-    VALUES(nvr, nValues, vr, values, "fmi3GetFloat64");
-    return (fmi3Status)pgb_get_real(INST->b, vr, nvr, values);
+    VALUES(nvr, nValues, vr, values, "fmi3GetFloat64", pgb_get_real);
 }
 
 fmi3Status fmi3GetInt32(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, fmi3Int32 values[], size_t nValues)
 {
     CHECK(c);
     REQUIRE(fmi3GetValues, "fmi3GetInt32");
-    VALUES(nvr, nValues, vr, values, "fmi3GetInt32");
-    return (fmi3Status)pgb_get_integer(INST->b, vr, nvr, values);
+    VALUES(nvr, nValues, vr, values, "fmi3GetInt32", pgb_get_integer);
 }
 
 fmi3Status fmi3GetBoolean(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, fmi3Boolean values[], size_t nValues)
@@ -346,16 +427,14 @@ fmi3Status fmi3SetFloat64(fmi3Instance c, const fmi3ValueReference vr[], size_t 
 {
     CHECK(c);
     REQUIRE(fmi3SetFloat, "fmi3SetFloat64");
-    VALUES(nvr, nValues, vr, values, "fmi3SetFloat64");
-    return (fmi3Status)pgb_set_real(INST->b, vr, nvr, values);
+    VALUES(nvr, nValues, vr, values, "fmi3SetFloat64", pgb_set_real);
 }
 
 fmi3Status fmi3SetInt32(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, const fmi3Int32 values[], size_t nValues)
 {
     CHECK(c);
     REQUIRE(fmi3SetDiscrete, "fmi3SetInt32");
-    VALUES(nvr, nValues, vr, values, "fmi3SetInt32");
-    return (fmi3Status)pgb_set_integer(INST->b, vr, nvr, values);
+    VALUES(nvr, nValues, vr, values, "fmi3SetInt32", pgb_set_integer);
 }
 
 fmi3Status fmi3SetBoolean(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, const fmi3Boolean values[],
@@ -549,15 +628,6 @@ fmi3Status fmi3GetDirectionalDerivative(fmi3Instance c, const fmi3ValueReference
 {
     CHECK(c);
     REQUIRE(fmi3GetDirectionalDerivative, "fmi3GetDirectionalDerivative");
-    /* every variable is a scalar: one seed per known, one sensitivity per unknown */
-    if (nSeed != nKnowns || nSensitivity != nUnknowns) {
-        char text[300];
-        snprintf(text, sizeof text, "fmi3GetDirectionalDerivative refused: nSeed = %zu and nSensitivity = %zu must "
-                 "equal nKnowns = %zu and nUnknowns = %zu (every variable of this FMU is a scalar)", nSeed,
-                 nSensitivity, nKnowns, nUnknowns);
-        emit(INST, ST_ERROR, "logStatusError", text);
-        return fmi3Error;
-    }
     if (nUnknowns) {
         NOT_NULL(unknowns, "fmi3GetDirectionalDerivative", "unknowns");
         NOT_NULL(sensitivity, "fmi3GetDirectionalDerivative", "sensitivity");
@@ -566,8 +636,20 @@ fmi3Status fmi3GetDirectionalDerivative(fmi3Instance c, const fmi3ValueReference
         NOT_NULL(knowns, "fmi3GetDirectionalDerivative", "knowns");
         NOT_NULL(seed, "fmi3GetDirectionalDerivative", "seed");
     }
-    return (fmi3Status)pgb_directional(INST->b, unknowns, nUnknowns, knowns, nKnowns, seed, sensitivity,
-                                           "fmi3GetDirectionalDerivative");
+    /* one seed per element of a known, one sensitivity per element of an unknown (the standard's
+     * rule for array variables) */
+    unsigned *tmp_u, *tmp_k = NULL;
+    const unsigned *u = expand(INST, "fmi3GetDirectionalDerivative", "nSensitivity", unknowns, nUnknowns,
+                               nSensitivity, &tmp_u);
+    const unsigned *k = u ? expand(INST, "fmi3GetDirectionalDerivative", "nSeed", knowns, nKnowns, nSeed, &tmp_k)
+                          : NULL;
+    fmi3Status st = fmi3Error;
+    if (u && k)
+        st = (fmi3Status)pgb_directional(INST->b, u, nSensitivity, k, nSeed, seed, sensitivity,
+                                         "fmi3GetDirectionalDerivative");
+    free(tmp_u);
+    free(tmp_k);
+    return st;
 }
 
 fmi3Status fmi3GetAdjointDerivative(fmi3Instance c, const fmi3ValueReference unknowns[], size_t nUnknowns,

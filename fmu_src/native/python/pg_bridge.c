@@ -56,6 +56,8 @@ struct PgBackend {
     int *real_slot, *int_slot; /* value reference -> buffer slot, -1 if not buffered */
     size_t n_slots;
     size_t nx, nz;     /* FMI 3.0: continuous states, event indicators */
+    unsigned *arrays;  /* FMI 3.0: the slave's array_table(), n_arrays (vr, elements) pairs */
+    size_t n_arrays;
     char **known;      /* the FMU's log categories */
     size_t n_known;
 };
@@ -595,6 +597,7 @@ void pgb_free(PgBackend *in)
     }
     for (size_t i = 0; i < in->n_known; ++i) free(in->known[i]);
     free(in->known);
+    free(in->arrays);
     free(in->real_slot);
     free(in->int_slot);
     free(in->name);
@@ -633,6 +636,19 @@ static void read_interface(Inst *in)
             py.Py_DecRef(r);
         }
     }
+    PyObject *m = py.PyObject_GetAttrString(in->obj, "array_table"); /* (vr, elements, vr, ...) */
+    PyObject *table = m ? py.PyObject_CallObject(m, NULL) : NULL;
+    Py_ssize_t_ size = table ? py.PySequence_Size(table) : 0;
+    if (size > 0 && (in->arrays = calloc((size_t)size, sizeof *in->arrays))) {
+        for (Py_ssize_t_ i = 0; i < size; ++i) {
+            PyObject *item = py.PySequence_GetItem(table, i);
+            in->arrays[i] = item ? (unsigned)py.PyLong_AsLong(item) : 0u;
+            if (item) py.Py_DecRef(item);
+        }
+        in->n_arrays = (size_t)size / 2;
+    }
+    if (table) py.Py_DecRef(table);
+    if (m) py.Py_DecRef(m);
     py.PyErr_Clear();
 }
 
@@ -901,6 +917,12 @@ const char *const *pgb_log_categories(PgBackend *in, size_t *n)
 {
     *n = in->n_known;
     return (const char *const *)in->known;
+}
+
+const unsigned *pgb_arrays(PgBackend *in, size_t *n)
+{
+    *n = in->n_arrays;
+    return in->arrays;
 }
 
 void pgb_counts(PgBackend *in, size_t *nx, size_t *nz)

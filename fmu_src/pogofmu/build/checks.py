@@ -81,8 +81,9 @@ def check_declarations(model) -> None:
     if not isinstance(model.name, str) or not NAME.match(model.name) or model.name.startswith("_pogofmu"):
         raise ModelFileError(f"{_at(model, model)}: model name {model.name!r} is not a valid FMU name: it names the "
                              f"FMU's files and C functions, so letters, digits and _ only, not starting with a digit")
+    inputs, outputs = model.declared_inputs(), model.declared_outputs()
     groups = (("state", model.states, Variable), ("parameter", model.parameters, Parameter),
-              ("input", model.inputs, Variable), ("output", model.outputs, Variable), ("event", model.events, Event))
+              ("input", inputs, Variable), ("output", outputs, Variable), ("event", model.events, Event))
     for what, items, cls in groups:
         if not isinstance(items, tuple):
             raise ModelFileError(f"{_at(model, model)}: {what}s={type(items).__name__}: HybridModel takes a tuple "
@@ -107,10 +108,12 @@ def check_declarations(model) -> None:
                 problem = unit_problem(item.unit)
                 if problem:
                     raise ModelFileError(f"{_at(item, model)}: {what} {name!r} has the unit {item.unit!r}: {problem}")
+            if what in ("state", "input", "output"):
+                _check_shape(item, what, model)
     # name spaces: the FMU's variables (parameters, inputs, outputs); the states (a state may also be
     # an output of the same name, carrying its value, but not a parameter or an input); the events
-    spaces = ((("parameter", model.parameters), ("input", model.inputs), ("output", model.outputs)),
-              (("state", model.states), ("parameter", model.parameters), ("input", model.inputs)),
+    spaces = ((("parameter", model.parameters), ("input", inputs), ("output", outputs)),
+              (("state", model.states), ("parameter", model.parameters), ("input", inputs)),
               (("event", model.events),))
     for space in spaces:
         seen = {}
@@ -162,6 +165,28 @@ def check_declarations(model) -> None:
             for name in names:
                 if name not in plotted:
                     raise ModelFileError(f"{_at(model, model)}: plots name {name!r}, which is not an input or output")
+
+
+def _check_shape(var, what, model) -> None:
+    """``shape``: ``()`` (a scalar) or ``(N,)`` with an int ``N >= 1`` (a 1-D array), for inputs and
+    outputs; a state is a scalar (``x`` is a flat list of floats)."""
+    from pogofmu.runtime.model import array_size
+
+    shape = var.shape
+    if shape == ():
+        return
+    if what == "state":
+        raise ModelFileError(f"{_at(var, model)}: state {var.name!r} has shape={shape!r}, which violates the rule: "
+                             f"a state is a scalar (shape=()); declare one state per element")
+    if array_size(var) is None:
+        raise ModelFileError(f"{_at(var, model)}: {what} {var.name!r} has shape={shape!r}, which violates the rule: "
+                             f"shape=() (a scalar) or shape=(N,) with an int N >= 1 (a 1-D array)")
+    if not _is_number(var.start):
+        raise ModelFileError(f"{_at(var, model)}: {what} {var.name!r} has start={var.start!r}, which violates the "
+                             f"rule: an array's start is one number, every element's")
+    if what == "output" and var.name in {s.name for s in model.states}:
+        raise ModelFileError(f"{_at(var, model)}: output {var.name!r} has shape={shape!r} and is also a state, which "
+                             f"violates the rule: an output of a state's name carries that (scalar) state")
 
 
 def _call(files, model, what, fn, *args):
@@ -268,30 +293,44 @@ def check_behaviour(model, files: Iterable) -> None:
         if set(jumped[1]) != set(q):
             raise ModelFileError(f"{_fn_at(ev.jump)}: event {ev.name}: the jump returns q with the keys "
                                  f"{sorted(jumped[1])}, initial with {sorted(q)}: a jump keeps the keys of q")
-    out = _call(files, model, "output_fn", model.output_fn, t, x, q, u, p)
+    output_fn = model.declared_output_fn()
+    out = _call(files, model, "output_fn", output_fn, t, x, q, u, p)
     if not isinstance(out, dict):
-        raise ModelFileError(f"{_fn_at(model.output_fn)}: output_fn returns {type(out).__name__}: it returns a dict "
+        raise ModelFileError(f"{_fn_at(output_fn)}: output_fn returns {type(out).__name__}: it returns a dict "
                              f"{{output name: value}}")
-    declared = [v.name for v in model.outputs]
+    outputs = model.declared_outputs()
+    declared = [v.name for v in outputs]
     extra = [k for k in out if k not in declared]
     if extra:
-        raise ModelFileError(f"{_fn_at(model.output_fn)}: output_fn returns {extra[0]!r}, which is not declared in "
+        raise ModelFileError(f"{_fn_at(output_fn)}: output_fn returns {extra[0]!r}, which is not declared in "
                              f"outputs (declare Variable({extra[0]!r}, ...) or drop it)")
     missing = [k for k in declared if k not in out]
     if missing:
-        var = next(v for v in model.outputs if v.name == missing[0])
+        var = next(v for v in outputs if v.name == missing[0])
         raise ModelFileError(f"{_at(var, model)}: output {missing[0]!r} is declared but output_fn does not return it")
+    from pogofmu.runtime.model import array_size
+
+    sizes = {v.name: array_size(v) for v in outputs}
     for k, v in out.items():
-        if not _is_number(v):
-            raise ModelFileError(f"{_fn_at(model.output_fn)}: output_fn returns {k} = {v!r}: an output is a number")
-        if k in model.integer_outputs and not (isinstance(v, int) or float(v).is_integer()):
-            raise ModelFileError(f"{_fn_at(model.output_fn)}: output {k} is an integer output but output_fn returns "
-                                 f"{v!r}")
+        n = sizes[k]
+        if n is not None:
+            if not isinstance(v, (list, tuple)) or len(v) != n:
+                raise ModelFileError(f"{_fn_at(output_fn)}: output_fn returns {k} = {v!r}, which violates the rule: "
+                                     f"{k} is an array of {n} (shape=({n},)): a list of {n} numbers")
+            values = [(f"{k}[{i}]", e) for i, e in enumerate(v, start=1)]
+        else:
+            values = [(k, v)]
+        for key, e in values:
+            if not _is_number(e):
+                raise ModelFileError(f"{_fn_at(output_fn)}: output_fn returns {key} = {e!r}: an output is a number")
+            if key in model.integer_outputs and not (isinstance(e, int) or float(e).is_integer()):
+                raise ModelFileError(f"{_fn_at(output_fn)}: output {key} is an integer output but output_fn "
+                                     f"returns {e!r}")
     from pogofmu.runtime.fmi3 import check_state_outputs
 
     problem = check_state_outputs(model)
     if problem:
-        raise ModelFileError(f"{_fn_at(model.output_fn)}: {problem}")
+        raise ModelFileError(f"{_fn_at(output_fn)}: {problem}")
     verdict = _call(files, model, "domain", model.domain, t, x, q, u, p, lambda scale: 0.0)
     if verdict is not None and not isinstance(verdict, str):
         raise ModelFileError(f"{_fn_at(model.domain)}: domain returns {verdict!r}: None inside the domain, else the "

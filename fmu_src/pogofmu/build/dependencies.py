@@ -130,9 +130,14 @@ def check_feedthrough(model, on_inputs) -> None:
         if seen - declared:
             problems.append(f"output {var.name} depends on the input(s) {sorted(seen - declared)} "
                             f"not declared in feedthrough")
-        if declared - seen:
-            problems.append(f"output {var.name} is declared to depend on {sorted(declared - seen)}, "
-                            f"which never changed it at the sampled points")
+    # a declaration naming an array stands for all its elements: it holds when one of them is seen
+    # (declare elements, "r[1]": ("z[1]",), for an FMI 2.0 model structure element by element)
+    for out, ins in model.declared_feedthrough().items():
+        for name in ins:
+            pairs = [(o, i) for o in model.elements(out) for i in model.elements(name)]
+            if not any(i in on_inputs.get(f"output:{o}", set()) for o, i in pairs):
+                problems.append(f"output {out} is declared to depend on {[name]}, "
+                                f"which never changed it at the sampled points")
     if problems:
         raise DependencyError(f"{model.name}: " + "; ".join(problems))
 

@@ -99,7 +99,9 @@ def model_description_fmi2(cls, token: str, source_files=(), directional=False) 
     root = ET.Element("fmiModelDescription", {
         "fmiVersion": "2.0", "modelName": model.name, "guid": token, "description": model.description,
         "author": cls.author, "license": cls.license, "version": project_version(),
-        "generationTool": _tool(), "generationDateAndTime": _build_date(), "variableNamingConvention": "flat",
+        "generationTool": _tool(), "generationDateAndTime": _build_date(),
+        # an array's elements are the scalars z[1] ... z[N]: names of the structured convention
+        "variableNamingConvention": "structured" if any(v.element for v in variables) else "flat",
         "numberOfEventIndicators": "0"})
     ET.SubElement(root, "CoSimulation", {
         "modelIdentifier": model.name, "needsExecutionTool": "false",
@@ -171,27 +173,50 @@ def model_description_fmi3(cls, token: str, directional=False) -> bytes:
                                              hasEventMode="true", canReturnEarlyAfterIntermediateUpdate="false",
                                              providesIntermediateUpdate="false", maxOutputDerivativeOrder="0"))
     mv = _description_body(root, cls, variables)
+    declared = {d.name: d for d in model.declared_inputs() + model.declared_outputs()}
     for v in variables:
+        if v.element and v.element[1] > 1:
+            continue  # an array is one variable, at its first element's value reference
         attrs = _variable_attributes(model, v)
+        if v.element:  # the array: the declared name and description
+            attrs.update(name=v.element[0], description=declared[v.element[0]].description)
         if v.type == "Real" and v.unit:
             attrs["unit"] = v.unit
         if v.start is not None:
-            attrs["start"] = _number(v.start, v.type == "Integer")
+            attrs["start"] = " ".join([_number(v.start, v.type == "Integer")] * (v.element[2] if v.element else 1))
         if v.name.startswith("der(") and v.name[4:-1] in by_name:
             attrs["derivative"] = str(by_name[v.name[4:-1]].vr)
-        ET.SubElement(mv, "Float64" if v.type == "Real" else "Int32", attrs)
+        var_el = ET.SubElement(mv, "Float64" if v.type == "Real" else "Int32", attrs)
+        if v.element:
+            ET.SubElement(var_el, "Dimension", start=str(v.element[2]))
     ms = ET.SubElement(root, "ModelStructure")
     states = [by_name[s.name] for s in model.states]
     derivatives = [by_name[f"der({s.name})"] for s in model.states]
     deps = structure(model)
 
+    # an array's element stands for the array (its value reference is the first element's): the
+    # dependencies of FMI 3.0 are on whole variables
+    head = {v.vr: v.vr - v.element[1] + 1 if v.element else v.vr for v in variables}
+
     def knowns(key):
         on_states, on_inputs = deps.get(key, (set(), set()))
-        return {by_name[n].vr for n in on_states} | {by_name[n].vr for n in on_inputs}
+        return {head[by_name[n].vr] for n in on_states} | {head[by_name[n].vr] for n in on_inputs}
+
+    def union(keys):
+        return set().union(*map(knowns, keys))
+
+    def keys_of(v, prefix):  # the element keys of an array variable, the variable's own otherwise
+        if not v.element:
+            return [f"{prefix}{v.name}"]
+        return [f"{prefix}{w.name}" for w in variables if w.element and w.element[0] == v.element[0]]
 
     engine_outputs = {v.name for v in model.engine_outputs()}
     for v in variables:
-        if v.causality == "output":
+        if v.causality == "output" and v.element and v.element[1] > 1:
+            continue
+        if v.causality == "output" and v.element:
+            ET.SubElement(ms, "Output", valueReference=str(v.vr), **_dependencies(union(keys_of(v, "output:"))))
+        elif v.causality == "output":
             # the engine's event counters change only at events: they depend on no known
             known = set() if v.name in engine_outputs else knowns(f"output:{v.name}")
             ET.SubElement(ms, "Output", valueReference=str(v.vr), **_dependencies(known))
@@ -201,12 +226,13 @@ def model_description_fmi3(cls, token: str, directional=False) -> bytes:
     from .dependencies import initial_dependencies
 
     at_init = initial_dependencies(model)
-    key_of = {v.vr: f"output:{v.name}" for v in variables if v.causality == "output"}
-    key_of.update({v.vr: f"state:{s.name}" for s, v in zip(model.states, states)})
-    key_of.update({v.vr: f"der:{s.name}" for s, v in zip(model.states, derivatives)})
+    key_of = {v.vr: keys_of(v, "output:") for v in variables if v.causality == "output" and not
+              (v.element and v.element[1] > 1)}
+    key_of.update({v.vr: [f"state:{s.name}"] for s, v in zip(model.states, states)})
+    key_of.update({v.vr: [f"der:{s.name}"] for s, v in zip(model.states, derivatives)})
     for vr in sorted(key_of):
         ET.SubElement(ms, "InitialUnknown", valueReference=str(vr),
-                      **_dependencies(by_name[n].vr for n in at_init.get(key_of[vr], ())))
+                      **_dependencies({head[by_name[n].vr] for key in key_of[vr] for n in at_init.get(key, ())}))
     for ev in model.events:
         ET.SubElement(ms, "EventIndicator", valueReference=str(by_name[indicator_name(ev)].vr),
                       **_dependencies(knowns(f"indicator:{ev.name}")))

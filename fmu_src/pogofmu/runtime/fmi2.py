@@ -110,6 +110,7 @@ class FmiVariable:
     unit: str = ""
     start: Optional[float] = None
     role: tuple = ()  # ("parameter", name) | ("input", index) | ("output", name)
+    element: tuple = ()  # an element of an array input or output: (array name, 1-based index, size)
 
 
 def fmi2_variables(model: HybridModel) -> Tuple[FmiVariable, ...]:
@@ -123,13 +124,13 @@ def fmi2_variables(model: HybridModel) -> Tuple[FmiVariable, ...]:
         integer = var.name in model.integer_inputs
         out.append(FmiVariable(var.name, len(out), "Integer" if integer else "Real", "input",
                                "discrete" if integer else "continuous", var.description, var.unit,
-                               int(var.start) if integer else float(var.start), ("input", i)))
+                               int(var.start) if integer else float(var.start), ("input", i), var.element))
     integers = model.all_integer_outputs()
     for var in model.all_outputs():
         integer = var.name in integers
         out.append(FmiVariable(var.name, len(out), "Integer" if integer else "Real", "output",
                                "discrete" if integer else "continuous", var.description, var.unit,
-                               None, ("output", var.name)))
+                               None, ("output", var.name), var.element))
     return tuple(out)
 
 

@@ -50,7 +50,7 @@ from .fmi2 import FMUError, FmiVariable, HybridSlave, fmi2_variables
 from .model import FALLING, HybridModel, ModelError
 from .status import ERROR
 
-__all__ = ["fmi3_variables", "fmi3_class", "Fmi3Slave", "rate_unit", "indicator_name"]
+__all__ = ["fmi3_variables", "fmi3_class", "Fmi3Slave", "rate_unit", "indicator_name", "array_table"]
 
 # the unit of d(state)/dt for the units of pogofmu.runtime.units
 _RATE_UNITS = {"m": "m/s", "m/s": "m/s2", "m.s": "m", "s": "", "J": "W", "": ""}
@@ -91,6 +91,18 @@ def fmi3_variables(model: HybridModel) -> Tuple[FmiVariable, ...]:
                                "", None, ("derived", indicator_name(ev))))
     out.append(FmiVariable("time", len(out), "Real", "independent", "continuous", "simulation time", "s", None,
                            ("output", "time")))
+    return tuple(out)
+
+
+def array_table(variables) -> Tuple[int, ...]:
+    """The FMI 3.0 arrays among ``variables``: ``(value reference, number of elements)`` pairs, flat.
+    An array variable has the value reference of its first element; its elements' own value
+    references (consecutive, after it) are not FMI 3.0 variables: the entry file (pg_fmi3.c) expands
+    an array's value reference into them, so that the backends see scalars only."""
+    out = []
+    for v in variables:
+        if v.element and v.element[1] == 1:
+            out += [v.vr, v.element[2]]
     return tuple(out)
 
 
@@ -170,6 +182,10 @@ class Fmi3Slave(HybridSlave):
         return super()._launcher_attach(mode, event_mode_used, early_return_allowed)
 
     # ---- variables --------------------------------------------------------------------------
+    def array_table(self):
+        """:func:`array_table` of this FMU's variables (read once by the launcher)."""
+        return array_table(type(self).variables())
+
     def _complete_outputs(self, t, x, q, u, p, out):
         out["time"] = t
         for var, v in zip(type(self).model.states, x):

@@ -62,17 +62,70 @@ class ZenoError(ModelError):
 
 @dataclass(frozen=True)
 class Variable:
-    """A named scalar with a unit and a description (state, input or output)."""
+    """A named variable with a unit and a description (state, input or output).
+
+    ``shape=(N,)`` (inputs and outputs) declares a 1-D array of ``N`` elements: one FMI 3.0 variable
+    with ``<Dimension start="N"/>``, the ``N`` scalars ``name[1]`` ... ``name[N]`` in FMI 2.0
+    (:meth:`HybridModel.__post_init__` expands it; ``start`` is every element's)."""
 
     name: str
     unit: str = ""
     description: str = ""
     start: float = 0.0
+    shape: tuple = ()
     site: Optional[tuple] = field(default=None, compare=False, repr=False)  # (file, line) of the declaration
+    # an element of an array declaration: (array name, 1-based index, number of elements)
+    element: tuple = field(default=(), compare=False, repr=False)
 
     def __post_init__(self):
         if self.site is None:
             object.__setattr__(self, "site", _site())
+
+
+def array_size(var) -> Optional[int]:
+    """``N`` for a well-formed 1-D array declaration ``shape=(N,)``, ``None`` for a scalar (``shape=()``)
+    and for a malformed shape (which the build's checks refuse, naming the rule)."""
+    shape = getattr(var, "shape", ())
+    if isinstance(shape, tuple) and len(shape) == 1 and isinstance(shape[0], int) \
+            and not isinstance(shape[0], bool) and shape[0] >= 1:
+        return shape[0]
+    return None
+
+
+def element_name(name: str, index: int) -> str:
+    """The FMI 2.0 scalar of element ``index`` (1-based) of the array ``name``: ``name[index]``
+    (the structured naming convention)."""
+    return f"{name}[{index}]"
+
+
+def _expand(variables):
+    """Scalars for declarations: an array ``z`` of ``N`` becomes ``z[1]`` ... ``z[N]``, in order."""
+    out = []
+    for var in variables:
+        n = array_size(var)
+        if n is None:
+            out.append(var)
+            continue
+        for i in range(1, n + 1):
+            out.append(Variable(element_name(var.name, i), var.unit, f"{var.description} (element {i} of {n})",
+                                var.start, (), var.site, (var.name, i, n)))
+    return tuple(out)
+
+
+def _flat_values(fn, arrays):
+    """``fn`` returning ``{name: value or list}`` made to return scalars only: the list of an array
+    output ``r`` becomes the entries ``r[1]`` ... ``r[N]``, in the place of ``r``."""
+    def flat(*args):
+        out = {}
+        for name, value in fn(*args).items():
+            n = arrays.get(name)
+            if n is None:
+                out[name] = value
+            else:
+                for i in range(n):
+                    out[element_name(name, i + 1)] = value[i]
+        return out
+    return flat
 
 
 @dataclass(frozen=True)
@@ -183,10 +236,68 @@ class HybridModel:
     time_scales: Optional[Callable] = None  # p -> ((label, parameter names, seconds), ...)
     error_scales: Optional[Callable] = None  # p -> ((label, parameter names, magnitude), ...)
     site: Optional[tuple] = field(default=None, compare=False, repr=False)  # (file, line) of the declaration
+    # what the model file declared, where it has arrays (see _expand_arrays): a dict with the keys
+    # inputs, outputs, output_fn, default_input, feedthrough, sizes; None for a model of scalars only
+    declared: Optional[dict] = field(default=None, compare=False, repr=False)
 
     def __post_init__(self):
         if self.site is None:
             object.__setattr__(self, "site", _site())
+        # (inputs or outputs that are not tuples are left to the build's checks, which name the rule)
+        if self.declared is None and isinstance(self.inputs, tuple) and isinstance(self.outputs, tuple) \
+                and any(array_size(v) for v in self.inputs + self.outputs):
+            self._expand_arrays()
+
+    def _expand_arrays(self):
+        """Array inputs and outputs (``shape=(N,)``) as their scalar elements, so that everything
+        downstream (engine, FMI 2.0, generated C, model structure) sees scalars: ``inputs`` and
+        ``outputs`` list the elements ``z[1]`` ... ``z[N]`` in the place of ``z`` (``u`` holds them
+        in consecutive slots); ``output_fn`` and ``default_input`` return the elements in the place
+        of a list; a name of an array in ``feedthrough`` and the integer sets stands for all its
+        elements.  The declarations are kept in ``declared`` (the FMI 3.0 description groups the
+        elements back into one array variable)."""
+        arrays_in = {v.name: array_size(v) for v in self.inputs if array_size(v)}
+        arrays_out = {v.name: array_size(v) for v in self.outputs if array_size(v)}
+        declared = {"inputs": self.inputs, "outputs": self.outputs, "output_fn": self.output_fn,
+                    "default_input": self.default_input, "feedthrough": dict(self.feedthrough),
+                    "sizes": dict(arrays_in, **arrays_out)}
+        object.__setattr__(self, "declared", declared)
+        names = self.elements
+
+        feedthrough = {}
+        for out, ins in self.feedthrough.items():
+            flat_in = tuple(e for name in ins for e in names(name))
+            for o in names(out):
+                feedthrough[o] = tuple(dict.fromkeys(feedthrough.get(o, ()) + flat_in))
+        changes = {"inputs": _expand(self.inputs), "outputs": _expand(self.outputs),
+                   "feedthrough": feedthrough,
+                   "integer_inputs": frozenset(e for n in self.integer_inputs for e in names(n)),
+                   "integer_outputs": frozenset(e for n in self.integer_outputs for e in names(n))}
+        if arrays_out:
+            changes["output_fn"] = _flat_values(self.output_fn, arrays_out)
+        if arrays_in and self.default_input is not None:
+            changes["default_input"] = _flat_values(self.default_input, arrays_in)
+        for key, value in changes.items():
+            object.__setattr__(self, key, value)
+
+    def elements(self, name: str) -> list:
+        """The scalars of a declared input or output: ``[name]``, or an array's ``name[1]`` ... ``name[N]``."""
+        n = self.declared["sizes"].get(name) if self.declared else None
+        return [name] if n is None else [element_name(name, i) for i in range(1, n + 1)]
+
+    def declared_feedthrough(self) -> Mapping[str, Tuple[str, ...]]:
+        """``feedthrough`` as declared: an array's name stands for all its elements."""
+        return self.declared["feedthrough"] if self.declared else self.feedthrough
+
+    def declared_inputs(self) -> Tuple[Variable, ...]:
+        """The inputs as the model file declared them (an array as one :class:`Variable`)."""
+        return self.declared["inputs"] if self.declared else self.inputs
+
+    def declared_outputs(self) -> Tuple[Variable, ...]:
+        return self.declared["outputs"] if self.declared else self.outputs
+
+    def declared_output_fn(self) -> Callable:
+        return self.declared["output_fn"] if self.declared else self.output_fn
 
     def check_parameters(self, p: "Params") -> None:
         """The rules of the parameters: each is a finite number (the rule every model has), then the

@@ -88,6 +88,8 @@ class Component:
         self._state = None
         self.saved_at = None
         self._plans = {}
+        self._sizes = {}  # value reference -> number of values (an FMI 3.0 array's elements)
+        self._arrays = {}  # value reference of an FMI 3.0 array input -> the values it was last set to
 
     # ---- logging ------------------------------------------------------------------------------
     def _log(self, status, message):
@@ -115,8 +117,10 @@ class Component:
         return self.variables[name].type
 
     def _plan(self, names):
-        """``[(kind, value references, positions in names, fast call or None)]``: one FMI call
-        per kind (cached with its ctypes buffers: the master's calls cost no fmpy wrapper)."""
+        """``[(kind, value references, slots, fast call or None)]``: one FMI call per kind (cached
+        with its ctypes buffers: the master's calls cost no fmpy wrapper). ``slots[i]`` is where the
+        value of ``names[i]`` lies among the call's values (an FMI 3.0 array is one value reference
+        whose elements are consecutive values; a name is one element, ``z[2]``)."""
         key = tuple(names)
         plan = self._plans.get(key)
         if plan is None:
@@ -124,38 +128,65 @@ class Component:
             for pos, n in enumerate(key):
                 t = self.type_of(n)
                 kind = "real" if t in REAL_TYPES else "int" if t in INTEGER_TYPES else t.lower()
-                vrs, where = groups.setdefault(kind, ([], []))
-                vrs.append(self.vr(n))
+                vrs, where, slots, base = groups.setdefault(kind, ([], [], [], {}))
+                _, index, size = self.comp.elements.get(n, (None, 1, 1))
+                vr = self.vr(n)
+                if vr not in base:  # its values follow those of the value references before it
+                    self._sizes[vr] = size
+                    base[vr] = sum(map(self._size, vrs))
+                    vrs.append(vr)
                 where.append(pos)
-            plan = self._plans[key] = [(kind, vrs, where, self._fast(kind, vrs))
-                                       for kind, (vrs, where) in groups.items()]
+                slots.append(base[vr] + index - 1)
+            plan = self._plans[key] = [(kind, vrs, (where, slots), self._fast(kind, vrs))
+                                       for kind, (vrs, where, slots, _) in groups.items()]
         return plan
 
+    def _size(self, vr):
+        return self._sizes.get(vr, 1)
+
     def _fast(self, kind, vrs):
-        """``(get(), set(values))`` calling the FMU's own functions with prebuilt buffers, for
-        reals and integers; None for the other types (fmpy's wrappers)."""
+        """``(get(), set(slots, values))`` calling the FMU's own functions with prebuilt buffers, for
+        reals and integers; None for the other types (fmpy's wrappers). The values of an array not
+        given are its last set ones (``_arrays``: an FMI 3.0 array is set whole)."""
         names = self.FAST.get(kind)
         if names is None:
             return None
         ctype = ctypes.c_double if kind == "real" else ctypes.c_int32
         n = len(vrs)
+        n_values = sum(map(self._size, vrs))
+        arrays = [(vr, sum(map(self._size, vrs[:k]))) for k, vr in enumerate(vrs) if self._size(vr) > 1]
         vr_arr = (ctypes.c_uint32 * n)(*vrs)
-        buf = (ctype * n)()
+        buf = (ctype * n_values)()
         fget, fset = raw_function(self.fmu, names[0]), raw_function(self.fmu, names[1])
         comp, fmi3 = self.fmu.component, self.fmi == 3
 
         def get():
-            status = fget(comp, vr_arr, n, buf, n) if fmi3 else fget(comp, vr_arr, n, buf)
+            status = fget(comp, vr_arr, n, buf, n_values) if fmi3 else fget(comp, vr_arr, n, buf)
             if status > 1:
                 raise _call_failed(names[0], status)
             return buf[:]
 
-        def set_(values):
-            buf[:] = values
-            status = fset(comp, vr_arr, n, buf, n) if fmi3 else fset(comp, vr_arr, n, buf)
+        def set_(slots, values):
+            for vr, at in arrays:
+                buf[at:at + self._size(vr)] = self._array_values(vr, kind)
+            for slot, v in zip(slots, values):
+                buf[slot] = v
+            status = fset(comp, vr_arr, n, buf, n_values) if fmi3 else fset(comp, vr_arr, n, buf)
             if status > 1:
                 raise _call_failed(names[1], status)
+            for vr, at in arrays:
+                self._arrays[vr] = buf[at:at + self._size(vr)]
         return get, set_
+
+    def _array_values(self, vr, kind):
+        """The values an array input was last set to (its start values before)."""
+        values = self._arrays.get(vr)
+        if values is None:
+            var = next(v for v in self.variables.values() if v.valueReference == vr)
+            start = str(var.start or "0").split()
+            conv = float if kind == "real" else int
+            values = [conv(start[min(i, len(start) - 1)]) for i in range(self._size(vr))]
+        return values
 
     def set_values(self, names, values):
         """Set variables by name (reals, integers, booleans, strings each in one call)."""
@@ -164,18 +195,19 @@ class Component:
         self._set_values(names, values)
 
     def _set_values(self, names, values):
-        for kind, vrs, where, fast in self._plan(names):
+        for kind, vrs, (where, slots), fast in self._plan(names):
             vals = [values[i] for i in where]
             if fast is not None:
-                fast[1]([float(v) for v in vals] if kind == "real" else [int(v) for v in vals])
+                fast[1](slots, [float(v) for v in vals] if kind == "real" else [int(v) for v in vals])
             else:
                 self._set(kind, vrs, vals)
 
     def get_values(self, names) -> list:
         out = [None] * len(names)
-        for kind, vrs, where, fast in self._plan(names):
-            for i, v in zip(where, fast[0]() if fast is not None else self._get(kind, vrs)):
-                out[i] = v
+        for kind, vrs, (where, slots), fast in self._plan(names):
+            got = fast[0]() if fast is not None else self._get(kind, vrs)
+            for i, slot in zip(where, slots):
+                out[i] = got[slot]
         return out
 
     @property
@@ -183,7 +215,8 @@ class Component:
         """Outputs whose change marks an event of an FMU of another tool (integers, booleans,
         discrete reals)."""
         return [n for n, v in self.variables.items() if v.causality == "output"
-                and (v.type not in REAL_TYPES or v.variability == "discrete")]
+                and (v.type not in REAL_TYPES or v.variability == "discrete")
+                and (not getattr(v, "dimensions", None) or n in self.comp.elements)]
 
     # ---- states -------------------------------------------------------------------------------
     def do_step(self, t, h) -> StepResult:

@@ -22,6 +22,12 @@ def feedthrough(comp) -> Dict[str, Optional[Set[str]]]:
     for v in md.modelVariables:  # an output the model structure does not list: every input
         if v.causality == "output" and v.name not in out:
             out[v.name] = None
+    # the element connectors of FMI 3.0 arrays (z[1], ...) depend, and are depended on, as their array
+    elements = getattr(comp, "elements", {})
+    for deps in out.values():
+        if deps is not None:
+            deps |= {e for e, (array, _, _) in elements.items() if array in deps}
+    out.update({e: out[array] for e, (array, _, _) in elements.items() if array in out})
     return out
 
 

@@ -132,11 +132,14 @@ def select_columns(system, order, record=None):
     patterns = [p for p in patterns if p]
     if not patterns:
         raise SSPError("--record: no pattern given (glob patterns over component.connector, e.g. 'Actuator_*.z')")
+    def match(name, pat):  # a name matches itself: an array element's brackets (B.z[3]) are no glob class
+        return name == pat or fnmatchcase(name, pat)
+
     for pat in patterns:
-        if not any(fnmatchcase(f"{n}.{c.name}", pat) for n, c in cols):
+        if not any(match(f"{n}.{c.name}", pat) for n, c in cols):
             raise SSPError(f"--record {pat!r} matches no connector of the system (patterns are globs over "
                            f"component.connector, e.g. 'Actuator_*.z,Reconstructor.piston_rms')")
-    return [(n, c) for n, c in cols if any(fnmatchcase(f"{n}.{c.name}", p) for p in patterns)]
+    return [(n, c) for n, c in cols if any(match(f"{n}.{c.name}", p) for p in patterns)]
 
 
 def simulate(ssp, parameters: Optional[str] = None, stop_time: Optional[float] = None, step: float = 1e-3,

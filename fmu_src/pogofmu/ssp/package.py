@@ -46,6 +46,9 @@ class Connector:
     kind: str
     type: str
     unit: Optional[str]
+    # an element of an array connector (SSP 2.0 ssc:Dimension): (array name, 1-based index, size);
+    # the system holds the elements z[1] ... z[N] of an array connector z, never z itself
+    element: tuple = ()
 
 
 @dataclass
@@ -56,6 +59,8 @@ class Component:
     bindings: List[str]  # sources of the component's ParameterBindings, in order
     variables: dict = field(default_factory=dict)  # name -> fmpy ScalarVariable (filled on validation)
     model_description: object = None
+    # FMI 3.0 array elements (filled on validation): element connector name -> (array, 1-based index, size)
+    elements: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -115,6 +120,60 @@ class System:
         return seen + [n for n in self.components if n not in seen]
 
 
+def element_name(name: str, index: int) -> str:
+    """Element ``index`` (1-based) of the array connector ``name``: ``name[index]`` (the FMI
+    structured naming of an array's element, the name of the FMI 2.0 scalar)."""
+    return f"{name}[{index}]"
+
+
+def _array_size(cel, where, problems) -> Optional[int]:
+    """The size of a 1-D array connector (one ``ssc:Dimension size="N"``), None for a scalar."""
+    dims = cel.findall("ssc:Dimension", NS)
+    if not dims:
+        return None
+    if len(dims) > 1:
+        problems.append(f"{where}: {len(dims)} ssc:Dimension elements: only 1-D array connectors are supported")
+        return None
+    raw = dims[0].get("size")
+    if raw is None or not raw.strip().isdigit() or int(raw) < 1:
+        problems.append(f"{where}: ssc:Dimension size={raw!r} violates the rule: a whole number >= 1 (a "
+                        f"sizeConnector is not supported)")
+        return None
+    return int(raw)
+
+
+def _element_connections(index, cel, arrays, problems) -> list:
+    """The connections of one ssd:Connection between scalars and array elements: an array connector
+    with ``startIndices``/``endIndices`` (one 1-based index, 1-D) is that element; an array without
+    indices is all its elements, connected one to one to an array of the same size."""
+    ends = []
+    for role in ("start", "end"):
+        el, cn, raw = cel.get(f"{role}Element"), cel.get(f"{role}Connector"), cel.get(f"{role}Indices")
+        where = f"Connection {index} ({cel.get('startElement')}.{cel.get('startConnector')} -> " \
+                f"{cel.get('endElement')}.{cel.get('endConnector')})"
+        size = arrays.get((el, cn))
+        if raw is None:
+            ends.append([cn] if size is None else [element_name(cn, i) for i in range(1, size + 1)])
+            continue
+        items = raw.split()
+        if size is None:
+            problems.append(f"{where}: {role}Indices={raw!r} on {el}.{cn}, which is not an array connector (no "
+                            f"ssc:Dimension)")
+            return []
+        if len(items) != 1 or not items[0].isdigit() or not 1 <= int(items[0]) <= size:
+            problems.append(f"{where}: {role}Indices={raw!r} violates the rule: one index from 1 to {size} ({el}.{cn} "
+                            f"is a 1-D array of {size})")
+            return []
+        ends.append([element_name(cn, int(items[0]))])
+    if len(ends[0]) != len(ends[1]):
+        problems.append(f"Connection {index} ({cel.get('startElement')}.{cel.get('startConnector')} -> "
+                        f"{cel.get('endElement')}.{cel.get('endConnector')}): {len(ends[0])} value(s) into "
+                        f"{len(ends[1])}: connect arrays of the same size, or one element (startIndices/endIndices) "
+                        f"with a scalar")
+        return []
+    return [Connection(index, cel.get("startElement"), a, cel.get("endElement"), b) for a, b in zip(*ends)]
+
+
 def _tag(prefix, name):
     return f"{{{NS[prefix]}}}{name}"
 
@@ -161,6 +220,7 @@ def read_ssd(root: Path) -> System:
     components = {}
     elements = system_el.find("ssd:Elements", NS)
     problems = []
+    arrays = {}  # (component, array connector) -> size
     for el in (list(elements) if elements is not None else []):
         if el.tag != _tag("ssd", "Component"):
             problems.append(f"ssd:Elements: element {el.tag.split('}')[-1]} {el.get('name')!r} is not supported "
@@ -170,7 +230,14 @@ def read_ssd(root: Path) -> System:
         connectors = {}
         for cel in el.findall("ssd:Connectors/ssd:Connector", NS):
             t, unit = _connector_type(cel)
-            connectors[cel.get("name")] = Connector(cel.get("name"), cel.get("kind"), t, unit)
+            size = _array_size(cel, f"Connector {name}.{cel.get('name')}", problems)
+            if size is None:
+                connectors[cel.get("name")] = Connector(cel.get("name"), cel.get("kind"), t, unit)
+            else:
+                arrays[(name, cel.get("name"))] = size
+                for i in range(1, size + 1):
+                    connectors[element_name(cel.get("name"), i)] = Connector(
+                        element_name(cel.get("name"), i), cel.get("kind"), t, unit, (cel.get("name"), i, size))
         bindings = []
         for bel in el.findall("ssd:ParameterBindings/ssd:ParameterBinding", NS):
             children = {child.tag.split("}")[-1] for child in bel}
@@ -199,8 +266,7 @@ def read_ssd(root: Path) -> System:
                             f"{cel.get('endElement')}.{cel.get('endConnector')}): ssc:{transforms[0]} is not "
                             f"supported (the master passes values unchanged; scale them in a component)")
             continue
-        connections.append(Connection(i, cel.get("startElement"), cel.get("startConnector"),
-                                      cel.get("endElement"), cel.get("endConnector")))
+        connections += _element_connections(i, cel, arrays, problems)
     start, stop = 0.0, None
     de = top.find("ssd:DefaultExperiment", NS)
     if de is not None:

@@ -14,6 +14,12 @@ def _fmu_unit(var):
     return unit or None
 
 
+def _dimensions(var) -> list:
+    """The sizes of an FMI 3.0 array variable (fmpy's ``dimensions``), [] for a scalar or none."""
+    return [None if d.start is None else int(d.start) for d in getattr(var, "dimensions", None) or ()] \
+        if var is not None else []
+
+
 def validate(system: System, parameters: Optional[str] = None) -> Dict[str, Optional[ParameterSet]]:
     """Check the system against itself and its FMUs; return the parameter set of every component.
 
@@ -48,8 +54,26 @@ def validate(system: System, parameters: Optional[str] = None) -> Dict[str, Opti
             if con.type is None:
                 problems.append(f"{where}: no type (ssc:Real, ssc:Integer, ...)")
             var = comp.variables.get(con.name)
-            if var is None:
+            dims = _dimensions(var)
+            if con.element and var is None:  # an element of an FMI 3.0 array: the array is the variable
+                array, i, size = con.element
+                var = comp.variables.get(array)
+                dims = _dimensions(var)
+                if var is None:
+                    problems.append(f"Connector {comp.name}.{array}: {comp.source} has no variable {array!r}")
+                    continue
+                if dims != [size]:
+                    problems.append(f"Connector {comp.name}.{array}: ssc:Dimension size={size} but the FMU's "
+                                    f"variable {array} has the dimensions {dims or 'of a scalar'}")
+                    continue
+                comp.variables[con.name] = var
+                comp.elements[con.name] = con.element
+            elif var is None:
                 problems.append(f"{where}: {comp.source} has no variable {con.name!r}")
+                continue
+            elif dims:
+                problems.append(f"{where}: the FMU's variable {con.name} is an array of {dims}: declare the "
+                                f"connector with <ssc:Dimension size=\"{dims[0]}\"/> (SSP 2.0)")
                 continue
             if con.type is not None and not same_type(var.type, con.type):
                 problems.append(f"{where}: type {con.type} but the FMU's variable is {var.type}")
