@@ -14,9 +14,10 @@ and write the same values as the C one.
 
 Served: FMI 2.0 co-simulation FMUs of pogofmu's native backend (their calls need no GIL), whose
 inputs and watched outputs are reals and integers. Every other component (FMI 3.0, another
-tool's FMU, a Python-hosted FMU) keeps the Python path, and so does a component that takes its
-inputs as lines over the step (Gauss-Seidel with ``--inputs interpolate``: the slopes are set by
-:meth:`~.algorithms.Exchange.feed`; setting them in C as well is not done). ``POGOFMU_SSP_NATIVE_LEVELS=0`` turns
+tool's FMU, a Python-hosted FMU) keeps the Python path, and so does a component that takes an
+input as a line over the step (Gauss-Seidel with ``--inputs interpolate``, from a component of an
+earlier level: the slopes are set by :meth:`~.algorithms.Exchange.feed`; setting them in C as
+well is not done). ``POGOFMU_SSP_NATIVE_LEVELS=0`` turns
 the C path off (the tests compare the two to the bit); without a C compiler it is off.
 
 Host-side code; never imported inside an FMU.
@@ -161,6 +162,7 @@ class NativeLevels:
         self._plans: Dict[str, Optional[tuple]] = {}
         self._batches = {}
         self._capable = {inst.name: self._can_serve(inst) for inst in ex.order}
+        self._level = None  # component -> its level in the update order (made when first needed)
 
     def close(self):
         if self.pool:
@@ -184,11 +186,25 @@ class NativeLevels:
     def serves(self, inst) -> bool:
         if not self._capable.get(inst.name):
             return False
-        if inst.name in self.ex._lines:
+        if self._takes_lines(inst):
             return False  # inputs taken as lines (--inputs interpolate): their slopes are set in Python
         if getattr(inst, "rollback", False) and not inst.counts_events:
             return False  # another tool's events: bisected in Python
         return self._plan(inst) is not None
+
+    def _takes_lines(self, inst) -> bool:
+        """``inst`` takes an input as a line over the step (Gauss-Seidel, ``--inputs interpolate``):
+        one of its interpolated inputs comes from a component of an earlier level, which has
+        stepped when it is fed (an input from a later level stays held, as the C code sets it)."""
+        ex = self.ex
+        lines = ex._lines.get(inst.name)
+        if not lines:
+            return False
+        if self._level is None:
+            self._level = {i.name: k for k, level in enumerate(ex.levels) for i in level}
+        mine = self._level[inst.name]
+        return any(c.end_connector in lines and self._level.get(c.start_element, mine) < mine
+                   for c in ex.incoming[inst.name])
 
     def forget(self, inst):
         """The variables read with the outputs of ``inst`` changed: its plan is made again."""
