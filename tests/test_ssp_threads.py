@@ -101,9 +101,14 @@ def test_a_record_pattern_matching_nothing_is_one_line_naming_it(mirror):
 
 # ---- the C stepping of a level (pogofmu/ssp/native_level.py) against the Python path ---------------
 
+class Calls(list):
+    slow = 0
+
+
 def _simulate(ssp, monkeypatch, native, calls, **kw):
     """The run in this process, with the C path on or off; ``calls`` gets the size of every C
-    level call it made."""
+    level call it made, and ``calls.slow`` the number of components of those levels left to the
+    Python path."""
     import pogofmu.ssp.native_level as nl
     from pogofmu.ssp import simulate
 
@@ -112,6 +117,8 @@ def _simulate(ssp, monkeypatch, native, calls, **kw):
 
     def counted(self, t, h):
         calls.append(len(self.fast))
+        if hasattr(calls, "slow"):
+            calls.slow += len(self.slow)
         return go(self, t, h)
     monkeypatch.setattr(nl.Batch, "go", counted)
     try:
@@ -125,10 +132,12 @@ def _simulate(ssp, monkeypatch, native, calls, **kw):
 def test_the_c_path_gives_the_bits_of_the_python_path(mirror, monkeypatch, algorithm, events):
     """Every column of the 1-ring mirror (actuators on their stops: rollbacks, cut steps), the C
     path on two threads against the Python path (POGOFMU_SSP_NATIVE_LEVELS=0) on one."""
-    calls, none = [], []
+    calls, none = Calls(), []
     c = _simulate(mirror / "m.ssp", monkeypatch, True, calls, algorithm=algorithm, events=events, threads=2)
     py = _simulate(mirror / "m.ssp", monkeypatch, False, none, algorithm=algorithm, events=events)
     assert max(calls) == (15 if algorithm == "jacobi" else 7) and not none  # every component in C: a level, or all
+    # the controllers and the reconstructor take their inputs as lines (Gauss-Seidel): set in C too
+    assert calls.slow == 0
     assert (c["event"] != 0).any() == events
     modes = np.array([c[f"Actuator_{i}.mode"] for i in range(1, 8)])
     assert (modes == 1).any() and (modes == -1).any()

@@ -3,7 +3,10 @@
  * For each component of a batch (FMI 2.0 co-simulation, called through the FMU's own functions,
  * whose addresses the Python side takes from fmpy): set its inputs from slots of a flat value
  * array, save its FMU state (fmi2GetFMUstate, the state object reused), fmi2DoStep, read its
- * outputs into their slots — each part when the Python side asks for it (the ``ops`` bits). The
+ * outputs into their slots — each part when the Python side asks for it (the ``ops`` bits). An
+ * input the component takes as a line over the step (Gauss-Seidel, ``--inputs interpolate``) is set
+ * to its source's value at the macro step's start, with the slope to its source's value now
+ * (fmi2SetRealInputDerivatives), as pogofmu.ssp.algorithms.Exchange.feed does. The
  * components of a batch are independent (none feeds another within the call), so they are
  * dealt to the pool's threads one at a time, in order; each does exactly the calls it would do
  * alone, so the results do not depend on the thread count. Every decision about events stays in
@@ -27,11 +30,12 @@ typedef int (*set_int_f)(void *, const unsigned *, size_t, const int *);
 typedef int (*get_int_f)(void *, const unsigned *, size_t, int *);
 typedef int (*do_step_f)(void *, double, double, int);
 typedef int (*get_state_f)(void *, void **);
+typedef int (*set_deriv_f)(void *, const unsigned *, size_t, const int *, const double *);
 
 /* one component (filled by the Python side, pogofmu/ssp/native_level.py: keep the two in step) */
 typedef struct {
     void *instance;
-    void *do_step, *set_real, *get_real, *set_int, *get_int, *get_state;
+    void *do_step, *set_real, *get_real, *set_int, *get_int, *get_state, *set_deriv;
     void **state; /* the fmi2FMUstate variable the Python side keeps (not NULL when SAVE is asked) */
     int n_in_real, n_in_int, n_out_real, n_out_int;
     int int_first; /* the integer inputs are set before the reals (the Python path's order) */
@@ -40,18 +44,25 @@ typedef struct {
     const unsigned *out_real_vr; const int *out_real_slot; double *out_real_buf;
     const unsigned *out_int_vr;  const int *out_int_slot;  int *out_int_buf;
     int event_slot; /* the slot of its event counter (n_events), or -1 */
+    /* input lines (NULL: none): per real input, the slot of its source's value at the macro step's
+     * start (-1: held) and the slot of the time its source has stepped since that start (a line
+     * only when > 0: the source has stepped); the buffers of one fmi2SetRealInputDerivatives */
+    const int *in_real_start; const int *in_real_span;
+    unsigned *line_vr; int *line_order; double *line_buf;
 } pgm_comp;
 
 enum { OP_FEED = 1, OP_SAVE = 2, OP_STEP = 4, OP_READ = 8 };
 /* result codes: 0 done, 1 done and the event counter changed, -1 not run (another failed);
  * (call << 8) | status for an error status > 1 of a call (pogofmu/ssp/native_level.py CALLS) */
-enum { CALL_SET_REAL = 1, CALL_SAVE = 2, CALL_STEP = 3, CALL_GET_REAL = 4, CALL_SET_INT = 5, CALL_GET_INT = 6 };
+enum { CALL_SET_REAL = 1, CALL_SAVE = 2, CALL_STEP = 3, CALL_GET_REAL = 4, CALL_SET_INT = 5, CALL_GET_INT = 6,
+       CALL_SET_DERIV = 7 };
 
 typedef struct {
     pgm_comp *const *comps;
     const unsigned char *ops;
     int n;
     double t, h;
+    double t_mark; /* the macro step's start: inputs are lines for a step from it (else NaN) */
     double *values;
     unsigned char *known;
     double *before;
@@ -79,10 +90,21 @@ static int one(job_t *j, int i)
     pgm_comp *c = j->comps[i];
     unsigned char ops = j->ops[i];
     double *v = j->values;
-    int k, st;
+    int k, st, lines = 0;
     if (ops & OP_FEED) {
+        int lined = c->in_real_start != NULL && j->t == j->t_mark;
         for (k = 0; k < c->n_in_real; k++) {
             double x = v[c->in_real_src[k]];
+            if (lined && c->in_real_start[k] >= 0) {
+                double span = v[c->in_real_span[k]];
+                if (span > 0) { /* the source has stepped: the line from its value at the start */
+                    double x0 = v[c->in_real_start[k]];
+                    c->line_vr[lines] = c->in_real_vr[k];
+                    c->line_order[lines] = 1;
+                    c->line_buf[lines++] = (x - x0) / span;
+                    x = x0;
+                }
+            }
             c->in_real_buf[k] = x;
             v[c->in_real_held[k]] = x;
             j->known[c->in_real_held[k]] = 1;
@@ -103,6 +125,10 @@ static int one(job_t *j, int i)
                 return CALL_SET_INT << 8 | st;
             }
         }
+        /* after the values: an fmi2SetReal of an input sets its derivative back to 0 */
+        if (lines && (st = ((set_deriv_f)c->set_deriv)(c->instance, c->line_vr, (size_t)lines, c->line_order,
+                                                       c->line_buf)) > 1)
+            return CALL_SET_DERIV << 8 | st;
     }
     if ((ops & OP_SAVE) && (st = ((get_state_f)c->get_state)(c->instance, c->state)) > 1)
         return CALL_SAVE << 8 | st;
@@ -214,9 +240,10 @@ PGM_EXPORT void pgm_pool_free(pgm_pool *p)
  * ``before[i]``: the event counter before the step (read components). Returns the number of
  * components whose result is not 0; every call has ended when it returns. */
 PGM_EXPORT int pgm_run(pgm_pool *p, int parallel, int n, pgm_comp *const *comps, const unsigned char *ops,
-                       double t, double h, double *values, unsigned char *known, double *before, int *result)
+                       double t, double h, double t_mark, double *values, unsigned char *known, double *before,
+                       int *result)
 {
-    job_t j = {comps, ops, n, t, h, values, known, before, result, 0, 0};
+    job_t j = {comps, ops, n, t, h, t_mark, values, known, before, result, 0, 0};
     int k, helpers = (p && parallel && n > 1) ? (p->threads < n - 1 ? p->threads : n - 1) : 0;
     for (k = 0; k < n; k++)
         result[k] = -1;

@@ -92,13 +92,19 @@ class Exchange:
                 keys.update((c.start_element, c.start_connector) for c in self.incoming[inst.name]
                             if c.end_connector in lines)
         self._start_keys = sorted(keys)
+        if self.native is not None:  # the start values in slots of the C value array, the lines in C
+            self._start = self.native.start
+            self.native.lines_changed()
 
     def mark(self, t):
         """A macro step starts at ``t`` (every output read there): the start of the input lines."""
         if self._lines:
-            v = self.value
             self.t_mark = t
-            self._start = {k: v[k] for k in self._start_keys}
+            if self.native is not None:
+                self.native.mark(self._start_keys)
+            else:
+                v = self.value
+                self._start = {k: v[k] for k in self._start_keys}
 
     # ---- parallel steps --------------------------------------------------------------------
     def map(self, fn, insts) -> list:

@@ -14,11 +14,12 @@ and write the same values as the C one.
 
 Served: FMI 2.0 co-simulation FMUs of pogofmu's native backend (their calls need no GIL), whose
 inputs and watched outputs are reals and integers. Every other component (FMI 3.0, another
-tool's FMU, a Python-hosted FMU) keeps the Python path, and so does a component that takes an
-input as a line over the step (Gauss-Seidel with ``--inputs interpolate``, from a component of an
-earlier level: the slopes are set by :meth:`~.algorithms.Exchange.feed`; setting them in C as
-well is not done). ``POGOFMU_SSP_NATIVE_LEVELS=0`` turns
-the C path off (the tests compare the two to the bit); without a C compiler it is off.
+tool's FMU, a Python-hosted FMU) keeps the Python path. An input taken as a line over the step
+(Gauss-Seidel with ``--inputs interpolate``) is set in C as :meth:`~.algorithms.Exchange.feed`
+sets it: the source's value at the macro step's start (a slot :meth:`NativeLevels.mark` fills)
+with the slope to its value now over the time the source has stepped (a slot per source that
+:meth:`Batch.go` fills), the same doubles in the same calls. ``POGOFMU_SSP_NATIVE_LEVELS=0``
+turns the C path off (the tests compare the two to the bit); without a C compiler it is off.
 
 Host-side code; never imported inside an FMU.
 """
@@ -34,6 +35,7 @@ INT_TYPES = ("Integer", "Int32", "Int16", "Int8", "UInt8", "UInt16", "UInt32", "
 FMI2_INT = ("Integer", "Enumeration")
 OP_FEED, OP_SAVE, OP_STEP, OP_READ = 1, 2, 4, 8
 CALLS = {1: ("setting its inputs", "fmi2SetReal"), 5: ("setting its inputs", "fmi2SetInteger"),
+         7: ("setting its inputs", "fmi2SetRealInputDerivatives"),
          2: ("saving its state", "fmi2GetFMUstate"), 3: ("step", "fmi2DoStep"),
          4: ("reading its outputs", "fmi2GetReal"), 6: ("reading its outputs", "fmi2GetInteger")}
 
@@ -47,14 +49,16 @@ class PgmComp(ctypes.Structure):
     """``pgm_comp`` of pg_level.c (keep the two in step)."""
 
     _fields_ = [("instance", _P), ("do_step", _P), ("set_real", _P), ("get_real", _P), ("set_int", _P),
-                ("get_int", _P), ("get_state", _P), ("state", _P),
+                ("get_int", _P), ("get_state", _P), ("set_deriv", _P), ("state", _P),
                 ("n_in_real", ctypes.c_int), ("n_in_int", ctypes.c_int), ("n_out_real", ctypes.c_int),
                 ("n_out_int", ctypes.c_int), ("int_first", ctypes.c_int),
                 ("in_real_vr", _UP), ("in_real_src", _IP), ("in_real_held", _IP), ("in_real_buf", _DP),
                 ("in_int_vr", _UP), ("in_int_src", _IP), ("in_int_held", _IP), ("in_int_buf", _IP),
                 ("out_real_vr", _UP), ("out_real_slot", _IP), ("out_real_buf", _DP),
                 ("out_int_vr", _UP), ("out_int_slot", _IP), ("out_int_buf", _IP),
-                ("event_slot", ctypes.c_int)]
+                ("event_slot", ctypes.c_int),
+                ("in_real_start", _IP), ("in_real_span", _IP), ("line_vr", _UP), ("line_order", _IP),
+                ("line_buf", _DP)]
 
 
 _LIB = None
@@ -78,8 +82,8 @@ def library():
         lib.pgm_pool_free.restype = None
         lib.pgm_pool_free.argtypes = [_P]
         lib.pgm_run.restype = ctypes.c_int
-        lib.pgm_run.argtypes = [_P, ctypes.c_int, ctypes.c_int, _P, _P, ctypes.c_double, ctypes.c_double, _P, _P,
-                                _P, _P]
+        lib.pgm_run.argtypes = [_P, ctypes.c_int, ctypes.c_int, _P, _P, ctypes.c_double, ctypes.c_double,
+                                ctypes.c_double, _P, _P, _P, _P]
         _LIB = lib
     return _LIB or None
 
@@ -152,17 +156,33 @@ class NativeLevels:
             if var is not None and (var.type in REAL_TYPES or var.type in INT_TYPES):
                 held[(c.end_element, c.end_connector)] = len(ints)
                 ints.append(var.type not in REAL_TYPES)
+        # input lines (--inputs interpolate): a slot for the value at the macro step's start of
+        # every real output that feeds a component able to interpolate, and one per component for
+        # the time it has stepped since that start
+        start, span = {}, {}
+        for c in ex.system.connections:
+            end = ex.instances.get(c.end_element)
+            key = (c.start_element, c.start_connector)
+            if getattr(end, "can_interpolate", False) and key in index and not ints[index[key]] \
+                    and key not in start:
+                start[key] = len(ints)
+                ints.append(False)
+        for inst in ex.order:
+            span[inst.name] = len(ints)
+            ints.append(False)
         n = max(len(ints), 1)
         self.arr = (ctypes.c_double * n)()
         self.known = (ctypes.c_ubyte * n)()
         self.value = SlotValues(index, ints, self.arr, self.known)
         self.held = SlotValues(held, ints, self.arr, self.known)
+        self.start = SlotValues(start, ints, self.arr, self.known)  # Exchange._start, when it marks
+        self.span = span
+        self._marks = None
         self.pool = lib.pgm_pool_new(threads) if threads > 1 else None
         self.parallel = 1 if self.pool else 0
         self._plans: Dict[str, Optional[tuple]] = {}
         self._batches = {}
         self._capable = {inst.name: self._can_serve(inst) for inst in ex.order}
-        self._level = None  # component -> its level in the update order (made when first needed)
 
     def close(self):
         if self.pool:
@@ -186,25 +206,28 @@ class NativeLevels:
     def serves(self, inst) -> bool:
         if not self._capable.get(inst.name):
             return False
-        if self._takes_lines(inst):
-            return False  # inputs taken as lines (--inputs interpolate): their slopes are set in Python
         if getattr(inst, "rollback", False) and not inst.counts_events:
             return False  # another tool's events: bisected in Python
         return self._plan(inst) is not None
 
-    def _takes_lines(self, inst) -> bool:
-        """``inst`` takes an input as a line over the step (Gauss-Seidel, ``--inputs interpolate``):
-        one of its interpolated inputs comes from a component of an earlier level, which has
-        stepped when it is fed (an input from a later level stays held, as the C code sets it)."""
-        ex = self.ex
-        lines = ex._lines.get(inst.name)
-        if not lines:
-            return False
-        if self._level is None:
-            self._level = {i.name: k for k, level in enumerate(ex.levels) for i in level}
-        mine = self._level[inst.name]
-        return any(c.end_connector in lines and self._level.get(c.start_element, mine) < mine
-                   for c in ex.incoming[inst.name])
+    def lines_changed(self):
+        """:meth:`~.algorithms.Exchange.interpolate_inputs` chose the input lines: the plans are
+        made again."""
+        self._plans.clear()
+        self._batches.clear()
+        self._marks = None
+
+    def mark(self, keys):
+        """The values of ``keys`` (outputs) copied into their start slots (``self.start``)."""
+        if self._marks is None:
+            import numpy as np
+
+            self._marks = (np.ctypeslib.as_array(self.arr), np.ctypeslib.as_array(self.known),
+                           np.array([self.value.index[k] for k in keys], dtype=np.intp),
+                           np.array([self.start.index[k] for k in keys], dtype=np.intp))
+        arr, known, src, dst = self._marks
+        arr[dst] = arr[src]
+        known[dst] = known[src]
 
     def forget(self, inst):
         """The variables read with the outputs of ``inst`` changed: its plan is made again."""
@@ -218,6 +241,8 @@ class NativeLevels:
         ex, idx, hidx = self.ex, self.value.index, self.held.index
         ins = {"real": ([], [], []), "int": ([], [], [])}
         first = None
+        lines = ex._lines.get(inst.name, ())
+        line_start, line_span, sources = [], [], []
         for c in ex.incoming[inst.name]:
             kind = "real" if inst.type_of(c.end_connector) in REAL_TYPES else "int"
             first = first or kind
@@ -225,6 +250,12 @@ class NativeLevels:
             vrs.append(inst.vr(c.end_connector))
             src.append(idx[(c.start_element, c.start_connector)])
             held.append(hidx[(c.end_element, c.end_connector)])
+            if kind == "real":
+                lined = c.end_connector in lines
+                line_start.append(self.start.index[(c.start_element, c.start_connector)] if lined else -1)
+                line_span.append(self.span[c.start_element] if lined else -1)
+                if lined and c.start_element not in sources:
+                    sources.append(c.start_element)
         outs = {"real": ([], []), "int": ([], [])}
         for name in ex.watch[inst.name]:
             t = inst.type_of(name)
@@ -264,8 +295,13 @@ class NativeLevels:
         s.out_int_buf = arr(ctypes.c_int, [0] * len(oiv))
         counts = getattr(inst, "rollback", False) and inst.counts_events and "n_events" in ex.watch[inst.name]
         s.event_slot = idx[(inst.name, "n_events")] if counts else -1
+        if sources:  # inputs taken as lines over the step
+            s.set_deriv = _address(raw_function(fmu, "fmi2SetRealInputDerivatives"))
+            s.in_real_start, s.in_real_span = arr(ctypes.c_int, line_start), arr(ctypes.c_int, line_span)
+            s.line_vr, s.line_order = arr(ctypes.c_uint, [0] * len(rv)), arr(ctypes.c_int, [1] * len(rv))
+            s.line_buf = arr(ctypes.c_double, [0.0] * len(rv))
         names = [c.end_connector for c in ex.incoming[inst.name]]
-        plan = self._plans[inst.name] = (s, keep, names)
+        plan = self._plans[inst.name] = (s, keep, names, sources)
         return plan
 
     # ---- running a batch --------------------------------------------------------------------------
@@ -316,6 +352,11 @@ class Batch:
                 self.slow.append(k)
         n = len(self.fast)
         self.run = None
+        # the sources of the served components' input lines: (component, its span slot)
+        names = {} if feed else ()
+        for inst in self.fast if feed else ():
+            names.update(dict.fromkeys(nat._plan(inst)[3]))
+        self.sources = [(nat.ex.instances[name], nat.span[name]) for name in names]
         if n:
             self.args = (nat.pool, nat.parallel if feed is not None else 0, n,
                          (ctypes.POINTER(PgmComp) * n)(*[ctypes.pointer(nat._plan(i)[0]) for i in self.fast]),
@@ -329,7 +370,13 @@ class Batch:
         call << 8 | its status)."""
         pool, parallel, n, comps, ops = self.args
         nat = self.nat
-        if not self.run(pool, parallel, n, comps, ops, t, h, nat.arr, nat.known, self.before, self.result):
+        t_mark = nat.ex.t_mark
+        if self.sources and t == t_mark:  # lines: the time each source has stepped since the start
+            arr = nat.arr
+            for src, slot in self.sources:
+                arr[slot] = src.t - t_mark
+        if not self.run(pool, parallel, n, comps, ops, t, h, t_mark if t_mark is not None else float("nan"),
+                        nat.arr, nat.known, self.before, self.result):
             return ()
         result, before = self.result, self.before
         return [(i, result[i], before[i]) for i in range(n) if result[i] != 0]
