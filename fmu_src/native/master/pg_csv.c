@@ -22,6 +22,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <float.h>
+#include <stdint.h>
 
 #ifdef _WIN32
 #define PGM_EXPORT __declspec(dllexport)
@@ -117,11 +118,148 @@ static void step_digits(const digits *g, int up, digits *out)
     }
 }
 
+/* The same digits without printf and strtod for 1e-15 <= x < 1e17 (a run's usual numbers): x =
+ * f 2^k exactly, x 10^s (s = 16 - e <= 31) = f 5^s 2^(k+s) and the bounds of the interval of the
+ * decimals reading back as x, (4f -/+ 2) 5^s 2^(k+s-2) (4f - 1 below a power of two), all
+ * integers times powers of two below 2^127; rounding is to nearest, ties to even (printf's), and a
+ * bound belongs to the interval when f is even (strtod's ties to even). Returns 0 outside. */
+#if defined(__SIZEOF_INT128__)
+typedef unsigned __int128 u128;
+
+static const unsigned long long POW5[28] = {
+    1ULL, 5ULL, 25ULL, 125ULL, 625ULL, 3125ULL, 15625ULL, 78125ULL, 390625ULL, 1953125ULL, 9765625ULL,
+    48828125ULL, 244140625ULL, 1220703125ULL, 6103515625ULL, 30517578125ULL, 152587890625ULL,
+    762939453125ULL, 3814697265625ULL, 19073486328125ULL, 95367431640625ULL, 476837158203125ULL,
+    2384185791015625ULL, 11920928955078125ULL, 59604644775390625ULL, 298023223876953125ULL,
+    1490116119384765625ULL, 7450580596923828125ULL};
+static const unsigned long long POW10[19] = {
+    1ULL, 10ULL, 100ULL, 1000ULL, 10000ULL, 100000ULL, 1000000ULL, 10000000ULL, 100000000ULL,
+    1000000000ULL, 10000000000ULL, 100000000000ULL, 1000000000000ULL, 10000000000000ULL,
+    100000000000000ULL, 1000000000000000ULL, 10000000000000000ULL, 100000000000000000ULL,
+    1000000000000000000ULL};
+
+static u128 pow5(int n)
+{
+    return n <= 27 ? (u128)POW5[n] : (u128)POW5[27] * POW5[n - 27];
+}
+
+/* A 2^t / d rounded to nearest, ties to even (d = 1, 10, 100; the result below 2^63). */
+static unsigned long long round_scaled(u128 a, int t, unsigned d)
+{
+    unsigned long long q, b;
+    if (t >= 0) {
+        u128 v = a << t;
+        q = (unsigned long long)(v / d);
+        b = (unsigned long long)(v % d);
+        return q + (2 * b > d || (2 * b == d && (q & 1)));
+    } else {
+        int sh = -t;
+        u128 rem = a & (((u128)1 << sh) - 1), half = (u128)1 << (sh - 1);
+        unsigned long long q0 = (unsigned long long)(a >> sh);
+        q = q0 / d;
+        b = q0 % d;
+        if (d == 1)
+            return q + (rem > half || (rem == half && (q & 1)));
+        return q + (b > d / 2 || (b == d / 2 && (rem > 0 || (q & 1))));
+    }
+}
+
+/* The sign of D - a 2^t. */
+static int cmp_scaled(unsigned long long D, u128 a, int t)
+{
+    if (t >= 0) {
+        u128 v = a << t;
+        return D < v ? -1 : D > v;
+    } else {
+        int sh = -t;
+        u128 q = a >> sh, rem = a & (((u128)1 << sh) - 1);
+        if (D != q)
+            return D < q ? -1 : 1;
+        return rem ? -1 : 0;
+    }
+}
+
+static void int_digits(unsigned long long D, int s, digits *out)
+{
+    char tmp[24];
+    int k = 0;
+    do {
+        tmp[k++] = (char)('0' + D % 10);
+        D /= 10;
+    } while (D);
+    out->n = k;
+    out->e = k - 1 - s;
+    for (int i = 0; i < k; i++)
+        out->d[i] = tmp[k - 1 - i];
+}
+
+static int shortest_exact(double x, digits *out)
+{
+    unsigned long long bits, frac, f, N, D;
+    int E, k, e, s, t, pass, p, even, pow2;
+    memcpy(&bits, &x, sizeof bits);
+    E = (int)((bits >> 52) & 0x7ff);
+    frac = bits & ((1ULL << 52) - 1);
+    if (E == 0 || E == 0x7ff)
+        return 0;
+    f = frac | (1ULL << 52);
+    k = E - 1075;
+    even = !(f & 1);
+    pow2 = frac == 0 && E > 1;
+    e = (int)floor(log10(x));
+    for (pass = 0;; pass++) {
+        s = 16 - e;
+        if (s < 0 || s > 31 || pass > 2)
+            return 0;
+        t = k + s - 2; /* the scale of 4f 5^s */
+        if (t < -120 || t > 8)
+            return 0;
+        N = round_scaled((u128)f * pow5(s), k + s, 1);
+        if (N < POW10[16])
+            e--;
+        else if (N >= POW10[17])
+            e++;
+        else
+            break;
+    }
+    u128 mid = (u128)(4 * f) * pow5(s), lo = (u128)(4 * f - (pow2 ? 1 : 2)) * pow5(s), hi = (u128)(4 * f + 2) * pow5(s);
+    for (p = 15; p <= 16; p++) {
+        unsigned d = p == 15 ? 100 : 10;
+        D = round_scaled(mid, t, d) * d;
+        int c_lo = cmp_scaled(D, lo, t), c_hi = cmp_scaled(D, hi, t);
+        if ((c_lo > 0 || (c_lo == 0 && even)) && (c_hi < 0 || (c_hi == 0 && even))) {
+            int_digits(D, s, out);
+            return 1;
+        }
+        if (p == 16 && pow2) { /* the 16-digit neighbour on the other side of x */
+            unsigned long long h = cmp_scaled(D, mid, t) < 0 ? D + 10 : D == POW10[16] ? D - 1 : D - 10;
+            c_lo = cmp_scaled(h, lo, t);
+            c_hi = cmp_scaled(h, hi, t);
+            if ((c_lo > 0 || (c_lo == 0 && even)) && (c_hi < 0 || (c_hi == 0 && even))) {
+                int_digits(h, s, out);
+                return 1;
+            }
+        }
+    }
+    int_digits(N, s, out);
+    return 1;
+}
+#else
+static int shortest_exact(double x, digits *out)
+{
+    (void)x;
+    (void)out;
+    return 0;
+}
+#endif
+
 /* The shortest digits of x > 0 (finite) reading back as x, the closest to x of those. */
 static void shortest(double x, digits *out)
 {
     digits g17, g;
     int p, ex;
+    if (shortest_exact(x, out))
+        return;
     if (x < DBL_MIN) { /* subnormal: few significant bits, the shortest may have any length */
         for (p = 1; p < 17; p++) {
             printf_digits(x, p, out);
