@@ -187,7 +187,7 @@ def csv_library():
 class RowFormatter:
     """Rows of numbers (a 2-D float64 array; ``is_int[j]``: column ``j`` holds integers) as the
     bytes ``csv.writer`` writes for them as lists (floats as ``repr``, integer columns as ``int``,
-    ``\r\n`` after each row): by the C code with the GIL released (``lib``), else by the csv
+    ``\\r\\n`` after each row): by the C code with the GIL released (``lib``), else by the csv
     module."""
 
     TEXT = 1 << 22  # bytes of text per C call (at least one row)
@@ -266,7 +266,7 @@ class CSVStream:
         self.rows, self.last_time = 0, None
         self.span = span
         self.threads = max(1, int(threads))
-        self._env = Envelope(span, len(self.names))
+        self._env = None  # made at the first row: plot_only() first narrows it (2000 x 6 numbers per column)
         self._chunk = min(self.CHUNK, chunk_rows(len(self.names)))
         self._buf = []  # rows given as lists, not yet written
         self._block, self._n = None, 0  # the block being filled by bind_slots()'s rows, and how many
@@ -296,7 +296,7 @@ class CSVStream:
         self._buf = []
         text = io.StringIO()
         csv.writer(text).writerows(rows)  # floats as repr (shortest round trip), integers as integers
-        self._env.add(rows)
+        self.envelope().add(rows)
         self._write(text.getvalue().encode(self._file.encoding), len(rows), rows[-1][0])
 
     # --- rows as slots of the C value array -------------------------------------------------------
@@ -342,7 +342,7 @@ class CSVStream:
         stream goes on with the other block)."""
         block, n = self._block, self._n
         self._n = 0
-        self._env.add(block[:n])
+        self.envelope().add(block[:n])
         if self.threads < 2:
             self._write_block(block[:n], n, float(block[n - 1, 0]))
             return
@@ -490,4 +490,6 @@ class CSVStream:
         self.part.replace(self.path if complete else self.incomplete)
 
     def envelope(self) -> Envelope:
+        if self._env is None:
+            self._env = Envelope(self.span, len(self.names))
         return self._env
