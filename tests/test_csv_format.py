@@ -36,7 +36,12 @@ def python_text(block, is_int):
 
 def c_text(block, is_int):
     fmt = record.RowFormatter(is_int, LIB)
-    return b"".join(bytes(piece) for piece in fmt.chunks(np.ascontiguousarray(block, dtype=np.float64)))
+    pieces = list((bytes(text), end) for text, end in fmt.chunks(np.ascontiguousarray(block, dtype=np.float64)))
+    ends = [end for _, end in pieces]
+    assert ends == sorted(ends) and ends[-1] == len(block)  # the rows written so far, piece by piece
+    text = b"".join(t for t, _ in pieces)
+    assert all(text.count(b"\r\n", 0, sum(len(t) for t, _ in pieces[:i + 1])) == e for i, e in enumerate(ends))
+    return text
 
 
 def first_difference(a: bytes, b: bytes):
@@ -111,13 +116,14 @@ def test_rows_longer_than_the_text_buffer_and_a_buffer_of_a_few_rows():
     assert c_text(block, [0] * 731) == want
     fmt = record.RowFormatter([0] * 731, LIB)
     fmt._text = np.empty(2 * LIB.pgm_csv_row_max(731, fmt.is_int.ctypes.data), dtype=np.uint8)  # two rows at most
-    assert b"".join(bytes(p) for p in fmt.chunks(block[:50])) == python_text(block[:50], [0] * 731)
+    pieces = [(bytes(text), end) for text, end in fmt.chunks(block[:50])]
+    assert len(pieces) >= 25 and b"".join(t for t, _ in pieces) == python_text(block[:50], [0] * 731)
 
 
 def test_the_python_formatter_is_the_list_path():
     block = np.array([[0.0, 0, 1.5, 3], [1e-3, -1, -0.0, -7]])
     fmt = record.RowFormatter([0, 1, 0, 1], None)
-    assert b"".join(fmt.chunks(block)) == b"0.0,0,1.5,3\r\n0.001,-1,-0.0,-7\r\n"
+    assert list(fmt.chunks(block)) == [(b"0.0,0,1.5,3\r\n0.001,-1,-0.0,-7\r\n", 2)]
 
 
 # ---- CSVStream: the rows of bind_slots and of add ------------------------------------------------

@@ -190,7 +190,7 @@ class RowFormatter:
     ``\\r\\n`` after each row): by the C code with the GIL released (``lib``), else by the csv
     module."""
 
-    TEXT = 1 << 22  # bytes of text per C call (at least one row)
+    TEXT = 1 << 20  # bytes of text per C call (at least two rows)
 
     def __init__(self, is_int, lib=None, encoding="utf-8"):
         import numpy as np
@@ -204,14 +204,15 @@ class RowFormatter:
             self._done = ctypes.c_long()
 
     def chunks(self, block):
-        """The text of ``block``'s rows, in pieces (each valid until the next one is asked for)."""
+        """The text of ``block``'s rows, in pieces ``(text, end)``: the rows up to ``end`` (each
+        text valid until the next piece is asked for)."""
         import numpy as np
 
         m = len(block)
         if m == 0:
             return
         if self.lib is None:
-            yield self.python(block)
+            yield self.python(block), m
             return
         block = np.ascontiguousarray(block, dtype=np.float64)
         n_cols, row_bytes = block.shape[1], block.strides[0]
@@ -223,7 +224,7 @@ class RowFormatter:
             if done.value <= 0:
                 raise RuntimeError("pgm_csv_rows wrote no row")  # (the buffer holds two rows at least)
             r += done.value
-            yield memoryview(text)[:n]
+            yield memoryview(text)[:n], r
 
     def python(self, block) -> bytes:
         """The csv module's text of ``block``'s rows (the reference the C code is held to)."""
@@ -356,14 +357,18 @@ class CSVStream:
         if self._error is not None:
             return
         try:
-            for text in self._fmt.chunks(block):
-                self._out.write(text)
+            self._write_text(block)
         except OSError as exc:
             self._error = exc
-        else:
-            self.rows += n
-            self.last_time = t_last
         self._raise()
+
+    def _write_text(self, block):
+        """The rows of ``block`` formatted and written, counted piece by piece (a failed write
+        leaves ``rows`` and ``last_time`` those of the pieces written)."""
+        rows = self.rows
+        for text, end in self._fmt.chunks(block):
+            self._out.write(text)
+            self.rows, self.last_time = rows + end, float(block[end - 1, 0])
 
     # --- the writer thread (threads >= 2) -------------------------------------------------------
 
@@ -388,11 +393,10 @@ class CSVStream:
                 if self._error is None:
                     if isinstance(data, bytes):
                         self._out.write(data)
+                        self.rows += n
+                        self.last_time = t_last
                     else:
-                        for text in self._fmt.chunks(data[:n]):
-                            self._out.write(text)
-                    self.rows += n
-                    self.last_time = t_last
+                        self._write_text(data[:n])
             except BaseException as exc:  # noqa: BLE001 - handed to the run's thread (_raise)
                 self._error = exc
             finally:
