@@ -139,8 +139,9 @@ MASTER = NATIVE / "master"
 
 def host_level_library(cc: Optional[str] = None) -> Path:
     """The SSP master's C stepping of a level of components (``fmu_src/native/master/pg_level.c``,
-    :mod:`pogofmu.ssp.native_level`), compiled once per version like :func:`host_engine_library`."""
-    return _host_library("pogofmu_level", [MASTER / "pg_level.c"], (), [MASTER],
+    :mod:`pogofmu.ssp.native_level`) and its CSV rows (``pg_csv.c``, :mod:`pogofmu.ssp.record`),
+    compiled once per version like :func:`host_engine_library`."""
+    return _host_library("pogofmu_level", [MASTER / "pg_level.c", MASTER / "pg_csv.c"], (), [MASTER],
                          ["-fvisibility=hidden", "-pthread"], cc)
 
 

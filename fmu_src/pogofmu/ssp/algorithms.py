@@ -275,9 +275,15 @@ class Exchange:
             self.value[key] = v
         return changed
 
+    _put_row = None  # the recorder's own copy of a row from the C value array (_row_arrays)
+
     def row(self, t: float, kind: int = GRID):
         """One row: every output, and every input with the value it holds from here on (its
         source's latest value; an unconnected input its own)."""
+        put = self._put_row
+        if put is not None and type(t) is float and self._np_known[self._row_slots].all():
+            put(t, kind)  # no Python list: the slots copied into the recorder's block (CSVStream.bind_slots)
+            return
         self.record.add(self.row_values(t, kind))
 
     def _row_arrays(self):
@@ -291,6 +297,9 @@ class Exchange:
             self._row_ints = [p for p, k in enumerate(self._row_keys) if self.value.ints[index[k]]]
             self._np_values = np.ctypeslib.as_array(self.native.arr)
             self._np_known = np.ctypeslib.as_array(self.native.known)
+            bind = getattr(self.record, "bind_slots", None)  # a CSVStream formatting its rows in C
+            if bind is not None:
+                self._put_row = bind(self._np_values, self._row_slots, self._row_ints)
 
     def row_values(self, t: float, kind: int = GRID) -> list:
         v = self.value

@@ -45,7 +45,7 @@ def run(ssp, parameters=None, stop_time=None, step=1e-3, out=None, algorithm="ga
     def open_csv(names, types, units, span):  # called once the package and the numbers are valid
         prepare_out(out, csv_path, png_path)
         try:
-            opened.append(CSVStream(csv_path, names, types, units, span))
+            opened.append(CSVStream(csv_path, names, types, units, span, threads=options.get("threads", 1)))
         except OSError as exc:
             raise SSPError(f"cannot write {csv_path}: {exc.strerror or exc}") from None
         return opened[0]

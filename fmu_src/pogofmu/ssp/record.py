@@ -3,6 +3,10 @@
 :class:`Envelope` as the only thing kept of a streamed run."""
 from __future__ import annotations
 
+import csv
+import ctypes
+import io
+import os
 from operator import itemgetter
 from pathlib import Path
 
@@ -148,19 +152,112 @@ class Result:
         return self._envelope
 
 
+_OFF = ("0", "off", "no", "false")
+_CSV_LIB = None
+
+
+def csv_library():
+    """The C formatting of CSV rows (``fmu_src/native/master/pg_csv.c``, in the library of the C
+    level stepping, :func:`.native_level.library`); None without it (no C compiler, or turned off:
+    ``POGOFMU_SSP_NATIVE_CSV=0``, or ``POGOFMU_SSP_NATIVE_LEVELS=0``): the csv module then writes
+    the same bytes."""
+    global _CSV_LIB
+    if os.environ.get("POGOFMU_SSP_NATIVE_CSV", "1").strip() in _OFF:
+        return None
+    if _CSV_LIB is None:
+        from .native_level import library
+
+        lib = library()
+        if lib is None:
+            return None
+        try:
+            f = lib.pgm_csv_rows
+        except AttributeError:
+            _CSV_LIB = False
+            return None
+        f.restype = ctypes.c_long
+        f.argtypes = [ctypes.c_void_p, ctypes.c_long, ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p,
+                      ctypes.c_long, ctypes.POINTER(ctypes.c_long)]
+        lib.pgm_csv_row_max.restype = ctypes.c_long
+        lib.pgm_csv_row_max.argtypes = [ctypes.c_int, ctypes.c_void_p]
+        _CSV_LIB = lib
+    return _CSV_LIB or None
+
+
+class RowFormatter:
+    """Rows of numbers (a 2-D float64 array; ``is_int[j]``: column ``j`` holds integers) as the
+    bytes ``csv.writer`` writes for them as lists (floats as ``repr``, integer columns as ``int``,
+    ``\\r\\n`` after each row): by the C code with the GIL released (``lib``), else by the csv
+    module."""
+
+    TEXT = 1 << 20  # bytes of text per C call (at least two rows)
+
+    def __init__(self, is_int, lib=None, encoding="utf-8"):
+        import numpy as np
+
+        self.is_int = np.ascontiguousarray(is_int, dtype=np.uint8)
+        self.ints = [j for j, f in enumerate(self.is_int) if f]
+        self.lib, self.encoding = lib, encoding
+        if lib is not None:
+            row_max = lib.pgm_csv_row_max(len(self.is_int), self.is_int.ctypes.data)
+            self._text = np.empty(max(self.TEXT, 2 * row_max), dtype=np.uint8)
+            self._done = ctypes.c_long()
+
+    def chunks(self, block):
+        """The text of ``block``'s rows, in pieces ``(text, end)``: the rows up to ``end`` (each
+        text valid until the next piece is asked for)."""
+        import numpy as np
+
+        m = len(block)
+        if m == 0:
+            return
+        if self.lib is None:
+            yield self.python(block), m
+            return
+        block = np.ascontiguousarray(block, dtype=np.float64)
+        n_cols, row_bytes = block.shape[1], block.strides[0]
+        text, cap, done = self._text, len(self._text), self._done
+        r = 0
+        while r < m:
+            n = self.lib.pgm_csv_rows(block.ctypes.data + r * row_bytes, m - r, n_cols, self.is_int.ctypes.data,
+                                      text.ctypes.data, cap, ctypes.byref(done))
+            if done.value <= 0:
+                raise RuntimeError("pgm_csv_rows wrote no row")  # (the buffer holds two rows at least)
+            r += done.value
+            yield memoryview(text)[:n], r
+
+    def python(self, block) -> bytes:
+        """The csv module's text of ``block``'s rows (the reference the C code is held to)."""
+        out = io.StringIO()
+        w = csv.writer(out)
+        rows = block.tolist()
+        if self.ints:
+            for row in rows:
+                for j in self.ints:
+                    row[j] = int(row[j])
+        w.writerows(rows)
+        return out.getvalue().encode(self.encoding)
+
+
 class CSVStream:
     """Rows written to ``path`` while the run goes (in chunks), with the figure's :class:`Envelope`
     as the only thing kept in memory: the master's memory does not grow with the run's length.
 
     The file is written as ``<path>.part`` and renamed to ``path`` once the run is complete; a run
     that fails leaves its rows so far in ``<stem>.incomplete.csv`` (never a truncated ``path``).
+
+    Rows come as lists (:meth:`add`, written by the csv module) or, from the C level stepping, as
+    slots of its value array (:meth:`bind_slots`): copied into a preallocated block of the stream, no
+    Python object per row, and a full block formatted by C code (:class:`RowFormatter`) with the
+    GIL released — with ``threads`` >= 2 on a writer thread of the stream, overlapping the
+    stepping (two blocks: one filled while the other is written), else in the calling thread.
+    Both write the same bytes. A failed write ends the run with :class:`~.package.SSPError`
+    ``cannot write <path>: <reason>``.
     """
 
     CHUNK = 4096  # rows per write (at most; fewer for wide rows, chunk_rows)
 
-    def __init__(self, path: Path, names, types, units, span):
-        import csv
-
+    def __init__(self, path: Path, names, types, units, span, threads: int = 1):
         self.path = Path(path)
         self.part = self.path.with_name(self.path.name + ".part")
         self.incomplete = self.path.with_name(f"{self.path.stem}.incomplete.csv")
@@ -169,42 +266,234 @@ class CSVStream:
         self.units = dict(zip(names, units))
         self.rows, self.last_time = 0, None
         self.span = span
-        self._env = Envelope(span, len(self.names))
+        self.threads = max(1, int(threads))
+        self._env = None  # made at the first row: plot_only() first narrows it (2000 x 6 numbers per column)
         self._chunk = min(self.CHUNK, chunk_rows(len(self.names)))
-        self._buf = []
+        self._buf = []  # rows given as lists, not yet written
+        self._block, self._n = None, 0  # the block being filled by bind_slots()'s rows, and how many
+        self._fmt = None
+        self._jobs = self._free = self._writer = None
+        self._error = None  # the first failed write (OSError)
+        self._raised = False  # ... raised as SSPError
+        self._done = False
         self._file = self.part.open("w", newline="")
-        self._csv = csv.writer(self._file)  # floats as repr (shortest round trip), integers as integers
-        self._csv.writerow(self.names)
+        csv.writer(self._file).writerow(self.names)  # the header: the csv module, like every list row
+        self._file.flush()
+        self._out = self._file.buffer  # every row after it: bytes, in order
+
+    # --- rows as lists --------------------------------------------------------------------------
 
     def add(self, row):
+        if self._n:
+            self._hand_block()
         self._buf.append(row)
         if len(self._buf) >= self._chunk:
-            self._flush()
+            self._flush_list()
+
+    def _flush_list(self):
+        if not self._buf:
+            return
+        rows = self._buf
+        self._buf = []
+        text = io.StringIO()
+        csv.writer(text).writerows(rows)  # floats as repr (shortest round trip), integers as integers
+        self.envelope().add(rows)
+        self._write(text.getvalue().encode(self._file.encoding), len(rows), rows[-1][0])
+
+    # --- rows as slots of the C value array -------------------------------------------------------
+
+    def bind_slots(self, values, slots, ints):
+        """The rows of the C level stepping: ``put(t, kind)`` writes the row ``t, kind,
+        values[slots]`` (``ints``: the positions in ``slots`` of integer values) into the stream's
+        block; None when this stream formats no rows in C (no library)."""
+        import numpy as np
+
+        lib = csv_library()
+        if lib is None or len(slots) + 2 != len(self.names):
+            return None
+        is_int = np.zeros(len(self.names), dtype=np.uint8)
+        is_int[1] = 1  # the event column
+        is_int[2 + np.asarray(list(ints), dtype=np.intp)] = 1
+        self._fmt = RowFormatter(is_int, lib, self._file.encoding)
+        self._block = np.empty((self._chunk, len(self.names)))
+        rows = list(self._block)  # one view per row, made once
+        slots = np.ascontiguousarray(slots, dtype=np.intp)
+        take = np.take
+
+        def put(t, kind):
+            if self._buf:
+                self._flush_list()
+            row = rows[self._n]
+            row[0] = t
+            row[1] = kind
+            take(values, slots, out=row[2:], mode="clip")
+            self._n += 1
+            if self._n == self._chunk:
+                self._hand_block()
+
+        def swap(block):  # bind_slots()'s rows go to another block from now on
+            nonlocal rows
+            self._block, rows = block, list(block)
+
+        self._swap = swap
+        return put
+
+    def _hand_block(self):
+        """The full (or last) block: into the envelope, and written (by the writer thread: the
+        stream goes on with the other block)."""
+        block, n = self._block, self._n
+        self._n = 0
+        self.envelope().add(block[:n])
+        if self.threads < 2:
+            self._write_block(block[:n], n, float(block[n - 1, 0]))
+            return
+        if self._writer is None:
+            self._start_writer()
+        self._raise()
+        self._jobs.put((block, n, float(block[n - 1, 0])))
+        self._swap(self._take_free())
+
+    def _write_block(self, block, n, t_last):
+        if self._error is not None:
+            return
+        try:
+            self._write_text(block)
+        except OSError as exc:
+            self._error = exc
+        self._raise()
+
+    def _write_text(self, block):
+        """The rows of ``block`` formatted and written, counted piece by piece (a failed write
+        leaves ``rows`` and ``last_time`` those of the pieces written)."""
+        rows = self.rows
+        for text, end in self._fmt.chunks(block):
+            self._out.write(text)
+            self.rows, self.last_time = rows + end, float(block[end - 1, 0])
+
+    # --- the writer thread (threads >= 2) -------------------------------------------------------
+
+    def _start_writer(self):
+        import queue
+        import threading
+
+        import numpy as np
+
+        self._jobs, self._free = queue.Queue(maxsize=2), queue.Queue()
+        self._free.put(np.empty_like(self._block))  # the second block: filled while the first is written
+        self._writer = threading.Thread(target=self._write_jobs, name="pogofmu-csv", daemon=True)
+        self._writer.start()
+
+    def _write_jobs(self):
+        while True:
+            job = self._jobs.get()
+            if job is None:
+                return
+            data, n, t_last = job
+            try:
+                if self._error is None:
+                    if isinstance(data, bytes):
+                        self._out.write(data)
+                        self.rows += n
+                        self.last_time = t_last
+                    else:
+                        self._write_text(data[:n])
+            except BaseException as exc:  # noqa: BLE001 - handed to the run's thread (_raise)
+                self._error = exc
+            finally:
+                if not isinstance(data, bytes):
+                    self._free.put(data)  # never kept: the run's thread waits for it
+
+    def _take_free(self):
+        import queue
+
+        while True:
+            try:
+                return self._free.get(timeout=1.0)
+            except queue.Empty:
+                if not self._writer.is_alive():
+                    self._error = self._error or RuntimeError("the CSV writer thread ended")
+                    self._raise()
+
+    def _write(self, data: bytes, n, t_last):
+        """Bytes of ``n`` rows, written in order after every block handed before."""
+        if self._writer is not None:
+            self._raise()
+            self._jobs.put((data, n, t_last))
+            return
+        if self._error is not None:
+            return
+        try:
+            self._out.write(data)
+        except OSError as exc:
+            self._error = exc
+        else:
+            self.rows += n
+            self.last_time = t_last
+        self._raise()
+
+    def _stop_writer(self):
+        if self._writer is not None:
+            self._jobs.put(None)
+            self._writer.join()
+            self._writer = None
+
+    def _raise(self):
+        exc = self._error
+        if exc is not None:
+            from .package import SSPError
+
+            self._raised = True
+            reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
+            raise SSPError(f"cannot write {self.path}: {reason}") from None
+
+    # ---------------------------------------------------------------------------------------------
 
     def plot_only(self, names):
         """The figure draws these signals only: its envelope keeps no other column (called
         before the first row)."""
         self._env = Envelope(self.span, len(self.names), keep=[self.names.index(n) for n in names])
 
-    def _flush(self):
-        if self._buf:
-            self._csv.writerows(self._buf)
-            self._env.add(self._buf)
-            self.rows += len(self._buf)
-            self.last_time = self._buf[-1][0]
-            self._buf.clear()
-
     def close(self, complete=True):
-        if self._file.closed:
+        """Every row written, the file closed and renamed (``path`` when ``complete``, else
+        ``<stem>.incomplete.csv``); a failed write raises ``SSPError`` after the rename."""
+        if self._done:
             return
+        self._done = True
         try:
-            self._flush()
-        finally:
-            self._file.close()
+            try:
+                if self._error is None:
+                    if self._n:
+                        self._hand_block()
+                    self._flush_list()
+            finally:
+                self._stop_writer()
+                try:
+                    self._file.close()
+                except OSError as exc:  # the last buffered bytes
+                    self._error = self._error or exc
+                    try:
+                        self._file.close()  # (a second close releases the descriptor)
+                    except OSError:
+                        pass
+        except Exception:  # noqa: BLE001 - the rows so far are kept as incomplete, then the error goes on
+            self._rename(False)
+            raise
+        if self._error is not None:
+            self._rename(False)
+            if complete or not self._raised:  # (closing after the error was raised: no second one)
+                self._raise()
+            return
+        self._rename(complete)
+
+    def _rename(self, complete):
+        if not self.part.exists():
+            return
         if not complete and self.rows == 0:  # nothing was simulated: no file at all
             self.part.unlink(missing_ok=True)
             return
         self.part.replace(self.path if complete else self.incomplete)
 
     def envelope(self) -> Envelope:
+        if self._env is None:
+            self._env = Envelope(self.span, len(self.names))
         return self._env
