@@ -136,10 +136,8 @@ class PgbPy(C.Structure):
 
 
 def _new_py(lib):
-    buf = (C.c_byte * lib.pgb_py_sizeof())()
-    py = PgbPy.from_buffer(buf)
-    py._buffer = buf
-    return py
+    # (from_buffer keeps the buffer alive with the instance: nothing else holds it)
+    return PgbPy.from_buffer((C.c_byte * lib.pgb_py_sizeof())())
 
 
 def use_library(path) -> None:
@@ -202,32 +200,32 @@ def library():
             lib.pgb_last_event.restype = None
             lib.pgb_limits.argtypes = [C.POINTER(C.c_int)]
             lib.pgb_limits.restype = None
-            _layouts(lib)
+            lib.layouts = _Layouts(lib)
             _LIB_PATH, _LIB = path, lib
     return _LIB
 
 
 class _Layouts:
-    """PgEvent and PgScale (pg_engine.h, pg_model.h) laid out with the sizes the library was built with."""
-    max_scales = max_scale_names = 0
-    event = scale = None
+    """PgEvent and PgScale (pg_engine.h, pg_model.h) laid out with the sizes one library was built with.
+
+    One per loaded library (``lib.layouts``), not global: :func:`use_library` may load another
+    build of the engine while runs on the previous one go on, and each must read its own sizes."""
+
+    def __init__(self, lib):
+        sizes = (C.c_int * 3)()
+        lib.pgb_limits(sizes)
+        max_x, self.max_scales, self.max_scale_names = sizes
+        self.event = type("PgEvent", (C.Structure,), {"_fields_": [
+            ("time", C.c_double), ("index", C.c_int), ("x_before", C.c_double * max_x),
+            ("x_after", C.c_double * max_x)]})
+        self.scale = type("PgScale", (C.Structure,), {"_fields_": [
+            ("label", C.c_char_p), ("names", C.c_char_p * self.max_scale_names), ("n_names", C.c_int),
+            ("value", C.c_double)]})
 
 
-def layouts() -> type:
-    """:class:`_Layouts` (``event``, ``scale``, ``max_scales``, ``max_scale_names``) of the loaded library."""
-    library()
-    return _Layouts
-
-
-def _layouts(lib) -> None:
-    sizes = (C.c_int * 3)()
-    lib.pgb_limits(sizes)
-    max_x, _Layouts.max_scales, _Layouts.max_scale_names = sizes
-    _Layouts.event = type("PgEvent", (C.Structure,), {"_fields_": [
-        ("time", C.c_double), ("index", C.c_int), ("x_before", C.c_double * max_x), ("x_after", C.c_double * max_x)]})
-    _Layouts.scale = type("PgScale", (C.Structure,), {"_fields_": [
-        ("label", C.c_char_p), ("names", C.c_char_p * _Layouts.max_scale_names), ("n_names", C.c_int),
-        ("value", C.c_double)]})
+def layouts() -> _Layouts:
+    """The :class:`_Layouts` (``event``, ``scale``, ``max_scales``, ``max_scale_names``) of the loaded library."""
+    return library().layouts
 
 
 # ---- a model's static description ---------------------------------------------------------------
@@ -427,7 +425,7 @@ class Simulator:
     def _fill_py(self):
         """This run's PgbPy: the objects the trampolines call (kept alive here), the cache dropped."""
         model, py = self.model, self._py
-        self._lib.pgb_py_forget(C.byref(py))
+        self._forget()
         keep = self._py_keep = {
             "sync": self._tsync, "fail": self._fail, "fun_for": self._fun_for, "domain_text": self._domain_text,
             "guards": list(self._guards), "actives": [ev.active for ev in model.events],
@@ -606,14 +604,15 @@ class Simulator:
 
     def _scales(self, fn, out, n, m):
         try:
-            rows = list(fn(self.p))[:_Layouts.max_scales]
-            table = (_Layouts.scale * _Layouts.max_scales).from_address(out)
+            lay = self._lib.layouts
+            rows = list(fn(self.p))[:lay.max_scales]
+            table = (lay.scale * lay.max_scales).from_address(out)
             keep = self._scale_keep = []
             for i, (label, names, value) in enumerate(rows):
                 sc = table[i]
                 keep.append(str(label).encode())
                 sc.label = keep[-1]
-                names = list(names)[:_Layouts.max_scale_names]
+                names = list(names)[:lay.max_scale_names]
                 for j, name in enumerate(names):
                     keep.append(str(name).encode())
                     sc.names[j] = keep[-1]
@@ -633,7 +632,7 @@ class Simulator:
     def _cb_event(self, ctx, engine, ev, number):
         if self._history is None:
             return
-        e = _Layouts.event.from_address(ev)
+        e = self._lib.layouts.event.from_address(ev)
         record = EventRecord(e.time, self.model.events[e.index].name, e.index, list(e.x_before[:self._nx]),
                              list(e.x_after[:self._nx]))
         self._history.append(record)
