@@ -136,10 +136,8 @@ class PgbPy(C.Structure):
 
 
 def _new_py(lib):
-    buf = (C.c_byte * lib.pgb_py_sizeof())()
-    py = PgbPy.from_buffer(buf)
-    py._buffer = buf
-    return py
+    # (from_buffer keeps the buffer alive with the instance: nothing else holds it)
+    return PgbPy.from_buffer((C.c_byte * lib.pgb_py_sizeof())())
 
 
 def use_library(path) -> None:
@@ -188,46 +186,48 @@ def library():
             lib.pgb_py_functions(tramps)
             lib.trampolines = dict(zip(_HOT, tramps))
             lib.pgb_rebind.restype = None
-            lib.pgb_advance.argtypes = [C.c_void_p, C.c_double, D]
-            lib.pgb_advance_to_event.argtypes = [C.c_void_p, C.c_double, C.POINTER(C.c_int), D]
+            # (the calls of every communication step take addresses, plain ints: cheaper to convert
+            # than an array for a D)
+            lib.pgb_advance.argtypes = [C.c_void_p, C.c_double, C.c_void_p]
+            lib.pgb_advance_to_event.argtypes = [C.c_void_p, C.c_double, C.POINTER(C.c_int), C.c_void_p]
             lib.pgb_set_input.argtypes = [C.c_void_p, D]
             lib.pgb_set_inputs.argtypes = [C.c_void_p, D, D]
             lib.pgb_inputs_at.argtypes = [C.c_void_p, C.c_double, D]
             lib.pgb_apply_event.argtypes = [C.c_void_p, C.c_int, C.c_double, D]
             lib.pgb_restart_at.argtypes = [C.c_void_p, C.c_double, D, D]
             lib.pgb_event_due.argtypes = [C.c_void_p]
-            lib.pgb_read.argtypes = [C.c_void_p, D]
+            lib.pgb_read.argtypes = [C.c_void_p, C.c_void_p]
             lib.pgb_read.restype = None
             lib.pgb_last_event.argtypes = [C.c_void_p, D, D]
             lib.pgb_last_event.restype = None
             lib.pgb_limits.argtypes = [C.POINTER(C.c_int)]
             lib.pgb_limits.restype = None
-            _layouts(lib)
+            lib.layouts = _Layouts(lib)
             _LIB_PATH, _LIB = path, lib
     return _LIB
 
 
 class _Layouts:
-    """PgEvent and PgScale (pg_engine.h, pg_model.h) laid out with the sizes the library was built with."""
-    max_scales = max_scale_names = 0
-    event = scale = None
+    """PgEvent and PgScale (pg_engine.h, pg_model.h) laid out with the sizes one library was built with.
+
+    One per loaded library (``lib.layouts``), not global: :func:`use_library` may load another
+    build of the engine while runs on the previous one go on, and each must read its own sizes."""
+
+    def __init__(self, lib):
+        sizes = (C.c_int * 3)()
+        lib.pgb_limits(sizes)
+        max_x, self.max_scales, self.max_scale_names = sizes
+        self.event = type("PgEvent", (C.Structure,), {"_fields_": [
+            ("time", C.c_double), ("index", C.c_int), ("x_before", C.c_double * max_x),
+            ("x_after", C.c_double * max_x)]})
+        self.scale = type("PgScale", (C.Structure,), {"_fields_": [
+            ("label", C.c_char_p), ("names", C.c_char_p * self.max_scale_names), ("n_names", C.c_int),
+            ("value", C.c_double)]})
 
 
-def layouts() -> type:
-    """:class:`_Layouts` (``event``, ``scale``, ``max_scales``, ``max_scale_names``) of the loaded library."""
-    library()
-    return _Layouts
-
-
-def _layouts(lib) -> None:
-    sizes = (C.c_int * 3)()
-    lib.pgb_limits(sizes)
-    max_x, _Layouts.max_scales, _Layouts.max_scale_names = sizes
-    _Layouts.event = type("PgEvent", (C.Structure,), {"_fields_": [
-        ("time", C.c_double), ("index", C.c_int), ("x_before", C.c_double * max_x), ("x_after", C.c_double * max_x)]})
-    _Layouts.scale = type("PgScale", (C.Structure,), {"_fields_": [
-        ("label", C.c_char_p), ("names", C.c_char_p * _Layouts.max_scale_names), ("n_names", C.c_int),
-        ("value", C.c_double)]})
+def layouts() -> _Layouts:
+    """The :class:`_Layouts` (``event``, ``scale``, ``max_scales``, ``max_scale_names``) of the loaded library."""
+    return library().layouts
 
 
 # ---- a model's static description ---------------------------------------------------------------
@@ -379,6 +379,7 @@ class Simulator:
                           int(zeno_max_events), float(zeno_window), int(keep), self._on_event, self._on_warning,
                           C.addressof(self._py))
         self._check(rc)
+        self.n_events, self.last_event = -1, None  # (the first read takes the engine's)
         self._read()
 
     # ---- the callbacks ------------------------------------------------------------------------
@@ -394,7 +395,17 @@ class Simulator:
         self._qfmt = f"={self._nq}d"
         self._U, self._ubytes, self._ukey, self._uc = C.c_double * max(self._nu, 1), 8 * self._nu, None, self.u
         self._guards = [ev.guard for ev in model.events]
-        self._buf = (C.c_double * (_READ_HEAD + 2 * self._nx + 2 * self._nq + self._nu))()
+        n = _READ_HEAD + 2 * self._nx + 2 * self._nq + self._nu
+        self._buf = (C.c_double * n)()
+        # the buffer read in one unpack (native doubles: the bits as they are; a ctypes slice costs
+        # several times as much per item), where pgb_read puts x_out, q_out, x, q and u in it (the
+        # slices built once), and the addresses the calls of every step pass (the engine and the
+        # buffer stay where they are for this object's life: restore copies into the same engine bytes)
+        self._unpack = struct.Struct(f"{n}d").unpack_from
+        a = _READ_HEAD
+        b, c, d, e = a + self._nx, a + self._nx + self._nq, a + 2 * self._nx + self._nq, n - self._nu
+        self._slices = (slice(a, b), slice(b, c), slice(c, d), slice(d, e), slice(e, n))
+        self._eaddr, self._baddr = C.addressof(self._engine), C.addressof(self._buf)
         self._ubuf = (C.c_double * max(self._nu, 1))()
         self.sloped = False  # the inputs lie on a line (set_inputs with a slope), not held
         self._slack = domain_slack(self.solver)
@@ -427,7 +438,7 @@ class Simulator:
     def _fill_py(self):
         """This run's PgbPy: the objects the trampolines call (kept alive here), the cache dropped."""
         model, py = self.model, self._py
-        self._lib.pgb_py_forget(C.byref(py))
+        self._forget()
         keep = self._py_keep = {
             "sync": self._tsync, "fail": self._fail, "fun_for": self._fun_for, "domain_text": self._domain_text,
             "guards": list(self._guards), "actives": [ev.active for ev in model.events],
@@ -606,14 +617,15 @@ class Simulator:
 
     def _scales(self, fn, out, n, m):
         try:
-            rows = list(fn(self.p))[:_Layouts.max_scales]
-            table = (_Layouts.scale * _Layouts.max_scales).from_address(out)
+            lay = self._lib.layouts
+            rows = list(fn(self.p))[:lay.max_scales]
+            table = (lay.scale * lay.max_scales).from_address(out)
             keep = self._scale_keep = []
             for i, (label, names, value) in enumerate(rows):
                 sc = table[i]
                 keep.append(str(label).encode())
                 sc.label = keep[-1]
-                names = list(names)[:_Layouts.max_scale_names]
+                names = list(names)[:lay.max_scale_names]
                 for j, name in enumerate(names):
                     keep.append(str(name).encode())
                     sc.names[j] = keep[-1]
@@ -633,7 +645,7 @@ class Simulator:
     def _cb_event(self, ctx, engine, ev, number):
         if self._history is None:
             return
-        e = _Layouts.event.from_address(ev)
+        e = self._lib.layouts.event.from_address(ev)
         record = EventRecord(e.time, self.model.events[e.index].name, e.index, list(e.x_before[:self._nx]),
                              list(e.x_after[:self._nx]))
         self._history.append(record)
@@ -658,33 +670,32 @@ class Simulator:
 
     def _read(self, filled=False):
         """Take the engine's served values into this object's attributes (``filled``: the call that
-        just returned wrote them into the buffer already)."""
-        buf = self._buf
+        just returned wrote them into the buffer already).  Called after every communication step:
+        the buffer comes in one unpack, and the discrete state's dict of the latest read is served
+        again while its values are the same (as :meth:`_qdict_of` would, without the call)."""
         if not filled:
-            self._lib.pgb_read(self._engine, buf)
-        v = buf[:]
-        self.t_out, self.t, self.h, self.max_step, n_events, n_steps, n_rejected = v[:7]
-        n_events, self.n_steps, self.n_rejected = int(n_events), int(n_steps), int(n_rejected)
-        self._due = bool(v[10])
-        self.jacobian_by_differences = bool(v[11])
-        a = _READ_HEAD
-        b = a + self._nx
-        c = b + self._nq
-        d = c + self._nx
-        e = d + self._nq
-        self.x_out = v[a:b]
-        self.q_out = self._qdict_of(v[b:c])
-        self.x = v[c:d]
-        self.q = self._qdict_of(v[d:e])
-        self.u = tuple(v[e:])
-        if n_events != getattr(self, "n_events", -1) or (v[7] and getattr(self, "last_event", None) is None):
-            self.n_events = n_events
-            if v[7]:
+            self._lib.pgb_read(self._eaddr, self._baddr)
+        v = self._unpack(self._buf)
+        (self.t_out, self.t, self.h, self.max_step, n_events, n_steps, n_rejected, has_last, last_time, last_index,
+         due, by_differences) = v[:_READ_HEAD]
+        self.n_steps, self.n_rejected = int(n_steps), int(n_rejected)
+        self._due, self.jacobian_by_differences = due != 0.0, by_differences != 0.0  # (bool(v) of a float)
+        s_x_out, s_q_out, s_x, s_q, s_u = self._slices
+        self.x_out = list(v[s_x_out])
+        q = v[s_q_out]  # (a tuple, as _qlast)
+        self.q_out = self._qlast_dict if q == self._qlast and not self._qfloat else self._qdict_of(q)
+        self.x = list(v[s_x])
+        q = v[s_q]
+        self.q = self._qlast_dict if q == self._qlast and not self._qfloat else self._qdict_of(q)
+        self.u = v[s_u]
+        if n_events != self.n_events or (has_last and self.last_event is None):
+            self.n_events = int(n_events)
+            if has_last:
                 nx = self._nx
                 xb, xa = (C.c_double * max(nx, 1))(), (C.c_double * max(nx, 1))()
                 self._lib.pgb_last_event(self._engine, xb, xa)
-                i = int(v[9])
-                self.last_event = EventRecord(v[8], self.model.events[i].name, i, xb[:nx], xa[:nx])
+                i = int(last_index)
+                self.last_event = EventRecord(last_time, self.model.events[i].name, i, xb[:nx], xa[:nx])
             else:
                 self.last_event = None
 
@@ -729,7 +740,7 @@ class Simulator:
 
     def advance(self, t_target: float):
         """Integrate to ``t_target`` (handling every event on the way); return ``(x, q)`` there."""
-        self._check(self._lib.pgb_advance(self._engine, float(t_target), self._buf))
+        self._check(self._lib.pgb_advance(self._eaddr, float(t_target), self._baddr))
         self._read(True)
         return self.x_out, self.q_out
 
@@ -738,7 +749,7 @@ class Simulator:
         an event lies in ``(t_out, t_target]`` (``t_out`` is then its exact time, the jump pending
         until the next :meth:`advance`); the step sequence is that of :meth:`advance`."""
         stopped = C.c_int()
-        self._check(self._lib.pgb_advance_to_event(self._engine, float(t_target), C.byref(stopped), self._buf))
+        self._check(self._lib.pgb_advance_to_event(self._eaddr, float(t_target), C.byref(stopped), self._baddr))
         self._read(True)
         return bool(stopped.value)
 
