@@ -64,6 +64,22 @@ def pogofmu_events(unzipdir: str) -> Optional[List[str]]:
     return None
 
 
+def _unpacked(comp, workdir: Path, extract) -> str:
+    """The folder of the component's FMU, unpacked once per FMU file of the package and shared by
+    its instances: one copy of its binary loaded for all (as FMI allows unless the FMU says
+    ``canBeInstantiatedOnlyOncePerProcess``; such an FMU gets a copy per component, as a separate
+    library is the only way to host two of it)."""
+    md = comp.model_description
+    once = any(getattr(getattr(md, kind, None), "canBeInstantiatedOnlyOncePerProcess", False)
+               for kind in ("coSimulation", "modelExchange", "scheduledExecution"))
+    if once:
+        return extract(str(comp.model_description_path), unzipdir=str(workdir / comp.name))
+    folder = workdir / "fmus" / str(comp.source).replace("/", "_").replace("\\", "_")
+    if not folder.exists():
+        extract(str(comp.model_description_path), unzipdir=str(folder))
+    return str(folder)
+
+
 class Component:
     """One FMU instance of the system, with its log kept (warnings and errors echoed)."""
 
@@ -81,7 +97,7 @@ class Component:
         self.dead = False
         self.echo = echo
         self.md = comp.model_description
-        self.dir = extract(str(comp.model_description_path), unzipdir=str(workdir / comp.name))
+        self.dir = _unpacked(comp, workdir, extract)
         self.variables = comp.variables
         self.events = pogofmu_events(self.dir)  # None: not a pogofmu FMU
         self.t = None  # the time the component has reached
