@@ -64,11 +64,25 @@ static double read_back(const digits *g)
     return strtod(buf, NULL);
 }
 
+/* One unit of the last digit added to x (a carry past the first digit makes 10...0 one exponent up). */
+static void add_unit(digits *x)
+{
+    int k;
+    for (k = x->n - 1; k >= 0 && x->d[k] == '9'; k--)
+        x->d[k] = '0';
+    if (k >= 0)
+        x->d[k]++;
+    else {
+        x->d[0] = '1';
+        x->e++;
+    }
+}
+
 /* g rounded to p < g->n digits, when the digits dropped tell which way (not exactly half of the
  * last digit kept: then the double itself decides, and 0 is returned). */
 static int round_digits(const digits *g, int p, digits *out)
 {
-    int tail = 0, half = 5, i, k;
+    int tail = 0, half = 5, i;
     for (i = p; i < g->n; i++) {
         tail = tail * 10 + (g->d[i] - '0');
         if (i > p)
@@ -79,16 +93,8 @@ static int round_digits(const digits *g, int p, digits *out)
     memcpy(out->d, g->d, (size_t)p);
     out->n = p;
     out->e = g->e;
-    if (tail > half) {
-        for (k = p - 1; k >= 0 && out->d[k] == '9'; k--)
-            out->d[k] = '0';
-        if (k >= 0)
-            out->d[k]++;
-        else {
-            out->d[0] = '1';
-            out->e++;
-        }
-    }
+    if (tail > half)
+        add_unit(out);
     return 1;
 }
 
@@ -98,14 +104,7 @@ static void step_digits(const digits *g, int up, digits *out)
     int k, p = g->n;
     *out = *g;
     if (up) {
-        for (k = p - 1; k >= 0 && out->d[k] == '9'; k--)
-            out->d[k] = '0';
-        if (k >= 0)
-            out->d[k]++;
-        else {
-            out->d[0] = '1';
-            out->e++;
-        }
+        add_unit(out);
     } else {
         for (k = p - 1; k >= 0 && out->d[k] == '0'; k--)
             out->d[k] = '9';
