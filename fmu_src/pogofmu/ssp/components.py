@@ -66,9 +66,8 @@ def pogofmu_events(unzipdir: str) -> Optional[List[str]]:
 
 def _unpacked(comp, workdir: Path, extract) -> str:
     """The folder of the component's FMU, unpacked once per FMU file of the package and shared by
-    its instances: one copy of its binary loaded for all (as FMI allows unless the FMU says
-    ``canBeInstantiatedOnlyOncePerProcess``; such an FMU gets a copy per component, as a separate
-    library is the only way to host two of it)."""
+    its instances: one copy of its binary loaded for all, as FMI allows unless the FMU says
+    ``canBeInstantiatedOnlyOncePerProcess`` (such an FMU keeps a copy per component, as before)."""
     md = comp.model_description
     once = any(getattr(getattr(md, kind, None), "canBeInstantiatedOnlyOncePerProcess", False)
                for kind in ("coSimulation", "modelExchange", "scheduledExecution"))

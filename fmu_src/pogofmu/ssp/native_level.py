@@ -353,9 +353,7 @@ class Batch:
         n = len(self.fast)
         self.run = None
         # the sources of the served components' input lines: (component, its span slot)
-        names = {} if feed else ()
-        for inst in self.fast if feed else ():
-            names.update(dict.fromkeys(nat._plan(inst)[3]))
+        names = dict.fromkeys(src for inst in self.fast for src in nat._plan(inst)[3]) if feed else {}
         self.sources = [(nat.ex.instances[name], nat.span[name]) for name in names]
         if n:
             self.args = (nat.pool, nat.parallel if feed is not None else 0, n,

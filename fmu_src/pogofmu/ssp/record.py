@@ -184,6 +184,14 @@ def csv_library():
     return _CSV_LIB or None
 
 
+def csv_bytes(rows, encoding) -> bytes:
+    """The csv module's text of ``rows`` (lists): floats as repr (shortest round trip), integers
+    as integers, ``\r\n`` after each row."""
+    out = io.StringIO()
+    csv.writer(out).writerows(rows)
+    return out.getvalue().encode(encoding)
+
+
 class RowFormatter:
     """Rows of numbers (a 2-D float64 array; ``is_int[j]``: column ``j`` holds integers) as the
     bytes ``csv.writer`` writes for them as lists (floats as ``repr``, integer columns as ``int``,
@@ -228,15 +236,12 @@ class RowFormatter:
 
     def python(self, block) -> bytes:
         """The csv module's text of ``block``'s rows (the reference the C code is held to)."""
-        out = io.StringIO()
-        w = csv.writer(out)
         rows = block.tolist()
         if self.ints:
             for row in rows:
                 for j in self.ints:
                     row[j] = int(row[j])
-        w.writerows(rows)
-        return out.getvalue().encode(self.encoding)
+        return csv_bytes(rows, self.encoding)
 
 
 class CSVStream:
@@ -295,10 +300,8 @@ class CSVStream:
             return
         rows = self._buf
         self._buf = []
-        text = io.StringIO()
-        csv.writer(text).writerows(rows)  # floats as repr (shortest round trip), integers as integers
         self.envelope().add(rows)
-        self._write(text.getvalue().encode(self._file.encoding), len(rows), rows[-1][0])
+        self._write(csv_bytes(rows, self._file.encoding), len(rows), rows[-1][0])
 
     # --- rows as slots of the C value array -------------------------------------------------------
 
@@ -345,7 +348,7 @@ class CSVStream:
         self._n = 0
         self.envelope().add(block[:n])
         if self.threads < 2:
-            self._write_block(block[:n], n, float(block[n - 1, 0]))
+            self._write_block(block[:n])
             return
         if self._writer is None:
             self._start_writer()
@@ -353,7 +356,7 @@ class CSVStream:
         self._jobs.put((block, n, float(block[n - 1, 0])))
         self._swap(self._take_free())
 
-    def _write_block(self, block, n, t_last):
+    def _write_block(self, block):
         if self._error is not None:
             return
         try:
