@@ -18,13 +18,27 @@
 #include "pg_pairs.h"
 #include "pg_rodas.h"
 
+/* The largest model the engine takes. A native FMU's own pg_sizes.h (pg_pairs.h includes it) sets
+ * each size to its model's count, so that its instance and every FMU state (a copy of the instance,
+ * fmi2GetFMUstate) hold what the model uses and no more: a segmented-mirror actuator's state is a
+ * few kB instead of ~80 kB. */
+#ifndef PG_MAX_Q
 #define PG_MAX_Q 16
+#endif
+#ifndef PG_MAX_U
 #define PG_MAX_U 1024 /* a reconstructor of a 12-ring segmented mirror takes 469 */
+#endif
+#ifndef PG_MAX_Y
 #define PG_MAX_Y 1024 /* the model's outputs */
+#endif
+#ifndef PG_MAX_P
 #define PG_MAX_P 64
+#endif
 #define PG_NS 8 /* solver settings: method rel_tol abs_tol max_step initial_step log_events max_steps_per_second
                   max_steps_per_call (the order of SOLVER_PARAMETERS in engine/settings.py) */
+#ifndef PG_MAX_EVENTS
 #define PG_MAX_EVENTS 16
+#endif
 #define PG_RECENT 200 /* max(zeno_max_events, STORM_EVENTS) */
 
 enum { PG_S_METHOD, PG_S_REL_TOL, PG_S_ABS_TOL, PG_S_MAX_STEP, PG_S_INITIAL_STEP, PG_S_LOG_EVENTS,

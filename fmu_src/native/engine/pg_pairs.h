@@ -4,8 +4,11 @@
 #define PG_PAIRS_H
 
 #include "pg_model.h"
+#include "pg_sizes.h"
 
+#ifndef PG_MAX_X
 #define PG_MAX_X 32
+#endif
 #define PG_MAX_STAGES 13 /* DOP853's 12 stages and f(t + h) */
 #define PG_MAX_DENSE 7   /* coefficient vectors of the continuous extension */
 

@@ -48,13 +48,12 @@ def engine_limits() -> dict:
 def engine_size_check(source: ModelSource) -> None:
     """A model larger than the engine's fixed sizes is refused for every backend (both run the C
     engine), naming the count, the limit and its constant."""
-    from pogofmu.runtime.engine.cengine import discrete_layout
+    from pogofmu.codegen.cmodel import SIZES, model_sizes
 
     model, limits = source.model, engine_limits()
-    sizes = {"X": ("states", len(model.states)), "U": ("inputs", len(model.inputs)),
-             "P": ("parameters", len(model.parameters)), "EVENTS": ("events", len(model.events)),
-             "Y": ("outputs", len(model.outputs)), "Q": ("discrete state entries", len(discrete_layout(model)))}
-    for key, (what, n) in sizes.items():
+    counts = model_sizes(model)
+    for key, what in SIZES:
+        n = counts[key]
         if n > limits[key]:
             raise ModelFileError(f"{source.where()}: {model.name} has {n} {what}; the engine takes at most "
                                  f"{limits[key]} (PG_MAX_{key} in fmu_src/native/engine)")

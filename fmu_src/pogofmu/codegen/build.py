@@ -185,6 +185,9 @@ def stage_sources(model, fmi: int, folder: Path, fmi_headers: Path):
               *(fmi_headers / h for h in FMI_HEADERS[fmi])]
     for path in copied:
         shutil.copyfile(path, folder / path.name)
+    from .cmodel import sizes_header
+
+    (folder / "pg_sizes.h").write_text(sizes_header(_model(model)))  # (the engine's default replaced)
     files = sorted(p.name for p in folder.iterdir() if p.suffix in (".c", ".h"))
     digest = hashlib.sha256(f"fmi{fmi}".encode())
     for name in files:
