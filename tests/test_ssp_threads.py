@@ -103,28 +103,42 @@ def test_a_record_pattern_matching_nothing_is_one_line_naming_it(mirror):
 
 class Calls(list):
     slow = 0
+    macro = 0  # macro steps of several levels in one C call
 
 
 def _simulate(ssp, monkeypatch, native, calls, **kw):
     """The run in this process, with the C path on or off; ``calls`` gets the size of every C
-    level call it made, and ``calls.slow`` the number of components of those levels left to the
-    Python path."""
+    level call it made (a macro step of several levels in one call: each level's), and
+    ``calls.slow`` the number of components of those levels left to the Python path."""
     import pogofmu.ssp.native_level as nl
     from pogofmu.ssp import simulate
 
     monkeypatch.setenv("POGOFMU_SSP_NATIVE_LEVELS", "1" if native else "0")
-    go = nl.Batch.go
+    go, macro_go = nl.Batch.go, nl.Macro.go
+
+    def count(batch):
+        calls.append(len(batch.fast))
+        if hasattr(calls, "slow"):
+            calls.slow += len(batch.slow)
 
     def counted(self, t, h):
-        calls.append(len(self.fast))
-        if hasattr(calls, "slow"):
-            calls.slow += len(self.slow)
+        count(self)
         return go(self, t, h)
+
+    def counted_macro(self, t, h):
+        stop, bad = macro_go(self, t, h)
+        if hasattr(calls, "macro"):
+            calls.macro += 1
+        for batch in self.batches[:stop + 1]:
+            count(batch)
+        return stop, bad
     monkeypatch.setattr(nl.Batch, "go", counted)
+    monkeypatch.setattr(nl.Macro, "go", counted_macro)
     try:
         return simulate(str(ssp), stop_time=float(STOP), step=1e-3, echo_log=False, **kw)
     finally:
         monkeypatch.setattr(nl.Batch, "go", go)
+        monkeypatch.setattr(nl.Macro, "go", macro_go)
 
 
 @pytest.mark.parametrize("algorithm,events", [("gauss-seidel", True), ("jacobi", True), ("gauss-seidel", False),
@@ -138,6 +152,8 @@ def test_the_c_path_gives_the_bits_of_the_python_path(mirror, monkeypatch, algor
     assert max(calls) == (15 if algorithm == "jacobi" else 7) and not none  # every component in C: a level, or all
     # the controllers and the reconstructor take their inputs as lines (Gauss-Seidel): set in C too
     assert calls.slow == 0
+    # synchronized Gauss-Seidel: the levels of a macro step in one C call (a level's own call at events)
+    assert (calls.macro > 100) == (algorithm == "gauss-seidel" and events), calls.macro
     assert (c["event"] != 0).any() == events
     modes = np.array([c[f"Actuator_{i}.mode"] for i in range(1, 8)])
     assert (modes == 1).any() and (modes == -1).any()

@@ -15,8 +15,10 @@
  * Host-side only (pogofmu.ssp.native_level loads it); never part of an FMU. POSIX threads and the
  * GCC/Clang atomic builtins. */
 #include <pthread.h>
+#include <sched.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 #ifdef _WIN32
 #define PGM_EXPORT __declspec(dllexport)
@@ -67,22 +69,34 @@ typedef struct {
     unsigned char *known;
     double *before;
     int *result;
-    int next;   /* the next component to take (atomic) */
-    int failed; /* a component failed: take no more (atomic) */
+    int next;     /* the next component to take (atomic) */
+    int failed;   /* a component failed: run no more (atomic) */
+    int threads;  /* the threads that may take components */
 } job_t;
 
 typedef struct pgm_pool pgm_pool;
 PGM_EXPORT void pgm_pool_free(pgm_pool *p);
+
+/* The pool. The caller of pgm_run takes components of the batch too, and returns as soon as every
+ * component has ended: a worker that was not on a CPU while the batch ran is not waited for (it
+ * finds the batch closed). A waiting thread — a worker for the next batch, the caller for the
+ * components taken by workers — first polls for up to SPIN_NS, yielding the CPU every few polls,
+ * then sleeps on a condition variable: a level of small components takes ~0.1 ms, and the
+ * master's Python between two levels about as long, so a sleep and a wake-up through the kernel
+ * at every level (tens of microseconds on a virtual machine) would cost as much as the second
+ * thread gives. */
+#define SPIN_NS 200000L
 
 struct pgm_pool {
     int threads; /* workers besides the calling thread */
     pthread_t *tid;
     pthread_mutex_t mu;
     pthread_cond_t go, done;
-    unsigned long generation;
-    int running; /* workers still in the current job */
-    int quit;
-    job_t *job;
+    unsigned long generation; /* a batch was posted: changed under mu, read atomically */
+    int open;                 /* workers may enter the batch (atomic) */
+    int inside;               /* workers entered (atomic) */
+    int quit;                 /* (set under mu, read atomically) */
+    job_t job;
 };
 
 static int one(job_t *j, int i)
@@ -155,18 +169,83 @@ static int one(job_t *j, int i)
     return c->event_slot >= 0 && v[c->event_slot] != n0;
 }
 
+static long now_ns(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (long)ts.tv_sec * 1000000000L + ts.tv_nsec;
+}
+
+static void relax(void)
+{
+#if defined(__x86_64__) || defined(__i386__)
+    __builtin_ia32_pause();
+#elif defined(__aarch64__)
+    __asm__ __volatile__("yield");
+#endif
+}
+
+static int batch_posted(pgm_pool *p, unsigned long seen)
+{
+    return __atomic_load_n(&p->generation, __ATOMIC_ACQUIRE) != seen || __atomic_load_n(&p->quit, __ATOMIC_ACQUIRE);
+}
+
+static int workers_out(pgm_pool *p, unsigned long unused)
+{
+    (void)unused;
+    return __atomic_load_n(&p->inside, __ATOMIC_SEQ_CST) == 0;
+}
+
+/* until ready(p, arg): polls (SPIN_NS), then sleeps on ``cond`` (whoever makes it true signals
+ * ``cond`` under mu) */
+static void wait_for(pgm_pool *p, int (*ready)(pgm_pool *, unsigned long), unsigned long arg, pthread_cond_t *cond)
+{
+    long until = now_ns() + SPIN_NS;
+    for (int k = 1; !ready(p, arg); k++) {
+        if ((k & 63) == 0) {
+            if (now_ns() > until) {
+                pthread_mutex_lock(&p->mu);
+                while (!ready(p, arg))
+                    pthread_cond_wait(cond, &p->mu);
+                pthread_mutex_unlock(&p->mu);
+                return;
+            }
+            sched_yield();
+        } else {
+            relax();
+        }
+    }
+}
+
+static void signal_caller(pgm_pool *p)
+{
+    pthread_mutex_lock(&p->mu);
+    pthread_cond_signal(&p->done);
+    pthread_mutex_unlock(&p->mu);
+}
+
+/* take components until none is left, a run of consecutive ones at a time (a share of what is left,
+ * at least one: guided, so that the threads end together and seldom write neighbouring slots of
+ * the value array); after a failure the rest are not run (result -1) */
 static void work(job_t *j)
 {
     for (;;) {
-        if (__atomic_load_n(&j->failed, __ATOMIC_ACQUIRE))
-            return;
-        int i = __atomic_fetch_add(&j->next, 1, __ATOMIC_ACQ_REL);
-        if (i >= j->n)
-            return;
-        int r = one(j, i);
-        j->result[i] = r;
-        if (r > 1)
-            __atomic_store_n(&j->failed, 1, __ATOMIC_RELEASE);
+        int i = __atomic_load_n(&j->next, __ATOMIC_RELAXED), size;
+        do {
+            if (i >= j->n)
+                return;
+            size = (j->n - i) / (2 * j->threads);
+            if (size < 1)
+                size = 1;
+        } while (!__atomic_compare_exchange_n(&j->next, &i, i + size, 1, __ATOMIC_ACQ_REL, __ATOMIC_RELAXED));
+        for (int k = i; k < i + size; k++) {
+            if (__atomic_load_n(&j->failed, __ATOMIC_ACQUIRE))
+                continue;
+            int r = one(j, k);
+            j->result[k] = r;
+            if (r > 1)
+                __atomic_store_n(&j->failed, 1, __ATOMIC_RELEASE);
+        }
     }
 }
 
@@ -174,21 +253,19 @@ static void *worker(void *arg)
 {
     pgm_pool *p = arg;
     unsigned long seen = 0;
-    pthread_mutex_lock(&p->mu);
     for (;;) {
-        while (!p->quit && p->generation == seen)
-            pthread_cond_wait(&p->go, &p->mu);
-        if (p->quit)
+        wait_for(p, batch_posted, seen, &p->go);
+        if (__atomic_load_n(&p->quit, __ATOMIC_ACQUIRE))
             break;
-        seen = p->generation;
-        job_t *j = p->job;
-        pthread_mutex_unlock(&p->mu);
-        work(j);
-        pthread_mutex_lock(&p->mu);
-        if (--p->running == 0)
-            pthread_cond_signal(&p->done);
+        seen = __atomic_load_n(&p->generation, __ATOMIC_ACQUIRE);
+        /* enter, then look whether the batch is still open (the caller closes it, then waits
+         * until no worker is inside: one of the two sees the other) */
+        __atomic_add_fetch(&p->inside, 1, __ATOMIC_SEQ_CST);
+        if (__atomic_load_n(&p->open, __ATOMIC_SEQ_CST))
+            work(&p->job);
+        if (__atomic_sub_fetch(&p->inside, 1, __ATOMIC_SEQ_CST) == 0)
+            signal_caller(p);
     }
-    pthread_mutex_unlock(&p->mu);
     return NULL;
 }
 
@@ -223,7 +300,7 @@ PGM_EXPORT void pgm_pool_free(pgm_pool *p)
     if (!p)
         return;
     pthread_mutex_lock(&p->mu);
-    p->quit = 1;
+    __atomic_store_n(&p->quit, 1, __ATOMIC_RELEASE);
     pthread_cond_broadcast(&p->go);
     pthread_mutex_unlock(&p->mu);
     for (int k = 0; k < p->threads; k++)
@@ -235,6 +312,35 @@ PGM_EXPORT void pgm_pool_free(pgm_pool *p)
     free(p);
 }
 
+/* one batch on the pool's threads (when ``parallel``): the number of components whose result is not 0 */
+static int run_batch(pgm_pool *p, int parallel, int n, pgm_comp *const *comps, const unsigned char *ops, double t,
+                     double h, double t_mark, double *values, unsigned char *known, double *before, int *result)
+{
+    job_t local, *j = p ? &p->job : &local; /* (no worker reads the pool's job while it is closed) */
+    int k, helpers = (p && parallel && n > 1 && p->threads > 0);
+    *j = (job_t){comps, ops, n, t, h, t_mark, values, known, before, result, 0, 0, helpers ? p->threads + 1 : 1};
+    for (k = 0; k < n; k++)
+        result[k] = -1;
+    if (helpers) {
+        __atomic_store_n(&p->open, 1, __ATOMIC_SEQ_CST);
+        pthread_mutex_lock(&p->mu); /* (a worker going to sleep checks the generation under mu) */
+        __atomic_add_fetch(&p->generation, 1, __ATOMIC_RELEASE);
+        pthread_cond_broadcast(&p->go);
+        pthread_mutex_unlock(&p->mu);
+    }
+    work(j);
+    if (helpers) {
+        /* every component is taken: close the batch, and wait for the workers inside (those
+         * running a component) to leave */
+        __atomic_store_n(&p->open, 0, __ATOMIC_SEQ_CST);
+        wait_for(p, workers_out, 0, &p->done);
+    }
+    int count = 0;
+    for (k = 0; k < n; k++)
+        count += result[k] != 0;
+    return count;
+}
+
 /* Run the batch: ``ops[i]`` on ``comps[i]`` (steps from ``t`` of length ``h``), on the pool's
  * threads when ``parallel`` and there are several components. ``result[i]`` as above;
  * ``before[i]``: the event counter before the step (read components). Returns the number of
@@ -243,28 +349,34 @@ PGM_EXPORT int pgm_run(pgm_pool *p, int parallel, int n, pgm_comp *const *comps,
                        double t, double h, double t_mark, double *values, unsigned char *known, double *before,
                        int *result)
 {
-    job_t j = {comps, ops, n, t, h, t_mark, values, known, before, result, 0, 0};
-    int k, helpers = (p && parallel && n > 1) ? (p->threads < n - 1 ? p->threads : n - 1) : 0;
-    for (k = 0; k < n; k++)
-        result[k] = -1;
-    if (helpers) {
-        pthread_mutex_lock(&p->mu);
-        p->job = &j;
-        p->running = p->threads;
-        p->generation++;
-        pthread_cond_broadcast(&p->go);
-        pthread_mutex_unlock(&p->mu);
+    return run_batch(p, parallel, n, comps, ops, t, h, t_mark, values, known, before, result);
+}
+
+/* A Gauss-Seidel macro step of ``n_levels`` levels, each a batch as pgm_run's (level L: ``n[L]``
+ * components ``comps[L]``, ``ops[L]``, ``before[L]``, ``result[L]``), every component at the macro
+ * step's start ``t`` = ``t_mark`` and stepped by ``h``: level after level, each fed from the
+ * outputs of those before. ``span[L][i]`` is the slot of the time component i has stepped since
+ * t_mark (-1: none), which the input lines of later levels read: ``t - t_mark`` before its step,
+ * ``(t + h) - t_mark`` after (the doubles pogofmu.ssp.native_level.Batch.go writes). Stops after
+ * the first level with a result that is not 0 (an event counted, a failure); returns its index, or
+ * n_levels when every level ended with all results 0. */
+PGM_EXPORT int pgm_run_levels(pgm_pool *p, int parallel, int n_levels, const int *n, pgm_comp *const *const *comps,
+                              const unsigned char *const *ops, double t, double h, double t_mark, double *values,
+                              unsigned char *known, double *const *before, int *const *result,
+                              const int *const *span)
+{
+    int L, i;
+    double before_step = t - t_mark, after_step = (t + h) - t_mark;
+    for (L = 0; L < n_levels; L++)
+        for (i = 0; i < n[L]; i++)
+            if (span[L][i] >= 0)
+                values[span[L][i]] = before_step;
+    for (L = 0; L < n_levels; L++) {
+        if (run_batch(p, parallel, n[L], comps[L], ops[L], t, h, t_mark, values, known, before[L], result[L]))
+            return L;
+        for (i = 0; i < n[L]; i++)
+            if (span[L][i] >= 0)
+                values[span[L][i]] = after_step;
     }
-    work(&j);
-    if (helpers) {
-        pthread_mutex_lock(&p->mu);
-        while (p->running > 0)
-            pthread_cond_wait(&p->done, &p->mu);
-        p->job = NULL;
-        pthread_mutex_unlock(&p->mu);
-    }
-    int count = 0;
-    for (k = 0; k < n; k++)
-        count += result[k] != 0;
-    return count;
+    return n_levels;
 }

@@ -155,7 +155,26 @@ class Exchange:
         batch = nat.batch(insts, feed, save)
         if batch.run is None:
             return self.map(fallback, insts)
-        bad = batch.go(t, h)
+        return self._finish(batch, insts, t, h, batch.go(t, h), fallback, on_event)
+
+    def step_levels(self, levels, t, h, on_event):
+        """A Gauss-Seidel macro step of whole ``levels`` (every component at ``t``, fed with
+        lines, saved where it must, stepped by ``h`` and read) as one C call when the C code serves
+        every component: the :meth:`step_level` results of the levels it ran, which end with the
+        first level that has an event or a failure (the later levels are not stepped); None when
+        it cannot (the caller steps level by level)."""
+        nat = self.native
+        macro = nat.macro(levels) if nat is not None else None
+        if macro is None:
+            return None
+        stop, bad = macro.go(t, h)
+        return [self._finish(b, level, t, h, bad if k == stop else (), None, on_event)
+                for k, (b, level) in enumerate(zip(macro.batches[:stop + 1], levels))]
+
+    def _finish(self, batch, insts, t, h, bad, fallback, on_event) -> list:
+        """After a C call of ``batch``: its components' times and journals, the others stepped by
+        ``fallback``, the results (see :meth:`step_level`)."""
+        nat = self.native
         end = t + h
         for inst in batch.saving:  # the FMU state itself saved at t, then the step (see Component.save)
             inst._journal, inst._mark, inst.saved_at = [(True, t, h)], 0, inst.t
@@ -188,6 +207,14 @@ class Exchange:
         if errors:
             raise min(errors, key=lambda e: e[0])[1]
         return out
+
+    def prepare(self, levels, feed, save=False):
+        """The C calls of these levels made before the run's first row (as :meth:`step_level` with
+        ``feed`` and ``save`` would make them at the first step): their set-up is not a cost of the
+        macro steps."""
+        if self.native is not None:
+            for level in levels:
+                self.native.batch(level, feed, save)
 
     def feed_all(self, insts):
         """:meth:`feed` every one of ``insts`` (Jacobi: all inputs from the same outputs; those
@@ -276,12 +303,17 @@ class Exchange:
         return changed
 
     _put_row = None  # the recorder's own copy of a row from the C value array (_row_arrays)
+    _row_known = False  # every recorded slot has had a value (they keep one: no slot is ever unset)
+
+    def _all_known(self) -> bool:
+        self._row_known = bool(self._np_known[self._row_slots].all())
+        return self._row_known
 
     def row(self, t: float, kind: int = GRID):
         """One row: every output, and every input with the value it holds from here on (its
         source's latest value; an unconnected input its own)."""
         put = self._put_row
-        if put is not None and type(t) is float and self._np_known[self._row_slots].all():
+        if put is not None and type(t) is float and (self._row_known or self._all_known()):
             put(t, kind)  # no Python list: the slots copied into the recorder's block (CSVStream.bind_slots)
             return
         self.record.add(self.row_values(t, kind))
@@ -388,6 +420,7 @@ def fixed_step(ex: Exchange, t0, t_end, step, jacobi=False, progress=None):
     outputs at ``t_k`` (libcosim's algorithm). Events happen inside the FMUs; the master learns of
     them at the next communication point."""
     t = t0
+    ex.prepare([ex.order] if jacobi else ex.levels, not jacobi)
     for T in grid_points(t0, t_end, step):
         h = T - t
 
@@ -582,12 +615,19 @@ class Synchronizer:
             ex.feed_all(ex.order)
         else:
             ex.mark(t)
-        for level in self.levels:
+        on_event = lambda inst, n0: self._first_event(inst, t, int(n0))  # noqa: E731
+        ran = None  # the levels stepped by one C call (Gauss-Seidel, every component at the step's start)
+        if not jacobi and all(inst.t < target for inst in ex.order):
+            ran = ex.step_levels(self.levels, t, target - t, on_event)
+        for k, level in enumerate(self.levels):
             # the level's components step together to ``target`` (in parallel with --threads);
             # the earliest event among them then cuts the macro step, as one after the other the
             # first would have cut the step of the next: those that went past it go back to it
-            todo = [inst for inst in level if inst.t < target]
-            stepped += [inst for inst in level if inst.t >= target]  # ahead (they cannot roll back): they wait
+            if ran is not None and k < len(ran):  # (stepped already: all of the level was at t)
+                todo = level
+            else:
+                todo = [inst for inst in level if inst.t < target]
+                stepped += [inst for inst in level if inst.t >= target]  # ahead (they cannot roll back): they wait
             goal = target
 
             def one(inst):
@@ -600,8 +640,10 @@ class Synchronizer:
                 r = inst.do_step(t, goal - t)
                 ex.read(inst)
                 return r
-            results = ex.step_level(todo, t, goal - t, not jacobi, one, save=True,
-                                    on_event=lambda inst, n0: self._first_event(inst, t, int(n0)))
+            if ran is not None and k < len(ran):
+                results = ran[k]
+            else:
+                results = ex.step_level(todo, t, goal - t, not jacobi, one, save=True, on_event=on_event)
             cut = None
             for inst, r in zip(todo, results):
                 if r.terminate:
@@ -813,6 +855,7 @@ def synchronized(ex: Exchange, t0, t_end, step, tolerance=1e-10, jacobi=False, p
     sync.settle(t0, em)  # FMI 3.0 with eventModeUsed: in Event Mode after initialization
     for inst in em:
         inst.enter_step_mode()
+    ex.prepare(sync.levels, not jacobi, save=True)
     ex.row(t0)
     t = t0
     stuck = 0  # events in a row at one instant (two components switching each other back and forth)

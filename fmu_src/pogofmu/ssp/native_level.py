@@ -84,6 +84,9 @@ def library():
         lib.pgm_run.restype = ctypes.c_int
         lib.pgm_run.argtypes = [_P, ctypes.c_int, ctypes.c_int, _P, _P, ctypes.c_double, ctypes.c_double,
                                 ctypes.c_double, _P, _P, _P, _P]
+        lib.pgm_run_levels.restype = ctypes.c_int
+        lib.pgm_run_levels.argtypes = [_P, ctypes.c_int, ctypes.c_int, _P, _P, _P, ctypes.c_double, ctypes.c_double,
+                                       ctypes.c_double, _P, _P, _P, _P, _P]
         _LIB = lib
     return _LIB or None
 
@@ -182,6 +185,7 @@ class NativeLevels:
         self.parallel = 1 if self.pool else 0
         self._plans: Dict[str, Optional[tuple]] = {}
         self._batches = {}
+        self._macros = {}
         self._capable = {inst.name: self._can_serve(inst) for inst in ex.order}
 
     def close(self):
@@ -215,6 +219,7 @@ class NativeLevels:
         made again."""
         self._plans.clear()
         self._batches.clear()
+        self._macros.clear()
         self._marks = None
 
     def mark(self, keys):
@@ -233,6 +238,7 @@ class NativeLevels:
         """The variables read with the outputs of ``inst`` changed: its plan is made again."""
         self._plans.pop(inst.name, None)
         self._batches.clear()
+        self._macros.clear()
 
     def _plan(self, inst):
         plan = self._plans.get(inst.name, 0)
@@ -314,6 +320,17 @@ class NativeLevels:
             b = self._batches[key] = Batch(self, insts, feed, save)
         return b
 
+    def macro(self, levels) -> Optional["Macro"]:
+        """The one C call of a Gauss-Seidel macro step over ``levels`` (cached), or None when a
+        component of them is not served (see :meth:`~.algorithms.Exchange.step_levels`)."""
+        key = tuple(map(tuple, levels))
+        m = self._macros.get(key, 0)
+        if m == 0:
+            batches = [self.batch(level, True, True) for level in levels]
+            m = Macro(self, batches) if all(b.run is not None and not b.slow for b in batches) else None
+            self._macros[key] = m
+        return m
+
     def error(self, inst, code, t, h):
         """The master's error for a failed call of ``inst`` in C (as the Python path words it)."""
         what, function = CALLS[code >> 8]
@@ -378,3 +395,36 @@ class Batch:
             return ()
         result, before = self.result, self.before
         return [(i, result[i], before[i]) for i in range(n) if result[i] != 0]
+
+
+class Macro:
+    """The levels of a Gauss-Seidel macro step in one C call (pgm_run_levels): the :class:`Batch`
+    of each level, run one after the other with the GIL released."""
+
+    def __init__(self, nat: NativeLevels, batches):
+        self.nat, self.batches = nat, batches
+        n = len(batches)
+
+        def pointers(arrays):
+            return (_P * n)(*[ctypes.addressof(a) for a in arrays])
+        # each component's span slot: the time it has stepped, read by the input lines of later levels
+        spans = [(ctypes.c_int * len(b.fast))(*[nat.span[inst.name] for inst in b.fast]) for b in batches]
+        self._keep = spans
+        self.args = (n, (ctypes.c_int * n)(*[len(b.fast) for b in batches]), pointers([b.args[3] for b in batches]),
+                     pointers([b.args[4] for b in batches]))
+        self.tail = (pointers([b.before for b in batches]), pointers([b.result for b in batches]), pointers(spans))
+        self.run = nat.lib.pgm_run_levels
+
+    def go(self, t, h):
+        """Run it: ``(stop, bad)``: the index of the level it stopped after (the number of levels
+        when every result was 0) and that level's components whose code is not 0 (as
+        :meth:`Batch.go`)."""
+        nat = self.nat
+        t_mark = nat.ex.t_mark
+        stop = self.run(nat.pool, nat.parallel, *self.args, t, h, t_mark if t_mark is not None else float("nan"),
+                        nat.arr, nat.known, *self.tail)
+        if stop == len(self.batches):
+            return stop, ()
+        b = self.batches[stop]
+        result, before = b.result, b.before
+        return stop, [(i, result[i], before[i]) for i in range(len(b.fast)) if result[i] != 0]

@@ -12,6 +12,7 @@ from pathlib import Path
 
 PLOT_BINS = 2000  # time slices of a figure's min/max envelope (more than the figure's pixel columns)
 CHUNK_VALUES = 1 << 20  # values per block of rows (CSV write, in-memory block): a block's memory bounded
+WRITER_VALUES = 1 << 15  # ... of a block handed to a writer thread (threads >= 2): formatted while the run goes on
 
 
 def chunk_rows(n_cols: int) -> int:
@@ -300,6 +301,10 @@ class CSVStream:
             return
         rows = self._buf
         self._buf = []
+        if self._writer is not None:  # the envelope is the writer's (rows in order with the blocks)
+            self._raise()
+            self._jobs.put((csv_bytes(rows, self._file.encoding), len(rows), rows[-1][0], rows))
+            return
         self.envelope().add(rows)
         self._write(csv_bytes(rows, self._file.encoding), len(rows), rows[-1][0])
 
@@ -318,10 +323,12 @@ class CSVStream:
         is_int[1] = 1  # the event column
         is_int[2 + np.asarray(list(ints), dtype=np.intp)] = 1
         self._fmt = RowFormatter(is_int, lib, self._file.encoding)
+        if self.threads >= 2:  # blocks of a writer thread: small, so that it formats while the run goes
+            self._chunk = min(self._chunk, max(16, WRITER_VALUES // len(self.names)))
         self._block = np.empty((self._chunk, len(self.names)))
         rows = list(self._block)  # one view per row, made once
         slots = np.ascontiguousarray(slots, dtype=np.intp)
-        take = np.take
+        take = values.take
 
         def put(t, kind):
             if self._buf:
@@ -329,7 +336,7 @@ class CSVStream:
             row = rows[self._n]
             row[0] = t
             row[1] = kind
-            take(values, slots, out=row[2:], mode="clip")
+            take(slots, out=row[2:], mode="clip")
             self._n += 1
             if self._n == self._chunk:
                 self._hand_block()
@@ -346,14 +353,14 @@ class CSVStream:
         stream goes on with the other block)."""
         block, n = self._block, self._n
         self._n = 0
-        self.envelope().add(block[:n])
         if self.threads < 2:
+            self.envelope().add(block[:n])
             self._write_block(block[:n])
             return
         if self._writer is None:
             self._start_writer()
         self._raise()
-        self._jobs.put((block, n, float(block[n - 1, 0])))
+        self._jobs.put((block, n, float(block[n - 1, 0]), None))  # (its envelope too: the writer's)
         self._swap(self._take_free())
 
     def _write_block(self, block):
@@ -391,8 +398,9 @@ class CSVStream:
             job = self._jobs.get()
             if job is None:
                 return
-            data, n, t_last = job
+            data, n, t_last, rows = job
             try:
+                self.envelope().add(data[:n] if rows is None else rows)
                 if self._error is None:
                     if isinstance(data, bytes):
                         self._out.write(data)
@@ -418,11 +426,7 @@ class CSVStream:
                     self._raise()
 
     def _write(self, data: bytes, n, t_last):
-        """Bytes of ``n`` rows, written in order after every block handed before."""
-        if self._writer is not None:
-            self._raise()
-            self._jobs.put((data, n, t_last))
-            return
+        """Bytes of ``n`` rows, written now (no writer thread: see _flush_list)."""
         if self._error is not None:
             return
         try:
