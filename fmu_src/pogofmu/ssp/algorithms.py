@@ -114,7 +114,7 @@ class Exchange:
         is raised. The results do not depend on the thread count: each call does what it would do
         alone, on its own instance (the FMI calls of native FMUs release the GIL)."""
         k = min(self.threads, len(insts))
-        if k <= 1:
+        if k <= 1 or self._in_c(insts):
             return [fn(inst) for inst in insts]
         if self._pool is None:
             from concurrent.futures import ThreadPoolExecutor
@@ -140,6 +140,12 @@ class Exchange:
         if failed:
             raise failed[min(failed)]
         return out
+
+    def _in_c(self, insts) -> bool:
+        """Every one of ``insts`` is stepped by the C level call: its calls outside it (at events)
+        are a few microseconds each, which Python threads would only hand the GIL around."""
+        nat = self.native
+        return nat is not None and all(nat.serves(inst) for inst in insts)
 
     def step_level(self, insts, t, h, feed, fallback, save=False, on_event=None) -> list:
         """``[fallback(inst) for inst in insts]`` (independent components, as :meth:`map`), where
@@ -176,8 +182,15 @@ class Exchange:
         ``fallback``, the results (see :meth:`step_level`)."""
         nat = self.native
         end = t + h
+        entry = (True, t, h)
         for inst in batch.saving:  # the FMU state itself saved at t, then the step (see Component.save)
-            inst._journal, inst._mark, inst.saved_at = [(True, t, h)], 0, inst.t
+            j = inst._journal
+            if j is not None and len(j) == 1:  # (the list of the previous step's C save: reused)
+                j[0] = entry
+            else:
+                inst._journal = [entry]
+            inst._mark = 0
+            inst.saved_at = inst.t
         for inst in batch.fast:
             inst.t = end
         out = [StepResult(end)] * len(insts)  # (one object: nobody changes a step's result)

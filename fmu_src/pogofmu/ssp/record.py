@@ -62,7 +62,18 @@ class Envelope:
         slot = np.maximum.accumulate(slot)  # rows come in time order (equal times at event instants)
         cuts = np.flatnonzero(np.diff(slot)) + 1
         cols = np.arange(block.shape[1])
-        for a, b in zip(np.r_[0, cuts], np.r_[cuts, m]):
+        starts, ends = np.r_[0, cuts], np.r_[cuts, m]
+        one = ends - starts == 1
+        if one.any():  # the slices a single row of the block falls in (fewer rows than slices): all at once
+            r = starts[one]
+            rows, j = block[r], slot[r]  # (each slice once: the slots of the segments differ)
+            for k_, v_, t_, better in ((self.kmin, self.vmin, self.tmin, np.less),
+                                       (self.kmax, self.vmax, self.tmax, np.greater)):
+                new_r, new_c = np.nonzero(better(rows, v_[j]))  # NaN never wins
+                k_[j[new_r], new_c] = self.rows + r[new_r]
+                v_[j[new_r], new_c] = rows[new_r, new_c]
+                t_[j[new_r], new_c] = rows[new_r, 0]
+        for a, b in zip(starts[~one], ends[~one]):
             seg, j = block[a:b], slot[a]
             for pick, k_, v_, t_, better in ((np.argmin, self.kmin, self.vmin, self.tmin, np.less),
                                              (np.argmax, self.kmax, self.vmax, self.tmax, np.greater)):
