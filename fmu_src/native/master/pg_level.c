@@ -8,8 +8,9 @@
  * to its source's value at the macro step's start, with the slope to its source's value now
  * (fmi2SetRealInputDerivatives), as pogofmu.ssp.algorithms.Exchange.feed does. The
  * components of a batch are independent (none feeds another within the call), so they are
- * dealt to the pool's threads one at a time, in order; each does exactly the calls it would do
- * alone, so the results do not depend on the thread count. Every decision about events stays in
+ * taken by the pool's threads in runs of neighbours; each does exactly the calls it would do
+ * alone, so the results do not depend on the thread count. pgm_run_levels runs the levels of a
+ * Gauss-Seidel macro step one after the other in one call. Every decision about events stays in
  * Python: this code only reports, per component, that its event counter changed over the step.
  *
  * Host-side only (pogofmu.ssp.native_level loads it); never part of an FMU. POSIX threads and the
@@ -77,14 +78,14 @@ typedef struct {
 typedef struct pgm_pool pgm_pool;
 PGM_EXPORT void pgm_pool_free(pgm_pool *p);
 
-/* The pool. The caller of pgm_run takes components of the batch too, and returns as soon as every
- * component has ended: a worker that was not on a CPU while the batch ran is not waited for (it
- * finds the batch closed). A waiting thread — a worker for the next batch, the caller for the
- * components taken by workers — first polls for up to SPIN_NS, yielding the CPU every few polls,
- * then sleeps on a condition variable: a level of small components takes ~0.1 ms, and the
- * master's Python between two levels about as long, so a sleep and a wake-up through the kernel
- * at every level (tens of microseconds on a virtual machine) would cost as much as the second
- * thread gives. */
+/* The pool. The caller of a batch takes its components too; once every one is taken it closes the
+ * batch and waits only for the workers inside it (running a component): a worker that was not on
+ * a CPU while the batch ran is not waited for (it finds the batch closed). A waiting thread — a
+ * worker for the next batch, the caller for the workers inside — first polls for up to SPIN_NS,
+ * yielding the CPU every few polls, then sleeps on a condition variable: a level of small
+ * components takes ~0.1 ms, and the master's Python between two macro steps about as long, so a
+ * sleep and a wake-up through the kernel at every level (tens of microseconds on a virtual
+ * machine) would cost as much as the second thread gives. */
 #define SPIN_NS 200000L
 
 struct pgm_pool {
