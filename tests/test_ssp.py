@@ -528,6 +528,38 @@ def test_envelope_keeps_every_slice_min_and_max():
     np.testing.assert_array_equal(small.series(1)[1], y[:50])
 
 
+def test_envelope_equals_a_row_by_row_update():
+    """Slices holding one row of a block (taken together) and slices holding several, in blocks of
+    any size, on several columns: the envelope's record (row index, value and time of each slice's
+    min and max per column) equals the plain row-by-row update written here (a row replaces the
+    slice's extreme only if strictly beyond it: the first of equal values stays)."""
+    rng = np.random.default_rng(4)
+    for rows, bins in ((300, 1000), (3000, 700), (2000, 2000)):
+        t = np.sort(rng.uniform(0.0, 1.0, rows))
+        t[rows // 3:rows // 3 + 4] = t[rows // 3]  # equal times (an event instant)
+        data = np.column_stack([t, rng.normal(size=(rows, 3)).round(1)])  # (rounded: ties)
+        env = master.Envelope((0.0, 1.0), 4, bins)
+        a = 0
+        while a < rows:
+            b = a + int(rng.integers(1, 200))
+            env.add(data[a:b])
+            a = b
+        k = np.full((2, bins, 4), -1)
+        v = np.stack([np.full((bins, 4), np.inf), np.full((bins, 4), -np.inf)])
+        tt = np.zeros((2, bins, 4))
+        j = 0
+        for r in range(rows):
+            j = max(j, min(bins - 1, max(0, int(np.floor(data[r, 0] * bins)))))
+            for c in range(4):
+                for m, beyond in ((0, data[r, c] < v[0, j, c]), (1, data[r, c] > v[1, j, c])):
+                    if beyond:
+                        k[m, j, c], v[m, j, c], tt[m, j, c] = r, data[r, c], data[r, 0]
+        for m, (ek, ev, et) in enumerate(((env.kmin, env.vmin, env.tmin), (env.kmax, env.vmax, env.tmax))):
+            np.testing.assert_array_equal(ek, k[m])
+            np.testing.assert_array_equal(ev, v[m])
+            np.testing.assert_array_equal(et, tt[m])
+
+
 def test_csv_stream_memory_does_not_grow_with_the_run(tmp_path):
     """The recorder of the run command: 10x more rows, (almost) no more memory (tracemalloc
     peak within 0.5 MB, where keeping the rows would cost 11 MB more), and the CSV holds every

@@ -313,9 +313,13 @@ PGM_EXPORT void pgm_pool_free(pgm_pool *p)
     free(p);
 }
 
-/* one batch on the pool's threads (when ``parallel``): the number of components whose result is not 0 */
-static int run_batch(pgm_pool *p, int parallel, int n, pgm_comp *const *comps, const unsigned char *ops, double t,
-                     double h, double t_mark, double *values, unsigned char *known, double *before, int *result)
+/* Run the batch: ``ops[i]`` on ``comps[i]`` (steps from ``t`` of length ``h``), on the pool's
+ * threads when ``parallel`` and there are several components. ``result[i]`` as above;
+ * ``before[i]``: the event counter before the step (read components). Returns the number of
+ * components whose result is not 0; every call has ended when it returns. */
+PGM_EXPORT int pgm_run(pgm_pool *p, int parallel, int n, pgm_comp *const *comps, const unsigned char *ops,
+                       double t, double h, double t_mark, double *values, unsigned char *known, double *before,
+                       int *result)
 {
     job_t local, *j = p ? &p->job : &local; /* (no worker reads the pool's job while it is closed) */
     int k, helpers = (p && parallel && n > 1 && p->threads > 0);
@@ -342,17 +346,6 @@ static int run_batch(pgm_pool *p, int parallel, int n, pgm_comp *const *comps, c
     return count;
 }
 
-/* Run the batch: ``ops[i]`` on ``comps[i]`` (steps from ``t`` of length ``h``), on the pool's
- * threads when ``parallel`` and there are several components. ``result[i]`` as above;
- * ``before[i]``: the event counter before the step (read components). Returns the number of
- * components whose result is not 0; every call has ended when it returns. */
-PGM_EXPORT int pgm_run(pgm_pool *p, int parallel, int n, pgm_comp *const *comps, const unsigned char *ops,
-                       double t, double h, double t_mark, double *values, unsigned char *known, double *before,
-                       int *result)
-{
-    return run_batch(p, parallel, n, comps, ops, t, h, t_mark, values, known, before, result);
-}
-
 /* A Gauss-Seidel macro step of ``n_levels`` levels, each a batch as pgm_run's (level L: ``n[L]``
  * components ``comps[L]``, ``ops[L]``, ``before[L]``, ``result[L]``), every component at the macro
  * step's start ``t`` = ``t_mark`` and stepped by ``h``: level after level, each fed from the
@@ -373,7 +366,7 @@ PGM_EXPORT int pgm_run_levels(pgm_pool *p, int parallel, int n_levels, const int
             if (span[L][i] >= 0)
                 values[span[L][i]] = before_step;
     for (L = 0; L < n_levels; L++) {
-        if (run_batch(p, parallel, n[L], comps[L], ops[L], t, h, t_mark, values, known, before[L], result[L]))
+        if (pgm_run(p, parallel, n[L], comps[L], ops[L], t, h, t_mark, values, known, before[L], result[L]))
             return L;
         for (i = 0; i < n[L]; i++)
             if (span[L][i] >= 0)

@@ -393,8 +393,13 @@ class Batch:
         if not self.run(pool, parallel, n, comps, ops, t, h, t_mark if t_mark is not None else float("nan"),
                         nat.arr, nat.known, self.before, self.result):
             return ()
+        return self.bad()
+
+    def bad(self):
+        """After its C call: ``[(index in fast, code, event counter before)]`` of the components
+        whose code is not 0 (see :meth:`go`)."""
         result, before = self.result, self.before
-        return [(i, result[i], before[i]) for i in range(n) if result[i] != 0]
+        return [(i, result[i], before[i]) for i in range(len(self.fast)) if result[i] != 0]
 
 
 class Macro:
@@ -423,8 +428,4 @@ class Macro:
         t_mark = nat.ex.t_mark
         stop = self.run(nat.pool, nat.parallel, *self.args, t, h, t_mark if t_mark is not None else float("nan"),
                         nat.arr, nat.known, *self.tail)
-        if stop == len(self.batches):
-            return stop, ()
-        b = self.batches[stop]
-        result, before = b.result, b.before
-        return stop, [(i, result[i], before[i]) for i in range(len(b.fast)) if result[i] != 0]
+        return stop, (self.batches[stop].bad() if stop < len(self.batches) else ())

@@ -312,12 +312,13 @@ class CSVStream:
             return
         rows = self._buf
         self._buf = []
+        data = csv_bytes(rows, self._file.encoding)
         if self._writer is not None:  # the envelope is the writer's (rows in order with the blocks)
             self._raise()
-            self._jobs.put((csv_bytes(rows, self._file.encoding), len(rows), rows[-1][0], rows))
+            self._jobs.put((data, len(rows), rows[-1][0], rows))
             return
         self.envelope().add(rows)
-        self._write(csv_bytes(rows, self._file.encoding), len(rows), rows[-1][0])
+        self._write(data, len(rows), rows[-1][0])
 
     # --- rows as slots of the C value array -------------------------------------------------------
 
