@@ -261,3 +261,29 @@ def test_a_run_whose_file_cannot_grow_ends_in_one_line_with_the_rows_kept(mirror
     assert "default.incomplete.csv" in lines[1]
     assert not (mirror / "big" / "default.csv").exists()
     assert (mirror / "big" / "default.incomplete.csv").stat().st_size > 1_000_000
+
+
+@need_c
+def test_with_two_threads_the_pools_workers_format_the_rows_between_their_batches(mirror):
+    """``--threads 2``: the writer thread hands its blocks to the C level stepping's pool
+    (pgm_pool_csv_rows, formatted by the worker between its batches); the file is byte for byte
+    the one-thread run's, and no block was formatted outside the pool."""
+    code = ("import sys, ctypes\n"
+            "from pogofmu.ssp import cli, native_level\n"
+            "calls = {'pool': 0, 'other': 0}\n"
+            "orig = native_level.NativeLevels.csv_rows\n"
+            "def counted(self, *args):\n"
+            "    calls['pool' if self.pool else 'other'] += 1\n"
+            "    return orig(self, *args)\n"
+            "native_level.NativeLevels.csv_rows = counted\n"
+            "cli.plot = lambda *a, **k: None\n"
+            "cli.run('m.ssp', stop_time=0.8, step=1e-3, out='pooled', progress=False, threads=2)\n"
+            "print(calls['pool'], calls['other'])\n")
+    proc = subprocess.run([sys.executable, "-c", code], cwd=mirror, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    pooled, other = map(int, proc.stdout.split()[-2:])
+    one = run_master(mirror, "one", "--threads", "1")
+    assert one.returncode == 0, one.stderr
+    text = (mirror / "pooled" / "default.csv").read_bytes()
+    assert pooled >= 2 and other == 0  # (blocks of ~2^15 values: several for 800 rows)
+    assert text == (mirror / "one" / "default.csv").read_bytes() and text.count(b"\r\n") > 801

@@ -11,8 +11,14 @@
  * that level, the failure's code is (3 << 8) | 3, and no later component of its level is run
  * after the failure is seen.
  *
+ * Meanwhile a writer thread has the pool's workers format blocks of CSV rows between their batches
+ * (pgm_pool_csv_rows, as the master's CSV writer does), in pieces of a buffer smaller than the
+ * block and whole: every text is compared with pgm_csv_rows's in the writer's own thread. A last
+ * block is asked for while no batch runs (the workers asleep).
+ *
  * Prints "ok" and exits 0; anything else is a failure (ThreadSanitizer exits 66 on a race). */
 #include "pg_level.c"
+#include "pg_csv.c"
 
 #include <math.h>
 #include <stdio.h>
@@ -142,9 +148,58 @@ static int run(System *s, pgm_pool *p, int *steps_run)
     return stop;
 }
 
+/* the CSV writer: blocks of rows formatted by the pool, compared with the calling thread's */
+#define ROWS 40
+#define COLS 57
+typedef struct {
+    pgm_pool *p;
+    int blocks, bad;
+    volatile int stop; /* (set by the main thread once the runs are over: read under no lock) */
+    double data[ROWS * COLS];
+    unsigned char is_int[COLS];
+    char mine[1 << 16], theirs[1 << 16];
+} Writer;
+
+static int one_block(Writer *w, long cap)
+{
+    long r = 0, done_mine, done_theirs;
+    while (r < ROWS) {
+        long n_theirs = pgm_pool_csv_rows(w->p, w->data + r * COLS, ROWS - r, COLS, w->is_int, w->theirs, cap,
+                                          &done_theirs);
+        long n_mine = pgm_csv_rows(w->data + r * COLS, ROWS - r, COLS, w->is_int, w->mine, cap, &done_mine);
+        if (done_theirs <= 0 || n_theirs != n_mine || done_theirs != done_mine ||
+            memcmp(w->mine, w->theirs, (size_t)n_mine) != 0)
+            return 1;
+        r += done_mine;
+    }
+    return 0;
+}
+
+static void *writer(void *arg)
+{
+    Writer *w = arg;
+    while (!__atomic_load_n(&w->stop, __ATOMIC_ACQUIRE)) {
+        /* the whole block in one text, then in pieces of a few rows */
+        w->bad |= one_block(w, (long)sizeof w->mine) | one_block(w, 5 * pgm_csv_row_max(COLS, w->is_int));
+        w->blocks++;
+    }
+    return NULL;
+}
+
+static void fill(Writer *w, pgm_pool *p)
+{
+    memset(w, 0, sizeof *w);
+    w->p = p;
+    for (int j = 0; j < COLS; j++)
+        w->is_int[j] = j % 7 == 1;
+    for (int k = 0; k < ROWS * COLS; k++)
+        w->data[k] = w->is_int[k % COLS] ? (double)(k % 13 - 6) : sin(0.37 * k) * pow(10.0, k % 11 - 5);
+}
+
 int main(void)
 {
     static System ref, sys;
+    static Writer w;
     int steps;
     setup(&ref, -1, -1);
     if (run(&ref, NULL, &steps) != 2 || steps != STEPS) {
@@ -155,6 +210,12 @@ int main(void)
         pgm_pool *p = pgm_pool_new(threads);
         if (!p) {
             printf("no pool of %d threads\n", threads);
+            return 1;
+        }
+        pthread_t wt;
+        fill(&w, p);
+        if (pthread_create(&wt, NULL, writer, &w) != 0) {
+            printf("no writer thread\n");
             return 1;
         }
         for (int rep = 0; rep < 3; rep++) {
@@ -183,6 +244,15 @@ int main(void)
                 printf("%d threads: component %d has result %d\n", threads, i, sys.result[i]);
                 return 1;
             }
+        __atomic_store_n(&w.stop, 1, __ATOMIC_RELEASE);
+        pthread_join(wt, NULL);
+        struct timespec nap = {0, 5000000}; /* the workers asleep (past their polling) */
+        nanosleep(&nap, NULL);
+        w.bad |= one_block(&w, (long)sizeof w.mine);
+        if (w.bad || w.blocks < 1) {
+            printf("%d threads: the pool's CSV rows differ from the caller's (%d blocks)\n", threads, w.blocks);
+            return 1;
+        }
         pgm_pool_free(p);
     }
     printf("ok\n");

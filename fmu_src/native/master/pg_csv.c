@@ -405,25 +405,47 @@ PGM_EXPORT long pgm_csv_row_max(int n_cols, const unsigned char *is_int)
     return n;
 }
 
+/* Rows ``data[0 .. n_rows)`` (``n_cols`` doubles each) formatted into ``out`` (``cap`` bytes) a
+ * piece at a time, from the cursor ``*row``, ``*col`` and ``len`` (the bytes so far) on: at most
+ * ``budget`` values (a row that is begun is ended by later pieces; a row is begun only when it
+ * surely fits: ``row_max``, pgm_csv_row_max). Returns the bytes so far and moves the cursor; the
+ * rows are all done when ``*row == n_rows`` or ``*col == 0`` and the next row does not fit. The
+ * pool's workers format a block this way between batches (pg_level.c). */
+long pgm_csv_piece(const double *data, long n_rows, int n_cols, const unsigned char *is_int, char *out, long cap,
+                   long row_max, long *row, int *col, long len, long budget)
+{
+    char *s = out + len;
+    long r = *row;
+    int j = *col;
+    while (r < n_rows && budget > 0) {
+        if (j == 0 && (long)(s - out) + row_max > cap)
+            break;
+        const double *v = data + (size_t)r * (size_t)n_cols;
+        for (; j < n_cols && budget > 0; j++, budget--) {
+            if (j)
+                *s++ = ',';
+            s = is_int[j] ? put_int(s, v[j]) : put_float(s, v[j]);
+        }
+        if (j == n_cols) {
+            *s++ = '\r';
+            *s++ = '\n';
+            j = 0;
+            r++;
+        }
+    }
+    *row = r;
+    *col = j;
+    return (long)(s - out);
+}
+
 /* Rows ``data[0 .. n_rows)`` (``n_cols`` doubles each) formatted into ``out`` as csv.writer
  * writes them, as many whole rows as surely fit in ``cap`` bytes (see pgm_csv_row_max); returns
  * the bytes written and sets ``*done`` to the rows. */
 PGM_EXPORT long pgm_csv_rows(const double *data, long n_rows, int n_cols, const unsigned char *is_int, char *out,
                              long cap, long *done)
 {
-    long row_max = pgm_csv_row_max(n_cols, is_int), r;
-    char *s = out;
-    int j;
-    for (r = 0; r < n_rows && (long)(s - out) + row_max <= cap; r++) {
-        const double *v = data + (size_t)r * (size_t)n_cols;
-        for (j = 0; j < n_cols; j++) {
-            if (j)
-                *s++ = ',';
-            s = is_int[j] ? put_int(s, v[j]) : put_float(s, v[j]);
-        }
-        *s++ = '\r';
-        *s++ = '\n';
-    }
-    *done = r;
-    return (long)(s - out);
+    int col = 0;
+    *done = 0;
+    return pgm_csv_piece(data, n_rows, n_cols, is_int, out, cap, pgm_csv_row_max(n_cols, is_int), done, &col, 0,
+                         n_rows * (long)n_cols + 1);
 }

@@ -13,6 +13,11 @@
  * Gauss-Seidel macro step one after the other in one call. Every decision about events stays in
  * Python: this code only reports, per component, that its event counter changed over the step.
  *
+ * A worker with no batch to run formats the recording's rows instead (pgm_pool_csv_rows, asked by
+ * the CSV writer thread, pogofmu.ssp.record): a few values at a time, looking for a batch between
+ * them, so that the writer is not a third thread on two cores beside the caller and a worker
+ * waiting for it, and the worker's time between batches is not spent polling.
+ *
  * Host-side only (pogofmu.ssp.native_level loads it); never part of an FMU. POSIX threads and the
  * GCC/Clang atomic builtins. */
 #include <pthread.h>
@@ -78,6 +83,29 @@ typedef struct {
 typedef struct pgm_pool pgm_pool;
 PGM_EXPORT void pgm_pool_free(pgm_pool *p);
 
+/* pg_csv.c */
+long pgm_csv_piece(const double *data, long n_rows, int n_cols, const unsigned char *is_int, char *out, long cap,
+                   long row_max, long *row, int *col, long len, long budget);
+PGM_EXPORT long pgm_csv_row_max(int n_cols, const unsigned char *is_int);
+PGM_EXPORT long pgm_csv_rows(const double *data, long n_rows, int n_cols, const unsigned char *is_int, char *out,
+                             long cap, long *done);
+
+/* the side job: a block of CSV rows to format (pgm_pool_csv_rows), with its cursor */
+typedef struct {
+    const double *data;
+    long n_rows;
+    int n_cols;
+    const unsigned char *is_int;
+    char *out;
+    long cap, row_max;
+    long row; /* the cursor: rows done, the column within the next, the bytes so far */
+    int col;
+    long len;
+} side_t;
+
+enum { SIDE_NONE, SIDE_POSTED, SIDE_DONE };
+#define SIDE_PIECE 64 /* values per piece (a few microseconds): a worker looks for a batch between pieces */
+
 /* The pool. The caller of a batch takes its components too; once every one is taken it closes the
  * batch and waits only for the workers inside it (running a component): a worker that was not on
  * a CPU while the batch ran is not waited for (it finds the batch closed). A waiting thread — a
@@ -98,6 +126,10 @@ struct pgm_pool {
     int inside;               /* workers entered (atomic) */
     int quit;                 /* (set under mu, read atomically) */
     job_t job;
+    side_t side;
+    int side_state; /* SIDE_*: set under mu (POSTED by the asker, DONE by the worker that ends it) */
+    int side_claim; /* a worker is formatting a piece (atomic) */
+    pthread_cond_t side_cv; /* the side job changed state */
 };
 
 static int one(job_t *j, int i)
@@ -191,6 +223,38 @@ static int batch_posted(pgm_pool *p, unsigned long seen)
     return __atomic_load_n(&p->generation, __ATOMIC_ACQUIRE) != seen || __atomic_load_n(&p->quit, __ATOMIC_ACQUIRE);
 }
 
+static int side_posted(pgm_pool *p)
+{
+    return __atomic_load_n(&p->side_state, __ATOMIC_ACQUIRE) == SIDE_POSTED;
+}
+
+static int batch_or_side(pgm_pool *p, unsigned long seen)
+{
+    return batch_posted(p, seen) || side_posted(p);
+}
+
+/* One piece of the side job, by the worker that claims it (none if another does: returns 0); the
+ * piece that ends the job says so to its asker. */
+static int side_piece(pgm_pool *p)
+{
+    int idle = 0;
+    if (!__atomic_compare_exchange_n(&p->side_claim, &idle, 1, 0, __ATOMIC_ACQUIRE, __ATOMIC_RELAXED))
+        return 0;
+    if (side_posted(p)) {
+        side_t *d = &p->side;
+        d->len = pgm_csv_piece(d->data, d->n_rows, d->n_cols, d->is_int, d->out, d->cap, d->row_max, &d->row,
+                               &d->col, d->len, SIDE_PIECE);
+        if (d->row == d->n_rows || (d->col == 0 && d->len + d->row_max > d->cap)) {
+            pthread_mutex_lock(&p->mu);
+            __atomic_store_n(&p->side_state, SIDE_DONE, __ATOMIC_RELEASE);
+            pthread_cond_broadcast(&p->side_cv);
+            pthread_mutex_unlock(&p->mu);
+        }
+    }
+    __atomic_store_n(&p->side_claim, 0, __ATOMIC_RELEASE);
+    return 1;
+}
+
 static int workers_out(pgm_pool *p, unsigned long unused)
 {
     (void)unused;
@@ -255,9 +319,18 @@ static void *worker(void *arg)
     pgm_pool *p = arg;
     unsigned long seen = 0;
     for (;;) {
-        wait_for(p, batch_posted, seen, &p->go);
-        if (__atomic_load_n(&p->quit, __ATOMIC_ACQUIRE))
+        wait_for(p, batch_or_side, seen, &p->go);
+        if (__atomic_load_n(&p->quit, __ATOMIC_ACQUIRE)) {
+            while (side_posted(p)) /* (its asker waits for it) */
+                if (!side_piece(p))
+                    relax();
             break;
+        }
+        if (!batch_posted(p, seen)) { /* no batch: a piece of the side job (another worker's: wait) */
+            if (!side_piece(p))
+                relax();
+            continue;
+        }
         seen = __atomic_load_n(&p->generation, __ATOMIC_ACQUIRE);
         /* enter, then look whether the batch is still open (the caller closes it, then waits
          * until no worker is inside: one of the two sees the other) */
@@ -281,6 +354,7 @@ PGM_EXPORT pgm_pool *pgm_pool_new(int threads)
     pthread_mutex_init(&p->mu, NULL);
     pthread_cond_init(&p->go, NULL);
     pthread_cond_init(&p->done, NULL);
+    pthread_cond_init(&p->side_cv, NULL);
     p->tid = calloc((size_t)(p->threads ? p->threads : 1), sizeof *p->tid);
     if (!p->tid) {
         free(p);
@@ -308,6 +382,7 @@ PGM_EXPORT void pgm_pool_free(pgm_pool *p)
         pthread_join(p->tid[k], NULL);
     pthread_cond_destroy(&p->go);
     pthread_cond_destroy(&p->done);
+    pthread_cond_destroy(&p->side_cv);
     pthread_mutex_destroy(&p->mu);
     free(p->tid);
     free(p);
@@ -373,4 +448,30 @@ PGM_EXPORT int pgm_run_levels(pgm_pool *p, int parallel, int n_levels, const int
                 values[span[L][i]] = after_step;
     }
     return n_levels;
+}
+
+/* ``pgm_csv_rows`` (pg_csv.c) done by the pool's workers between their batches, for a thread
+ * other than the pool's caller (the CSV writer): it waits, asleep, until they have formatted the
+ * rows. One block at a time (a second asker waits for the first). Without workers the asking
+ * thread formats them itself. Not to be called during or after pgm_pool_free (the pool's memory
+ * goes): pogofmu.ssp.native_level.NativeLevels holds a lock around both. */
+PGM_EXPORT long pgm_pool_csv_rows(pgm_pool *p, const double *data, long n_rows, int n_cols,
+                                  const unsigned char *is_int, char *out, long cap, long *done)
+{
+    if (!p || p->threads == 0)
+        return pgm_csv_rows(data, n_rows, n_cols, is_int, out, cap, done);
+    pthread_mutex_lock(&p->mu);
+    while (__atomic_load_n(&p->side_state, __ATOMIC_ACQUIRE) != SIDE_NONE)
+        pthread_cond_wait(&p->side_cv, &p->mu);
+    p->side = (side_t){data, n_rows, n_cols, is_int, out, cap, pgm_csv_row_max(n_cols, is_int), 0, 0, 0};
+    __atomic_store_n(&p->side_state, SIDE_POSTED, __ATOMIC_RELEASE);
+    pthread_cond_broadcast(&p->go); /* (a sleeping worker waits for a batch or a side job) */
+    while (__atomic_load_n(&p->side_state, __ATOMIC_ACQUIRE) != SIDE_DONE)
+        pthread_cond_wait(&p->side_cv, &p->mu);
+    long len = p->side.len;
+    *done = p->side.row;
+    __atomic_store_n(&p->side_state, SIDE_NONE, __ATOMIC_RELEASE);
+    pthread_cond_broadcast(&p->side_cv);
+    pthread_mutex_unlock(&p->mu);
+    return len;
 }

@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 import time as _time
 from fractions import Fraction
+from operator import attrgetter
 from typing import Dict, List
 
 from .components import REAL_TYPES, StepResult
@@ -23,6 +24,7 @@ from .package import SSPError
 INPUTS = ("hold", "interpolate")  # --inputs: how a Gauss-Seidel component sees the inputs over a step
 MAX_EVENT_ITERATIONS = 100  # discrete iterations at one instant before the master gives up
 GRID, LEFT, RIGHT = 0, -1, 1  # the ``event`` column: output grid, left and right limit at an event
+_TIME = attrgetter("t")
 
 
 class Exchange:
@@ -344,7 +346,7 @@ class Exchange:
             self._np_known = np.ctypeslib.as_array(self.native.known)
             bind = getattr(self.record, "bind_slots", None)  # a CSVStream formatting its rows in C
             if bind is not None:
-                self._put_row = bind(self._np_values, self._row_slots, self._row_ints)
+                self._put_row = bind(self._np_values, self._row_slots, self._row_ints, self.native.csv_rows)
 
     def row_values(self, t: float, kind: int = GRID) -> list:
         v = self.value
@@ -630,7 +632,7 @@ class Synchronizer:
             ex.mark(t)
         on_event = lambda inst, n0: self._first_event(inst, t, int(n0))  # noqa: E731
         ran = None  # the levels stepped by one C call (Gauss-Seidel, every component at the step's start)
-        if not jacobi and all(inst.t < target for inst in ex.order):
+        if not jacobi and max(map(_TIME, ex.order)) < target:
             ran = ex.step_levels(self.levels, t, target - t, on_event)
         for k, level in enumerate(self.levels):
             # the level's components step together to ``target`` (in parallel with --threads);
@@ -658,7 +660,10 @@ class Synchronizer:
             else:
                 results = ex.step_level(todo, t, goal - t, not jacobi, one, save=True, on_event=on_event)
             cut = None
-            for inst, r in zip(todo, results):
+            pairs = zip(todo, results)
+            if len(results) > 1 and results.count(results[0]) == len(results):
+                pairs = ((todo[0], results[0]),)  # one result for all (a C call without events): the checks once
+            for inst, r in pairs:
                 if r.terminate:
                     raise SSPError(f"Component {inst.name} asked to terminate the simulation at t = {r.t_end!r} s")
                 if r.t_end < goal and (cut is None or r.t_end < cut[1].t_end):

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import ctypes
 import os
+import threading
 from typing import Dict, List, Optional
 
 from .components import REAL_TYPES, Fmi2CoSimulation, _call_failed
@@ -84,6 +85,9 @@ def library():
         lib.pgm_run.restype = ctypes.c_int
         lib.pgm_run.argtypes = [_P, ctypes.c_int, ctypes.c_int, _P, _P, ctypes.c_double, ctypes.c_double,
                                 ctypes.c_double, _P, _P, _P, _P]
+        lib.pgm_pool_csv_rows.restype = ctypes.c_long
+        lib.pgm_pool_csv_rows.argtypes = [_P, _P, ctypes.c_long, ctypes.c_int, _P, _P, ctypes.c_long,
+                                          ctypes.POINTER(ctypes.c_long)]
         lib.pgm_run_levels.restype = ctypes.c_int
         lib.pgm_run_levels.argtypes = [_P, ctypes.c_int, ctypes.c_int, _P, _P, _P, ctypes.c_double, ctypes.c_double,
                                        ctypes.c_double, _P, _P, _P, _P, _P]
@@ -183,15 +187,27 @@ class NativeLevels:
         self._marks = None
         self.pool = lib.pgm_pool_new(threads) if threads > 1 else None
         self.parallel = 1 if self.pool else 0
+        self._pool_lock = threading.Lock()  # csv_rows (another thread) against close
         self._plans: Dict[str, Optional[tuple]] = {}
         self._batches = {}
         self._macros = {}
         self._capable = {inst.name: self._can_serve(inst) for inst in ex.order}
 
     def close(self):
-        if self.pool:
-            self.lib.pgm_pool_free(self.pool)
-            self.pool = None
+        with self._pool_lock:
+            if self.pool:
+                self.lib.pgm_pool_free(self.pool)
+                self.pool = None
+
+    def csv_rows(self, *args) -> int:
+        """``pgm_csv_rows(*args)`` (pg_csv.c) for the recording's writer thread: formatted by the
+        pool's workers between their batches (pgm_pool_csv_rows: the writer waits asleep, and is not
+        a third thread on the cores beside the pool's), or by the calling thread when there is no
+        pool (any more)."""
+        with self._pool_lock:
+            if self.pool:
+                return self.lib.pgm_pool_csv_rows(self.pool, *args)
+        return self.lib.pgm_csv_rows(*args)
 
     # ---- which components ----------------------------------------------------------------------
     def _can_serve(self, inst) -> bool:

@@ -212,12 +212,13 @@ class RowFormatter:
 
     TEXT = 1 << 20  # bytes of text per C call (at least two rows)
 
-    def __init__(self, is_int, lib=None, encoding="utf-8"):
+    def __init__(self, is_int, lib=None, encoding="utf-8", rows=None):
         import numpy as np
 
         self.is_int = np.ascontiguousarray(is_int, dtype=np.uint8)
         self.ints = [j for j, f in enumerate(self.is_int) if f]
         self.lib, self.encoding = lib, encoding
+        self.rows = rows or (lib.pgm_csv_rows if lib is not None else None)  # (pgm_csv_rows' arguments)
         if lib is not None:
             row_max = lib.pgm_csv_row_max(len(self.is_int), self.is_int.ctypes.data)
             self._text = np.empty(max(self.TEXT, 2 * row_max), dtype=np.uint8)
@@ -239,7 +240,7 @@ class RowFormatter:
         text, cap, done = self._text, len(self._text), self._done
         r = 0
         while r < m:
-            n = self.lib.pgm_csv_rows(block.ctypes.data + r * row_bytes, m - r, n_cols, self.is_int.ctypes.data,
+            n = self.rows(block.ctypes.data + r * row_bytes, m - r, n_cols, self.is_int.ctypes.data,
                                       text.ctypes.data, cap, ctypes.byref(done))
             if done.value <= 0:
                 raise RuntimeError("pgm_csv_rows wrote no row")  # (the buffer holds two rows at least)
@@ -322,10 +323,12 @@ class CSVStream:
 
     # --- rows as slots of the C value array -------------------------------------------------------
 
-    def bind_slots(self, values, slots, ints):
+    def bind_slots(self, values, slots, ints, rows=None):
         """The rows of the C level stepping: ``put(t, kind)`` writes the row ``t, kind,
         values[slots]`` (``ints``: the positions in ``slots`` of integer values) into the stream's
-        block; None when this stream formats no rows in C (no library)."""
+        block; None when this stream formats no rows in C (no library). ``rows``: a function with
+        ``pgm_csv_rows``'s arguments that formats them (the writer thread's: the C level stepping's
+        pool, :meth:`.native_level.NativeLevels.csv_rows`)."""
         import numpy as np
 
         lib = csv_library()
@@ -334,7 +337,7 @@ class CSVStream:
         is_int = np.zeros(len(self.names), dtype=np.uint8)
         is_int[1] = 1  # the event column
         is_int[2 + np.asarray(list(ints), dtype=np.intp)] = 1
-        self._fmt = RowFormatter(is_int, lib, self._file.encoding)
+        self._fmt = RowFormatter(is_int, lib, self._file.encoding, rows if self.threads >= 2 else None)
         if self.threads >= 2:  # blocks of a writer thread: small, so that it formats while the run goes
             self._chunk = min(self._chunk, max(16, WRITER_VALUES // len(self.names)))
         self._block = np.empty((self._chunk, len(self.names)))
