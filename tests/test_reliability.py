@@ -277,6 +277,27 @@ def test_first_instantiations_from_threads_in_fmpy(names):
             assert r == ["ok", *expected[n]], (n, r, proc.stdout[-3000:], proc.stderr[-1000:])
 
 
+def test_instantiations_while_another_thread_calls_py_getversion(tmp_path):
+    """The launcher reads the host's CPython version without Py_GetVersion's static buffer, which
+    every call rewrites from an empty text: with a C thread of the process calling Py_GetVersion
+    without pause, each of the five Python-hosted FMUs (five copies of the launcher, each checking
+    the host's CPython) instantiates in each of 3 fresh processes. Before, about a third of them
+    failed here ("this process runs CPython 3.11.7 ... needs 3.10 to 3.13"), and about 1 in 250 of
+    the fmpy-threads starts above under load."""
+    import shutil
+
+    cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
+    hammer = tmp_path / "py_version_hammer.so"
+    subprocess.run([cc, "-O2", "-shared", "-fPIC", "-pthread", str(ROOT / "tests" / "c_host" / "py_version_hammer.c"),
+                    "-o", str(hammer)], check=True)
+    for _ in range(3):
+        proc = subprocess.run([sys.executable, str(ROOT / "tests" / "_version_race.py"), str(DIST), ",".join(MIXED),
+                               str(hammer)], capture_output=True, text=True, timeout=300)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        got = json.loads(proc.stdout.strip().splitlines()[-1])
+        assert got == ["ok"] * len(MIXED), (got, proc.stdout[-3000:])
+
+
 def test_a_build_instantiated_a_thousand_times_imports_its_code_once():
     """docs/using-fmus.md: "the same build instantiated a thousand times imports its code once" —
     in a fresh process, after 1 000 instances (one after the other, each stepped and freed) the

@@ -75,6 +75,24 @@ static int resolve(void *handle, const char **missing)
     return 1;
 }
 
+/* The version of the CPython whose Py_GetVersion is `get_version` (its library `handle`, or
+ * RTLD_DEFAULT), as text ("3.11.7") in `text`: from its Py_Version constant (CPython 3.11 and
+ * newer), else from Py_GetVersion, which the caller calls only under the interpreter-start lock
+ * (lock_interpreter_start): Py_GetVersion formats its text into a static buffer at every call,
+ * whose first byte glibc's vsnprintf sets to '\0' before it writes, so a thread reading it while
+ * another calls it can read "" — the launchers of several FMUs instantiated at once from threads
+ * took the host's CPython 3.11.7 for an unusable one (about 1 in 200 such starts under load). */
+static void version_text(void *handle, const char *(*get_version)(void), char *text, size_t size)
+{
+    const unsigned long *hex = (const unsigned long *)dlsym(handle, "Py_Version");
+    if (hex) {
+        snprintf(text, size, "%lu.%lu.%lu", (*hex >> 24) & 0xffUL, (*hex >> 16) & 0xffUL, (*hex >> 8) & 0xffUL);
+        return;
+    }
+    const char *v = get_version();
+    snprintf(text, size, "%.*s", (int)strcspn(v, " "), v);
+}
+
 static int version_ok(const char *version, int *minor)
 {
     int major = 0;
@@ -109,13 +127,11 @@ static int find_home(const char *lib, int minor, char *home, size_t size)
 /* Start an isolated interpreter: no site-packages, no user site, environment ignored, standard
  * library of the loaded libpython only.  Py_InitializeEx aborts the process on failure, so the
  * standard library is checked first. */
-static int start_interpreter(void *handle)
+static int start_interpreter(void *handle, int minor)
 {
     static wchar_t *whome = NULL, *wname = NULL;
     Dl_info info;
     char home[PATH_MAX];
-    int minor;
-    if (!version_ok(py.Py_GetVersion(), &minor)) return 0;
     if (!dladdr(*(void **)&py.Py_GetVersion, &info) || !info.dli_fname) {
         report("  cannot tell the file of the loaded libpython\n");
         return 0;
@@ -158,12 +174,16 @@ static int try_library(const char *path)
         report("  %s: lacks %s\n", path, missing);
         return 0; /* left loaded: dlclose of a libpython is not safe */
     }
-    if (!version_ok(py.Py_GetVersion(), &minor)) {
-        report("  %s: CPython %.*s, need >= 3.10\n", path, (int)strcspn(py.Py_GetVersion(), " "), py.Py_GetVersion());
+    char version[64];
+    int fd = lock_interpreter_start(*(void **)&py.Py_GetVersion);
+    version_text(handle, py.Py_GetVersion, version, sizeof version);
+    if (!version_ok(version, &minor)) {
+        unlock_interpreter_start(fd);
+        report("  %s: CPython %s, need >= 3.10\n", path, version);
         return 0;
     }
-    int fd = lock_interpreter_start(*(void **)&py.Py_GetVersion);
-    int ok = py.Py_IsInitialized() /* already running in this process (another FMU) */ || start_interpreter(handle);
+    int ok = py.Py_IsInitialized() /* already running in this process (another FMU) */ ||
+             start_interpreter(handle, minor);
     unlock_interpreter_start(fd);
     if (ok) return 1;
     report("  %s: could not start an interpreter\n", path);
@@ -298,22 +318,28 @@ int ensure_python(const char *resources)
         *(void **)&host_version = dlsym(RTLD_DEFAULT, "Py_GetVersion");
         *(void **)&host_running = dlsym(RTLD_DEFAULT, "Py_IsInitialized");
         int minor;
-        if (host_version && host_running && host_running() && !version_ok(host_version(), &minor)) {
-            /* the host runs a CPython of its own (one per process): the FMU's code would run in it,
-             * and no other libpython can be started beside it */
-            snprintf(python_report, sizeof python_report, "%.*s", (int)strcspn(host_version(), " "), host_version());
-            pthread_mutex_unlock(&boot_lock);
-            return -2;
+        char version[64];
+        if (host_version && host_running && host_running()) {
+            int fd = lock_interpreter_start(*(void **)&host_version);
+            version_text(RTLD_DEFAULT, host_version, version, sizeof version);
+            unlock_interpreter_start(fd);
+            if (!version_ok(version, &minor)) {
+                /* the host runs a CPython of its own (one per process): the FMU's code would run in
+                 * it, and no other libpython can be started beside it */
+                snprintf(python_report, sizeof python_report, "%s", version);
+                pthread_mutex_unlock(&boot_lock);
+                return -2;
+            }
         }
         if (dlsym(RTLD_DEFAULT, "Py_IsInitialized") && resolve(RTLD_DEFAULT, &missing)) {
             int fd = lock_interpreter_start(*(void **)&py.Py_GetVersion);
-            if (!version_ok(py.Py_GetVersion(), &minor)) {
-                report("  the CPython linked into this process is %.*s, need >= 3.10\n",
-                       (int)strcspn(py.Py_GetVersion(), " "), py.Py_GetVersion());
+            version_text(RTLD_DEFAULT, py.Py_GetVersion, version, sizeof version);
+            if (!version_ok(version, &minor)) {
+                report("  the CPython linked into this process is %s, need >= 3.10\n", version);
             } else if (py.Py_IsInitialized()) {
                 python_ready = 1;
             } else {
-                python_ready = start_interpreter(RTLD_DEFAULT);
+                python_ready = start_interpreter(RTLD_DEFAULT, minor);
                 if (!python_ready) report("  the CPython linked into this process could not be started\n");
             }
             unlock_interpreter_start(fd);
