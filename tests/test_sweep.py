@@ -323,11 +323,18 @@ def test_resume_after_an_interruption_runs_only_the_missing_points(tmp_path, sch
     cmd = [str(POGOFMU), "sweep", str(gate_fmu), "--grid", f"k=0:{n - 1}:{n}", "--set", "hold=2", "--set", gate.set,
            "--stop-time", "0.1", "--step", "0.05", "--outputs", "y", "--chunk-size", "1", "--scheduler", scheduler,
            "--out", str(out), "--no-progress"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    # (PYTHONFAULTHANDLER: a sweep that does not end after the Ctrl-C shows its threads' stacks)
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env={**os.environ, "PYTHONFAULTHANDLER": "1"})
     try:
         _wait_for(lambda: len(_saved(parts)) >= 2, proc)
         proc.send_signal(signal.SIGINT)  # Ctrl-C
-        stdout, stderr = proc.communicate(timeout=120)
+        try:
+            stdout, stderr = proc.communicate(timeout=120)
+        except subprocess.TimeoutExpired:
+            proc.send_signal(signal.SIGABRT)  # faulthandler writes every thread's stack to stderr
+            stdout, stderr = proc.communicate(timeout=60)
+            pytest.fail(f"the interrupted sweep did not end within 120 s: {stdout[-1000:]}\n{stderr[-8000:]}")
     finally:  # a failure above must not leave the sweep holding the module's workers
         if proc.poll() is None:
             proc.kill()

@@ -6,7 +6,10 @@ import json
 import math
 import os
 import shutil
+import signal
 import sys
+import threading
+import time
 from pathlib import Path
 from typing import Optional
 
@@ -47,6 +50,36 @@ def open_cluster(workers: Optional[int] = None, scheduler: Optional[str] = None)
         cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
                                silence_logs=logging.CRITICAL)
         return Client(cluster), cluster
+
+
+POLL = 0.05  # [s] how often the loop looks for finished runs and for Ctrl-C while none finishes
+
+
+class Interrupts:
+    """Ctrl-C while the runs go: the signal is only noted, and :meth:`check` raises the
+    ``KeyboardInterrupt`` at a point of the sweep's own loop (between two results), never inside
+    the Dask client's code, where an exception raised at any bytecode can leave one of its locks or
+    states half-changed (an interrupted sweep sometimes hung, its output never written). In the main
+    thread only (where Python delivers signals); elsewhere nothing changes."""
+
+    def __enter__(self):
+        self.hit, self._prev = False, None
+        if threading.current_thread() is threading.main_thread() and signal.getsignal(signal.SIGINT) is not None:
+            self._prev = signal.signal(signal.SIGINT, self._note)
+        return self
+
+    def _note(self, signum, frame):
+        self.hit = True
+
+    def check(self):
+        if self.hit:
+            self.hit = False
+            raise KeyboardInterrupt
+
+    def __exit__(self, *exc):
+        if self._prev is not None:
+            signal.signal(signal.SIGINT, self._prev)
+        return False
 
 
 def close_cluster(client, cluster):
@@ -133,42 +166,50 @@ def run_sweep(sweep: Sweep, client, resume=False, overwrite=False, progress=True
                desc=Path(sweep.fmu).stem, file=sys.stderr, smoothing=0.1)
     n_run = 0
     failed = 0
+    stop = Interrupts()
     try:
         pending = as_completed(list(futures))
-        for fut in pending:
-            chunk = futures.pop(fut)
-            if fut.status == "cancelled":  # the scheduler went away (or cancelled it): stop, --resume goes on
-                raise RuntimeError(f"the cluster cancelled the task of runs {chunk[0][0]}-{chunk[-1][0]} "
-                                   "(scheduler lost?)")
-            if fut.status == "error":  # a worker died running it (KilledWorker), or the task itself failed
-                exc = fut.exception()
-                fut.release()
-                if len(chunk) > 1:  # a worker died in this chunk: run its points one by one to find the culprit
-                    bar.write(f"runs {chunk[0][0]}-{chunk[-1][0]} failed together ({type(exc).__name__}: {exc}); "
-                              "running them one by one")
-                    for item in chunk:
-                        f = submit([item])
-                        futures[f] = [item]
-                        pending.add(f)
+        with stop:
+            while not pending.is_empty():
+                stop.check()
+                if not pending.has_ready():
+                    time.sleep(POLL)
                     continue
-                run_id, point = chunk[0]
-                results = [({"run_id": run_id, **dict(zip(sweep.names, point)), "status": "crashed",
-                             "message": f"the worker running this point failed: {type(exc).__name__}: {exc}"}, None)]
-            else:
-                results = fut.result()
-                fut.release()
-            rows = []
-            for row, res in results:
-                if ts_dir is not None and res is not None:
-                    _write_timeseries(ts_dir, row["run_id"], res)
-                rows.append(row)
-                failed += row["status"] != "ok"
-            table = pa.Table.from_pylist(rows, schema=sch)
-            _write_atomic(table, parts / f"chunk-{rows[0]['run_id']:08d}.parquet")
-            n_run += len(rows)
-            bar.update(len(rows))
-            if failed:
-                bar.set_postfix(failed=failed)
+                fut = next(pending)
+                chunk = futures.pop(fut)
+                if fut.status == "cancelled":  # the scheduler went away (or cancelled it): stop, --resume goes on
+                    raise RuntimeError(f"the cluster cancelled the task of runs {chunk[0][0]}-{chunk[-1][0]} "
+                                       "(scheduler lost?)")
+                if fut.status == "error":  # a worker died running it (KilledWorker), or the task itself failed
+                    exc = fut.exception()
+                    fut.release()
+                    if len(chunk) > 1:  # a worker died in this chunk: run its points one by one to find the culprit
+                        bar.write(f"runs {chunk[0][0]}-{chunk[-1][0]} failed together ({type(exc).__name__}: {exc}); "
+                                  "running them one by one")
+                        for item in chunk:
+                            f = submit([item])
+                            futures[f] = [item]
+                            pending.add(f)
+                        continue
+                    run_id, point = chunk[0]
+                    results = [({"run_id": run_id, **dict(zip(sweep.names, point)), "status": "crashed",
+                                 "message": f"the worker running this point failed: {type(exc).__name__}: "
+                                            f"{exc}"}, None)]
+                else:
+                    results = fut.result()
+                    fut.release()
+                rows = []
+                for row, res in results:
+                    if ts_dir is not None and res is not None:
+                        _write_timeseries(ts_dir, row["run_id"], res)
+                    rows.append(row)
+                    failed += row["status"] != "ok"
+                table = pa.Table.from_pylist(rows, schema=sch)
+                _write_atomic(table, parts / f"chunk-{rows[0]['run_id']:08d}.parquet")
+                n_run += len(rows)
+                bar.update(len(rows))
+                if failed:
+                    bar.set_postfix(failed=failed)
     except KeyboardInterrupt:
         bar.close()
         client.cancel(list(futures))
