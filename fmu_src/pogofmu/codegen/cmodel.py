@@ -163,7 +163,7 @@ class ModelWriter:
     # ---- the whole file ----
     def write(self) -> str:
         model, inp = self.model, self.inp
-        nx, nu, ne = len(model.states), len(model.inputs), len(model.events)
+        nx = len(model.states)
         counts: Dict[str, int] = {}
         # the start of a run in the pieces of the engine's prepare(), traced one by one (the engine
         # calls them in its order); traced as one, the branches of each would multiply
@@ -239,7 +239,7 @@ class ModelWriter:
                 counts[kind] = self.function(f"pg_{kind}", ARGS["scales"], lambda fn=fn: fn(inp.p()),
                                              self._scales_leaf, kind.replace("_", " "))
         self.counts = counts
-        return self._file(nx, nu, ne, names)
+        return self._file(names)
 
     def _dispatch(self, name, args, call_args, ne):
         lines = [f"static int {name}(int k, {args})", "{", "    switch (k) {"]
@@ -250,8 +250,10 @@ class ModelWriter:
         lines += ["    pg_msg_clear(m);", '    pg_msg_str(m, "no such event");', "    return PG_RAISE;", "}", ""]
         return "\n".join(lines)
 
-    def _file(self, nx, nu, ne, out_names):
+    def _file(self, out_names):
         model = self.model
+        size = model_sizes(model)
+        ne = size['EVENTS']
 
         def strings(name, items):
             if not items:
@@ -274,9 +276,9 @@ class ModelWriter:
             strings("EVENT_NAMES", [ev.name for ev in model.events]),
             f"static const signed char EVENT_DIRECTION[] = {{{', '.join(str(ev.direction) for ev in model.events) or '0'}}};",
             "",
-            "const PgModel PG_MODEL = {",
-            f"    {c_string(model.name)}, {nx}, {len(self.layout)}, {nu}, {len(model.parameters)}, "
-            f"{len(SOLVER_PARAMETERS)}, {len(out_names)}, {ne},",
+            "const PgModel PG_MODEL = {",  # (its counts those of pg_sizes.h: model_sizes)
+            f"    {c_string(model.name)}, {size['X']}, {size['Q']}, {size['U']}, {size['P']}, "
+            f"{len(SOLVER_PARAMETERS)}, {size['Y']}, {size['EVENTS']},",
             "    STATE_NAMES, Q_NAMES, " + c_string("".join(k for _, k in self.layout)) + ", INPUT_NAMES, PARAMETER_NAMES,",
             "    " + c_string("".join("i" if par.integer else "f" for par in model.parameters)) + ",",
             "    OUTPUT_NAMES, EVENT_NAMES, EVENT_DIRECTION,",
