@@ -253,7 +253,7 @@ class ModelWriter:
     def _file(self, out_names):
         model = self.model
         size = model_sizes(model)
-        ne = size['EVENTS']
+        ne = size["EVENTS"]
 
         def strings(name, items):
             if not items:

@@ -638,7 +638,8 @@ class Synchronizer:
             # the level's components step together to ``target`` (in parallel with --threads);
             # the earliest event among them then cuts the macro step, as one after the other the
             # first would have cut the step of the next: those that went past it go back to it
-            if ran is not None and k < len(ran):  # (stepped already: all of the level was at t)
+            results = ran[k] if ran is not None and k < len(ran) else None
+            if results is not None:  # (stepped already: all of the level was at t)
                 todo = level
             else:
                 todo = [inst for inst in level if inst.t < target]
@@ -655,9 +656,7 @@ class Synchronizer:
                 r = inst.do_step(t, goal - t)
                 ex.read(inst)
                 return r
-            if ran is not None and k < len(ran):
-                results = ran[k]
-            else:
+            if results is None:
                 results = ex.step_level(todo, t, goal - t, not jacobi, one, save=True, on_event=on_event)
             cut = None
             pairs = zip(todo, results)

@@ -199,6 +199,11 @@ class NativeLevels:
                 self.lib.pgm_pool_free(self.pool)
                 self.pool = None
 
+    def mark_time(self) -> float:
+        """The macro step's start of the input lines for the C calls (NaN: no lines)."""
+        t_mark = self.ex.t_mark
+        return t_mark if t_mark is not None else float("nan")
+
     def csv_rows(self, *args) -> int:
         """``pgm_csv_rows(*args)`` (pg_csv.c) for the recording's writer thread: formatted by the
         pool's workers between their batches (pgm_pool_csv_rows: the writer waits asleep, and is not
@@ -406,8 +411,8 @@ class Batch:
             arr = nat.arr
             for src, slot in self.sources:
                 arr[slot] = src.t - t_mark
-        if not self.run(pool, parallel, n, comps, ops, t, h, t_mark if t_mark is not None else float("nan"),
-                        nat.arr, nat.known, self.before, self.result):
+        if not self.run(pool, parallel, n, comps, ops, t, h, nat.mark_time(), nat.arr, nat.known, self.before,
+                        self.result):
             return ()
         return self.bad()
 
@@ -441,7 +446,5 @@ class Macro:
         when every result was 0) and that level's components whose code is not 0 (as
         :meth:`Batch.go`)."""
         nat = self.nat
-        t_mark = nat.ex.t_mark
-        stop = self.run(nat.pool, nat.parallel, *self.args, t, h, t_mark if t_mark is not None else float("nan"),
-                        nat.arr, nat.known, *self.tail)
+        stop = self.run(nat.pool, nat.parallel, *self.args, t, h, nat.mark_time(), nat.arr, nat.known, *self.tail)
         return stop, (self.batches[stop].bad() if stop < len(self.batches) else ())
