@@ -22,6 +22,13 @@
 #define STORM_EVENTS 5
 #define ABS_TOL_MAX_FRACTION 1e-3
 #define DOMAIN_SLACK 10.0
+/* a guard is at zero within BAND_ULPS roundings of its states and time (guard_band); its direction
+ * there is its change along the flow over RATE_STEP max(|t|, 1) each way (guard_change) */
+#define BAND_ULPS 8.0
+#define RATE_STEP 1.4901161193847656e-08
+/* an event that fires this many times in a row from zero, its guard never leaving its band in
+ * between, is an accumulation (Zeno): the storm error */
+#define ZERO_REFIRES 5
 /* method = 0: DOPRI5's stiffness test (Hairer-Wanner II, IV.10; dopri5.f): h*rho > STIFF_H_RHO in
  * STIFF_STEPS accepted steps (CALM_RESET steps below it in a row forget them) switches to Rodas5P;
  * h*rho < STIFF_H_RHO in CALM_STEPS accepted Rodas5P steps in a row (rho from the Jacobian) back.
@@ -37,6 +44,8 @@
 
 /* an error of the model's own (PG_RAISE) or of its arithmetic (PG_ARITH), as raised in Python */
 #define TRY(call) do { int rc_ = (call); if (rc_) return rc_; } while (0)
+
+static int rearm(PgEngine *e, const signed char *was, int own, double own_g);
 
 static double pmax(double a, double b) { return b > a ? b : a; } /* Python's max(a, b) */
 static double pmin(double a, double b) { return b < a ? b : a; } /* Python's min(a, b) */
@@ -705,8 +714,6 @@ int pg_engine_init(PgEngine *e, const PgModel *model, const double *p, const dou
     e->budget = s[PG_S_MAX_STEPS_PER_SECOND] * BUDGET_WINDOW;
     e->win_t0 = e->t, e->win_n = 0, e->warned = 0;
     e->warn_n = BUDGET_WARN_FRACTION * e->budget;
-    e->at_start = 1;
-    e->disarmed = -1;
     memcpy(e->x_out, e->x, sizeof e->x);
     memcpy(e->q_out, e->q, sizeof e->q);
     e->stateless = e->nx == 0;
@@ -718,6 +725,7 @@ int pg_engine_init(PgEngine *e, const PgModel *model, const double *p, const dou
         if (is > 0) e->h = pmax(is, START_STEP_ULPS * EPS * pmax(fabs(e->t), 1.0));
         else rc = initial_step(e, &e->h);
     }
+    if (!rc && !e->stateless) rc = rearm(e, NULL, -1, 0.0); /* a guard at zero heading across fires at the start */
     if (rc) return at_time(e, rc, "initialization", 0, NULL);
     return PG_OK;
 }
@@ -831,13 +839,144 @@ static int collapse_error(PgEngine *e, double t, double h)
     return PG_RAISE;
 }
 
+/* ---- arming the guards (docs/solver.md, "Event semantics") --------------------------------- */
+/* The rounding band of guard i at (t, x): how far the guard moves when each state moves by
+ * BAND_ULPS of its own magnitude, and time by as many ulps at the guard's rate (the rate dg over
+ * 2 d). A guard within its band after a jump, a start or an input change is "at zero": the
+ * offset of a guard (x - d against x) changes the band, never the outcome. */
+static int guard_band(PgEngine *e, int i, double t, const double *x, double g, double rate, double *z)
+{
+    double xp[PG_MAX_X], gp, acc = 0.0;
+    memcpy(xp, x, sizeof(double) * (size_t)e->nx);
+    for (int j = 0; j < e->nx; ++j) {
+        if (x[j] == 0.0) continue;
+        xp[j] = x[j] + BAND_ULPS * EPS * x[j];
+        TRY(guard_at(e, i, t, xp, &gp));
+        xp[j] = x[j];
+        if (isfinite(gp)) acc += fabs(gp - g);
+    }
+    double zt = BAND_ULPS * EPS * fabs(t) * fabs(rate);
+    *z = isfinite(zt) ? acc + zt : acc;
+    return PG_OK;
+}
+
+/* the guard's change along the flow f through (t, x), in its direction: sgn (g(t + d, x + d f) -
+ * g(t - d, x - d f)) with d = RATE_STEP max(|t|, 1); positive: it heads to its after side */
+static int guard_change(PgEngine *e, int i, double t, const double *x, const double *f, double *dg, double *d_out)
+{
+    double d = RATE_STEP * pmax(fabs(t), 1.0), xp[PG_MAX_X], gp, gm;
+    for (int j = 0; j < e->nx; ++j) xp[j] = x[j] + d * f[j];
+    TRY(guard_at(e, i, t + d, xp, &gp));
+    for (int j = 0; j < e->nx; ++j) xp[j] = x[j] - d * f[j];
+    TRY(guard_at(e, i, t - d, xp, &gm));
+    *dg = sgn_of(e, i) * (gp - gm);
+    *d_out = d;
+    return PG_OK;
+}
+
+/* Arm every active guard at (e->t, e->x) after a restart: a jump of event `own`, the start or an
+ * input change (own = -1). was[i] says what guard i was just before: 1 armed, 0 active and not
+ * armed, -1 not active or no before (the start). A guard
+ *   - on its before side beyond its band is armed;
+ *   - at zero (within its band) is armed at zero, unless the flow carries it to its after side:
+ *     then it fires now if it was armed or unknown and is not the event that just jumped (that
+ *     event's own crossing goes on), and is disarmed otherwise;
+ *   - on its after side beyond its band fires now if it was armed (the restart crossed it: a
+ *     cascade, or simultaneous events), and is disarmed otherwise.
+ * The event that jumped sits at its located crossing: if its jump left its guard where it was
+ * (own_g, within the band), that value is its zero, however far floating point resolves it.
+ * *fire: the first event (in priority order, the model's) that fires now, -1 for none. */
+static int arm_guards(PgEngine *e, const signed char *was, int own, double own_g, int *fire)
+{
+    *fire = -1;
+    for (int k = 0; k < e->n_active; ++k) {
+        int i = e->active[k];
+        double G = sgn_of(e, i) * e->g[k], z, dg, d;
+        TRY(guard_change(e, i, e->t, e->x, e->f, &dg, &d));
+        TRY(guard_band(e, i, e->t, e->x, e->g[k], dg / (2 * d), &z));
+        if (i == own && fabs(e->g[k] - own_g) <= z) z += fabs(G);
+        int before = was ? was[i] : -1;
+        e->zarm[i] = 0, e->armed[i] = 0, e->zband[i] = z;
+        if (G > z) {
+            if (before == 1 && i != own && *fire < 0) *fire = i;
+        } else if (G >= -z) {
+            if (dg > 2 * z) {
+                if (before != 0 && i != own && *fire < 0) *fire = i;
+            } else {
+                e->zarm[i] = 1, e->armed[i] = 1;
+            }
+        } else {
+            e->armed[i] = 1;
+        }
+    }
+    return PG_OK;
+}
+
+/* what each event's guard was before a restart (arm_guards' was): 1 armed, 0 active and not, -1 inactive */
+static void arming_before(const PgEngine *e, signed char *was)
+{
+    for (int i = 0; i < e->model->ne; ++i) was[i] = -1;
+    for (int k = 0; k < e->n_active; ++k) was[e->active[k]] = e->armed[e->active[k]];
+}
+
+/* a restart's arming, and the event it fires now (pending at e->t) */
+static int rearm(PgEngine *e, const signed char *was, int own, double own_g)
+{
+    int fire;
+    TRY(arm_guards(e, was, own, own_g, &fire));
+    if (fire >= 0) {
+        e->has_pending = 1, e->pending_index = fire;
+        e->zero_hit = 0;
+        memcpy(e->pending_x, e->x, sizeof e->x);
+    }
+    return PG_OK;
+}
+
+/* ZERO_REFIRES events in a row from zero: the storm error naming the event */
+static int zero_storm(PgEngine *e, int i)
+{
+    if (!e->zero_hit) {
+        e->zrun = 0;
+        return PG_OK;
+    }
+    e->zrun = i == e->zrun_event ? e->zrun + 1 : 1;
+    e->zrun_event = i;
+    e->zero_hit = 0;
+    if (e->zrun < ZERO_REFIRES) return PG_OK;
+    PgMsg *m = &e->msg;
+    pg_msg_clear(m);
+    pg_msg_printf(m, "event storm: %s happens again within the rounding of its own location at t = ", event_name(e, i));
+    pg_msg_value(m, e->t, 'f', ".15g");
+    pg_msg_printf(m, " s (%d times in a row from zero, its guard never leaving its rounding band |guard| <= ", e->zrun);
+    pg_msg_value(m, e->zband[i], 'f', ".3g");
+    pg_msg_str(m, ") in between: the events accumulate faster than floating point resolves them (Zeno "
+                  "behaviour, e.g. a bouncing ball coming to rest). Model the rest (a mode without this event once "
+                  "the motion is small), or stop before this time");
+    return PG_RAISE;
+}
+
+/* after a step committed without an event, the guards g (at its end): armed on the before side;
+ * at zero still while within the band */
+static void armed_after_step(PgEngine *e, const double *g)
+{
+    for (int k = 0; k < e->n_active; ++k) {
+        int i = e->active[k];
+        double G = sgn_of(e, i) * g[k];
+        if (e->zarm[i] && G >= -e->zband[i] && G <= e->zband[i]) continue;
+        if (e->zarm[i] && i == e->zrun_event) e->zrun = 0; /* it left zero: no accumulation */
+        e->zarm[i] = 0;
+        e->armed[i] = G < 0.0;
+    }
+}
+
 /* ---- locating events ------------------------------------------------------------------------ */
 /* _locate: earliest time in [a, b] where guard i crosses zero in its direction */
-static int locate(PgEngine *e, PgSeg *seg, int i, double a, double ga, double gb, const double *b_in, double *out)
+static int locate_level(PgEngine *e, PgSeg *seg, int i, double level, double a, double ga, double gb,
+                        const double *b_in, double *out)
 {
     double sgn = sgn_of(e, i);
     double b = b_in ? *b_in : seg->t1;
-    double fa = sgn * ga, fb = sgn * gb;
+    double fa = sgn * ga - level, fb = sgn * gb - level;
     int side = 0;
     double tol = 4 * EPS * pmax(pmax(fabs(a), fabs(b)), 1e-300);
     double y[PG_MAX_X];
@@ -849,7 +988,7 @@ static int locate(PgEngine *e, PgSeg *seg, int i, double a, double ga, double gb
         double gc;
         TRY(seg_at(e, seg, c, y));
         TRY(guard_at(e, i, c, y, &gc));
-        double fc = sgn * gc;
+        double fc = sgn * gc - level;
         if (fc >= 0.0) {
             b = c, fb = fc;
             if (side == 1) fa *= 0.5;
@@ -863,6 +1002,11 @@ static int locate(PgEngine *e, PgSeg *seg, int i, double a, double ga, double gb
     }
     *out = b;
     return PG_OK;
+}
+
+static int locate(PgEngine *e, PgSeg *seg, int i, double a, double ga, double gb, const double *b_in, double *out)
+{
+    return locate_level(e, seg, i, 0.0, a, ga, gb, b_in, out);
 }
 
 /* _locate_from_zero: *found = 0 for "None" */
@@ -939,35 +1083,21 @@ static int hidden_crossing(PgEngine *e, PgSeg *seg, int i, double sgn, double g0
 
 /* _hidden_return */
 static int hidden_return(PgEngine *e, PgSeg *seg, int i, double sgn, double g0, double g1, const double *f1,
-                         int own, double *out, int *found)
+                         double below, double *out, int *found)
 {
     double tp = 0, gp = 0;
     TRY(turning_point(e, seg, i, -sgn, g0, g1, f1, &tp, &gp, found));
     if (!*found) return PG_OK;
-    if (sgn * gp < 0.0) return locate(e, seg, i, tp, gp, g1, NULL, out);
+    if (sgn * gp < -below) return locate(e, seg, i, tp, gp, g1, NULL, out);
     *found = 0;
-    if (own && sgn * g1 > sgn * g0) {
-        PgMsg *m = &e->msg;
-        pg_msg_clear(m);
-        pg_msg_printf(m, "event storm: %s happens again within the rounding of its own location at t = ",
-                      event_name(e, i));
-        pg_msg_value(m, seg->t0, 'f', ".15g");
-        pg_msg_str(m, " s (its guard heads back to zero after the jump and is past it again at t = ");
-        pg_msg_value(m, seg->t1, 'f', ".15g");
-        pg_msg_str(m, " s, guard = ");
-        pg_msg_value(m, g1, 'f', "r");
-        pg_msg_str(m, "): the events accumulate faster than the steps resolve them (Zeno behaviour, e.g. a "
-                      "bouncing ball coming to rest). Model the rest (a mode without this event once the motion is "
-                      "small), or stop before this time");
-        return PG_RAISE;
-    }
     return PG_OK;
 }
 
 /* _land_on_event: redo the step exactly up to the event, secant on exact steps */
-static int land_on_event(PgEngine *e, PgSeg *seg, int i, double te, double *te_out, double *y_out, double *f_out,
-                         double *K_out)
+static int land_on_event(PgEngine *e, PgSeg *seg, int i, double level, double te, double *te_out, double *y_out,
+                         double *f_out, double *K_out)
 {
+    double off = sgn_of(e, i) * level; /* the guard's value at the crossing sought: 0, or the band's edge */
     double t0 = seg->t0, t1 = seg->t1;
     double y_a[PG_MAX_X], f_a[PG_MAX_X], y_b[PG_MAX_X], f_b[PG_MAX_X], yd[PG_MAX_X];
     double K_a_local[PG_MAX_STAGES * PG_MAX_X], K_b_local[PG_MAX_STAGES * PG_MAX_X];
@@ -975,6 +1105,7 @@ static int land_on_event(PgEngine *e, PgSeg *seg, int i, double te, double *te_o
     double g_a, g_b, g_te, g_d;
     TRY(pair_step(e, t0, seg->y0, seg->f0, te - t0, y_a, f_a, K_a_local));
     TRY(guard_at(e, i, te, y_a, &g_a));
+    g_a -= off;
     double best = fabs(g_a), best_t = te;
     memcpy(y_out, y_a, n), memcpy(f_out, f_a, n), memcpy(K_out, K_a_local, sizeof K_a_local);
     double d = 1e-3 * (te - t0);
@@ -982,6 +1113,7 @@ static int land_on_event(PgEngine *e, PgSeg *seg, int i, double te, double *te_o
     TRY(guard_at(e, i, te, yd, &g_te));
     TRY(seg_at(e, seg, te - d, yd));
     TRY(guard_at(e, i, te - d, yd, &g_d));
+    g_te -= off, g_d -= off;
     if (d == 0.0) return pg_arith(&e->msg, PG_ZERO_DIVISION);
     double slope = (g_te - g_d) / d;
     double ta = te, tb = slope != 0.0 ? te - g_a / slope : te;
@@ -990,6 +1122,7 @@ static int land_on_event(PgEngine *e, PgSeg *seg, int i, double te, double *te_o
         if (g_a == 0.0 || !(t0 < tb && tb < t1) || fabs(tb - ta) <= tol) break;
         TRY(pair_step(e, t0, seg->y0, seg->f0, tb - t0, y_b, f_b, K_b_local));
         TRY(guard_at(e, i, tb, y_b, &g_b));
+        g_b -= off;
         if (fabs(g_b) < best) {
             best = fabs(g_b), best_t = tb;
             memcpy(y_out, y_b, n), memcpy(f_out, f_b, n), memcpy(K_out, K_b_local, sizeof K_b_local);
@@ -1022,6 +1155,7 @@ static int end_step(PgEngine *e, PgSeg *seg, double t_target, int *cut)
         memcpy(e->x, y_c, sizeof y_c), memcpy(e->f, f_c, sizeof f_c);
         for (int k = 0; k < e->n_active; ++k) TRY(guard_at(e, e->active[k], t_target, y_c, &e->g[k]));
         e->has_g_prev = 0;
+        armed_after_step(e, e->g);
         *cut = 1;
         return PG_OK;
     }
@@ -1072,37 +1206,40 @@ static int step(PgEngine *e, double t_target)
     }
     e->n_steps += 1;
     stiffness_test(e, K, h);
-    int at_start = e->at_start;
-    e->at_start = 0;
-    int disarmed = e->disarmed;
     PgSeg seg;
     make_seg(e, &seg, t, t_new, y, y_new, f, K);
     double g_new[PG_MAX_EVENTS];
     for (int k = 0; k < e->n_active; ++k) TRY(guard_at(e, e->active[k], t_new, y_new, &g_new[k]));
-    if (at_start)
-        for (int k = 0; k < e->n_active; ++k)
-            if (e->g[k] == 0.0 && g_new[k] == 0.0) e->at_start = 1;
     int hit = -1;
-    double hit_t = 0;
+    double hit_t = 0, hit_level = 0.0;
     for (int k = 0; k < e->n_active; ++k) {
         int i = e->active[k];
-        double g0 = e->g[k], g1 = g_new[k], te = 0;
+        double g0 = e->g[k], g1 = g_new[k], te = 0, level = 0.0;
         double sgn = sgn_of(e, i);
         int found = 1;
-        if (sgn * g1 < 0.0) {
+        if (e->zarm[i]) { /* at zero after a restart: fires once the flow carries it past its band */
+            double z = e->zband[i];
+            if (!(sgn * g1 > z)) continue;
+            /* a dip to the before side resolved inside the step: the crossing is the return's */
+            TRY(hidden_return(e, &seg, i, sgn, g0, g1, f_new, z, &te, &found));
+            if (!found) {
+                level = z;
+                TRY(locate_level(e, &seg, i, z, t, g0, g1, NULL, &te));
+            }
+        } else if (sgn * g1 < 0.0) {
             if (sgn * g0 >= 0.0 || (e->has_g_prev && sgn * (g0 - e->g_prev[k]) < 0.0)) continue;
             TRY(hidden_crossing(e, &seg, i, sgn, g0, g1, f_new, &te, &found));
             if (!found) continue;
         } else if (sgn * g0 < 0.0) {
             TRY(locate(e, &seg, i, t, g0, g1, NULL, &te));
         } else if (g0 == 0.0) {
-            TRY(locate_from_zero(e, &seg, i, g1, at_start && i != disarmed, &te, &found));
+            TRY(locate_from_zero(e, &seg, i, g1, 0, &te, &found));
             if (!found) continue;
         } else {
-            TRY(hidden_return(e, &seg, i, sgn, g0, g1, f_new, at_start && i == disarmed, &te, &found));
+            TRY(hidden_return(e, &seg, i, sgn, g0, g1, f_new, 0.0, &te, &found));
             if (!found) continue;
         }
-        if (hit < 0 || te < hit_t) hit = k, hit_t = te;
+        if (hit < 0 || te < hit_t) hit = k, hit_t = te, hit_level = level;
     }
     if (hit < 0) {
         int rc = e->model->domain(t_new, y_new, e->q, u_at(e, t_new), e->p, e->s, &e->msg);
@@ -1117,6 +1254,7 @@ static int step(PgEngine *e, double t_target)
             memcpy(e->x, y_new, sizeof y_new), memcpy(e->f, f_new, sizeof f_new);
             memcpy(e->g_prev, e->g, sizeof e->g), e->has_g_prev = 1;
             memcpy(e->g, g_new, sizeof g_new);
+            armed_after_step(e, g_new);
         }
         return PG_OK;
     }
@@ -1126,13 +1264,14 @@ static int step(PgEngine *e, double t_target)
         e->has_seg = 0;
         memcpy(e->x, y, sizeof y), memcpy(e->f, f, sizeof f);
         e->has_pending = 1, e->pending_index = i;
+        e->zero_hit = hit_level > 0.0;
         memcpy(e->pending_x, y, sizeof y);
         return PG_OK;
     }
     double y_e[PG_MAX_X], f_e[PG_MAX_X];
     if (te < t_new) {
         double K_e[PG_MAX_STAGES * PG_MAX_X];
-        TRY(land_on_event(e, &seg, i, te, &te, y_e, f_e, K_e));
+        TRY(land_on_event(e, &seg, i, hit_level, te, &te, y_e, f_e, K_e));
         make_seg(e, &seg, t, te, y, y_e, f, K_e);
     } else {
         memcpy(y_e, y_new, sizeof y_e), memcpy(f_e, f_new, sizeof f_e);
@@ -1144,6 +1283,7 @@ static int step(PgEngine *e, double t_target)
         e->t = te;
         memcpy(e->x, y_e, sizeof y_e), memcpy(e->f, f_e, sizeof f_e);
         e->has_pending = 1, e->pending_index = i;
+        e->zero_hit = hit_level > 0.0;
         memcpy(e->pending_x, y_e, sizeof y_e);
     }
     return PG_OK;
@@ -1195,6 +1335,10 @@ static int apply_pending_event(PgEngine *e)
 {
     int i = e->pending_index;
     double x_new[PG_MAX_X], q_new[PG_MAX_Q];
+    signed char was[PG_MAX_EVENTS];
+    arming_before(e, was);
+    double own_g = 0.0; /* its guard at the crossing, before the jump */
+    TRY(guard_at(e, i, e->t, e->x, &own_g));
     TRY(e->model->jump(i, e->x, e->q, u_at(e, e->t), e->p, x_new, q_new, &e->msg));
     size_t nx = sizeof(double) * (size_t)e->nx;
     e->last.time = e->t, e->last.index = i;
@@ -1207,7 +1351,7 @@ static int apply_pending_event(PgEngine *e)
     if (e->recent_n < PG_RECENT) e->recent_n += 1;
     if (e->keep_history && e->on_event) e->on_event(e->hook_ctx, e, &e->last, e->n_events);
     e->has_pending = 0;
-    e->at_start = 1, e->disarmed = i;
+    TRY(zero_storm(e, i));
     memcpy(e->x, x_new, nx);
     memcpy(e->q, q_new, sizeof(double) * (size_t)e->nq);
     TRY(check_zeno(e));
@@ -1216,7 +1360,7 @@ static int apply_pending_event(PgEngine *e)
     double h0;
     TRY(initial_step(e, &h0));
     e->h = pmin(e->h, h0);
-    return PG_OK;
+    return rearm(e, was, i, own_g); /* a guard the jump left crossed fires at this instant (a cascade) */
 }
 
 /* _run */
@@ -1282,6 +1426,10 @@ int pg_engine_advance(PgEngine *e, double t_target)
         return PG_RAISE;
     }
     if (e->stateless) {
+        while (e->has_pending && t_target >= e->t) { /* an event its inputs caused: at its instant */
+            int rc = apply_pending_event(e);
+            if (rc) return at_time(e, rc, "t = ", e->t, " s");
+        }
         e->t = e->t_out = pmax(e->t, t_target);
         memcpy(e->q_out, e->q, nq);
         return PG_OK;
@@ -1369,6 +1517,18 @@ int pg_engine_set_inputs(PgEngine *e, const double *u, const double *du)
         e->has_pending = 0;
         e->has_seg = 0;
     }
+    /* each guard's arming at (t, x) with the inputs before the change: a guard armed there that the
+     * new inputs put on its after side fires at this instant (an event caused by an input) */
+    signed char was[PG_MAX_EVENTS];
+    arming_before(e, was);
+    for (int k = 0; k < e->n_active; ++k) {
+        int i = e->active[k];
+        double g;
+        int rc = guard_at(e, i, e->t, e->x, &g);
+        if (rc) return at_time(e, rc, "the input change at t = ", e->t, " s");
+        double G = sgn_of(e, i) * g;
+        was[i] = G < 0.0 || (e->zarm[i] && G >= -e->zband[i] && G <= e->zband[i]);
+    }
     memcpy(e->u, u, sizeof(double) * (size_t)e->nu);
     e->has_du = sloped;
     e->t_u = e->t;
@@ -1380,11 +1540,16 @@ int pg_engine_set_inputs(PgEngine *e, const double *u, const double *du)
     if (rc) return at_time(e, rc, "the input change at t = ", e->t, " s");
     e->h = pmin(e->h, h0);
     if (crossed >= 0) {
-        e->has_pending = 1, e->pending_index = crossed;
+        e->has_pending = 1, e->pending_index = crossed, e->zero_hit = 0;
         memcpy(e->pending_x, e->x, sizeof e->x);
     }
-    e->at_start = 1;
-    e->disarmed = e->has_last && e->last.time == e->t ? e->last.index : -1;
+    int fire = -1;
+    rc = arm_guards(e, was, -1, 0.0, &fire);
+    if (rc) return at_time(e, rc, "the input change at t = ", e->t, " s");
+    if (fire >= 0 && !e->has_pending) {
+        e->has_pending = 1, e->pending_index = fire, e->zero_hit = 0;
+        memcpy(e->pending_x, e->x, sizeof e->x);
+    }
     return PG_OK;
 }
 
@@ -1393,7 +1558,7 @@ int pg_engine_apply_event(PgEngine *e, int index, double t, const double *x)
     e->t = e->t_out = t;
     memcpy(e->x, x, sizeof(double) * (size_t)e->nx);
     e->has_seg = 0;
-    e->has_pending = 1, e->pending_index = index;
+    e->has_pending = 1, e->pending_index = index, e->zero_hit = 0;
     memcpy(e->pending_x, e->x, sizeof e->x);
     int rc = apply_pending_event(e);
     if (rc) return at_time(e, rc, "t = ", e->t, " s");

@@ -99,8 +99,17 @@ struct PgEngine {
     double budget, win_t0, warn_n;
     long win_n;
     int warned;
-    int at_start, disarmed, stateless;
+    int stateless;
     int n_active, active[PG_MAX_EVENTS];
+    /* the arming of each event's guard (docs/solver.md, "Event semantics"): armed[i] = 1 while it may
+     * fire (seen on its before side, or at zero after a restart); zarm[i] = 1 while it sits at zero
+     * within its rounding band zband[i] after a jump, a start or an input change: it fires when the
+     * flow carries it past +zband[i] to its after side */
+    signed char armed[PG_MAX_EVENTS], zarm[PG_MAX_EVENTS];
+    double zband[PG_MAX_EVENTS];
+    /* the pending event fires from zero without its guard having left its band (zero_hit), and how
+     * many of the latest events in a row of event zrun_event did (a storm at ZERO_REFIRES) */
+    int zero_hit, zrun, zrun_event;
     double f[PG_MAX_X], g[PG_MAX_EVENTS], g_prev[PG_MAX_EVENTS];
     int has_g_prev;
     double h;

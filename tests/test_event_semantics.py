@@ -1,0 +1,194 @@
+"""The event semantics of docs/solver.md ("Event semantics") for models a user writes, not only the
+project's five: each model is a file in a temporary folder, exported by `pogofmu export` and driven
+through fmpy as a user drives it (held inputs, an input table), in every co-simulation kind.
+
+References are independent of the FMUs: the accumulation time of a wall against which a constant
+force presses, from the impact law; a shifted copy of the same model (a guard with an offset against
+one without); the input table itself for an event that an input causes."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from support import run_pogofmu
+
+# A forced oscillator against a rigid wall at x = d: x'' = (-k x - c x' + F)/m, impact v -> -e v.
+# F > k d presses the mass against the wall: the impacts accumulate (Zeno) at a finite time.
+WALL = '''
+from pogofmu import RISING, Event, HybridModel, Parameter, Variable
+
+MODEL = HybridModel(
+    name="{name}", description="forced oscillator against a wall",
+    states=(Variable("x", "m", "position"), Variable("v", "m/s", "velocity")),
+    parameters=(Parameter("m", 1.0, "kg", "mass"), Parameter("k", 40.0, "N/m", "stiffness"),
+                Parameter("c", 0.2, "N.s/m", "damping"), Parameter("d", 0.05, "m", "wall position"),
+                Parameter("e", 0.7, "", "restitution")),
+    inputs=(Variable("F", "N", "force", start=3.0),),
+    outputs=(Variable("x", "m", "position"), Variable("v", "m/s", "velocity")),
+    flow=lambda t, x, q, u, p: [x[1], (-p.k * (x[0] + {shift}) - p.c * x[1] + u[0]) / p.m],
+    events=(Event("impact", RISING, guard=lambda x, q, u, p: x[0] - {wall},
+                  jump=lambda x, q, u, p: ([x[0], -p.e * x[1]], q)),),
+    initial=lambda p: ([0.0 - {shift}, 0.0], {{}}),
+    output_fn=lambda t, x, q, u, p: {{"x": x[0], "v": x[1]}},
+)
+'''
+
+# The same oscillator with a rest mode: a slow impact puts the mass at rest on the wall (s = 1);
+# the input force releases it when it falls below k d (an event whose guard reads only the input).
+REST = '''
+from pogofmu import FALLING, RISING, Event, HybridModel, Parameter, Variable
+
+
+def impact(x, q, u, p):
+    if p.e * x[1] < p.v_rest:
+        return [p.d, 0.0], {"s": 1}
+    return [x[0], -p.e * x[1]], q
+
+
+MODEL = HybridModel(
+    name="Rest", description="oscillator against a wall, at rest on it until the force lets go",
+    states=(Variable("x", "m", "position"), Variable("v", "m/s", "velocity")),
+    parameters=(Parameter("m", 1.0, "kg", "mass"), Parameter("k", 40.0, "N/m", "stiffness"),
+                Parameter("c", 0.2, "N.s/m", "damping"), Parameter("d", 0.05, "m", "wall position"),
+                Parameter("e", 0.7, "", "restitution"), Parameter("v_rest", 0.3, "m/s", "rest below this rebound")),
+    inputs=(Variable("F", "N", "force", start=3.0),),
+    outputs=(Variable("x", "m", "position"), Variable("s", "", "mode: 1 at rest on the wall")),
+    flow=lambda t, x, q, u, p: [0.0, 0.0] if q["s"] == 1 else [x[1], (-p.k * x[0] - p.c * x[1] + u[0]) / p.m],
+    events=(Event("impact", RISING, guard=lambda x, q, u, p: x[0] - p.d, jump=impact,
+                  active=lambda q: q["s"] == 0),
+            Event("release", FALLING, guard=lambda x, q, u, p: u[0] - p.k * p.d,
+                  jump=lambda x, q, u, p: (x, {"s": 0}), active=lambda q: q["s"] == 1)),
+    initial=lambda p: ([0.0, 0.0], {"s": 0}),
+    output_fn=lambda t, x, q, u, p: {"x": x[0], "s": q["s"]},
+    integer_outputs=frozenset({"s"}),
+)
+'''
+
+KINDS = ("{n}.fmu", "fmi3/{n}.fmu", "native/{n}.fmu", "native/fmi3/{n}.fmu")
+
+
+@pytest.fixture(scope="module")
+def user_folder(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("event_semantics")
+    # the wall at x = d (guard x - d), and the same system shifted by d (guard x, wall at 0)
+    (folder / "wall.py").write_text(WALL.format(name="Wall", shift="0.0", wall="p.d"))
+    (folder / "wall0.py").write_text(WALL.format(name="Wall0", shift="p.d", wall="0.0"))
+    (folder / "rest.py").write_text(REST)
+    proc = run_pogofmu("export", "wall.py", "wall0.py", "rest.py", "--out", "out", cwd=folder, timeout=600)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    return folder
+
+
+def _storm(path, rel_tol):
+    """fmpy's CS run past the accumulation: (the storm message, every x served before it)."""
+    from fmpy import simulate_fmu
+    from fmpy.fmi1 import FMICallException
+
+    messages, rows = [], []
+    kw = {} if "fmi3" not in str(path) else dict(fmi_type="CoSimulation")
+    with pytest.raises(FMICallException):
+        simulate_fmu(str(path), stop_time=3.0, output_interval=1e-3, debug_logging=True,
+                     start_values={"rel_tol": rel_tol}, logger=lambda *a: messages.append(a[-1].decode() if a[-1] else ""),
+                     step_finished=lambda t, recorder: rows.append(recorder.rows[-1]) or True, **kw)
+    storm = [m for m in messages if "event storm" in m]
+    return storm, rows
+
+
+def _storm_time(text):
+    return float(text.split("t = ")[1].split(" s")[0])
+
+
+@pytest.mark.parametrize("rel_tol", [1e-10, 1e-6])
+def test_an_accumulation_against_an_offset_wall_ends_in_the_storm_never_through_the_wall(user_folder, rel_tol):
+    """The mass pressed against the wall x = d = 0.05 went on with x up to 0.0988 after 48 impacts,
+    silently, in every CS kind: now each ends with the storm naming the event, the mass never
+    beyond the wall by more than the solver's tolerance, at the same time as the same system
+    written without the offset (wall at 0)."""
+    times = {}
+    for name in ("Wall", "Wall0"):
+        for kind in KINDS:
+            path = user_folder / "out" / kind.format(n=name)
+            storm, rows = _storm(path, rel_tol)
+            assert storm and "impact" in storm[0], (path, storm)
+            x = np.array([r[1] for r in rows])
+            wall = 0.05 if name == "Wall" else 0.0
+            assert x.max() <= wall + 1e-6, (path, x.max())
+            times[(name, kind)] = _storm_time(storm[0])
+    # the same bits in every kind of one model, and the offset changes nothing but rounding
+    for name in ("Wall", "Wall0"):
+        assert len({t for (n, _), t in times.items() if n == name}) == 1, times
+    assert abs(times[("Wall", KINDS[0])] - times[("Wall0", KINDS[0])]) < 1e3 * rel_tol, times
+
+
+def test_the_accumulation_time_matches_the_impact_law(user_folder):
+    """Independent reference: between two impacts the mass flies a free oscillation from the wall
+    with the rebound speed; the flight times t_n of rebounds e^n v_1 sum to t_inf. scipy's brentq on
+    the closed-form flight (underdamped, x(t) - d = 0) gives each t_n; the storm comes at the sum."""
+    from scipy.optimize import brentq
+
+    m, k, c, d, e, F = 1.0, 40.0, 0.2, 0.05, 0.7, 3.0
+    wn = math.sqrt(k / m)
+    zeta = c / (2 * math.sqrt(k * m))
+    wd = wn * math.sqrt(1 - zeta * zeta)
+    xs = F / k  # the force's rest point, beyond the wall
+
+    def x_of(t, x0, v0):
+        a0 = x0 - xs
+        b0 = (v0 + zeta * wn * a0) / wd
+        return xs + math.exp(-zeta * wn * t) * (a0 * math.cos(wd * t) + b0 * math.sin(wd * t))
+
+    def v_of(t, x0, v0, h=1e-7):
+        return (x_of(t + h, x0, v0) - x_of(t - h, x0, v0)) / (2 * h)
+
+    # the first impact from rest at x = 0, then flights from the wall
+    t = brentq(lambda s: x_of(s, 0.0, 0.0) - d, 1e-6, math.pi / wd)
+    v = v_of(t, 0.0, 0.0)
+    total = t
+    for _ in range(60):
+        v = -e * v
+        if -v < 1e-7:
+            break
+        # the flight from the wall with speed v < 0 returns to it before the half period
+        dt = brentq(lambda s: x_of(s, d, v) - d, 1e-12 + 1e-3 * (-v), math.pi / wd)
+        v = v_of(dt, d, v)
+        total += dt
+    storm, _ = _storm(user_folder / "out" / "native" / "Wall.fmu", 1e-10)
+    assert abs(_storm_time(storm[0]) - total) < 1e-6, (storm[0], total)
+
+
+def _force_table(stop=7.0, dt=1e-3):
+    t = np.arange(0.0, stop + dt / 2, dt)
+    return np.array(list(zip(t, 10.0 * np.sin(2 * np.pi * 0.3 * t))), dtype=[("time", float), ("F", float)])
+
+
+def test_an_event_caused_by_a_held_input_fires_at_that_communication_point(user_folder):
+    """The release (guard F - k d, FALLING) reads only the input. With F held over each step from a
+    1 ms table (fmpy's default), F falls below k d = 2 N at a communication point: the release fires
+    there, before anything is integrated. It never fired in any CS kind; the mass stayed at rest
+    while F went down to -10 N."""
+    from fmpy import simulate_fmu
+
+    table = _force_table()
+    k_d = 40.0 * 0.05
+    for kind in KINDS:
+        path = user_folder / "out" / kind.format(n="Rest")
+        kw = {} if "fmi3" not in kind else dict(fmi_type="CoSimulation")
+        res = simulate_fmu(str(path), stop_time=7.0, output_interval=1e-3, input=table,
+                           start_values={"rel_tol": 1e-10}, **kw)
+        s, t = res["s"], res["time"]
+        rests = np.nonzero((s[1:] == 1) & (s[:-1] == 0))[0]
+        assert len(rests), f"{kind}: never at rest"
+        for r in rests:
+            t_rest = t[r + 1]
+            # the reference: the first table point after the rest where the held F is below k d
+            later = table[(table["time"] >= t_rest) & (table["F"] < k_d)]
+            assert len(later), kind
+            t_ref = later["time"][0]
+            # at rest up to that point, released from the next row on (the jump at its start)
+            rows = (t >= t_rest) & (t < t_ref - 1e-9)
+            assert np.all(s[rows] == 1), (kind, t_rest, t_ref)
+            after = np.nonzero(t > t_ref + 1e-9)[0]
+            if len(after):
+                assert s[after[0]] == 0, (kind, t_ref, s[after[0]])
