@@ -16,9 +16,9 @@ FN = {
     "check": C.CFUNCTYPE(C.c_int, D, MSG),
     "initial": C.CFUNCTYPE(C.c_int, D, D, D, MSG),
     "flow": C.CFUNCTYPE(C.c_int, C.c_double, D, D, D, D, D, MSG),
-    "guard": C.CFUNCTYPE(C.c_int, C.c_int, D, D, D, D, D, MSG),
+    "guard": C.CFUNCTYPE(C.c_int, C.c_int, C.c_double, D, D, D, D, D, MSG),
     "active": C.CFUNCTYPE(C.c_int, C.c_int, D, C.POINTER(C.c_int), MSG),
-    "jump": C.CFUNCTYPE(C.c_int, C.c_int, D, D, D, D, D, D, MSG),
+    "jump": C.CFUNCTYPE(C.c_int, C.c_int, C.c_double, D, D, D, D, D, D, MSG),
     "outputs": C.CFUNCTYPE(C.c_int, C.c_double, D, D, D, D, D, MSG),
     "domain": C.CFUNCTYPE(C.c_int, C.c_double, D, D, D, D, D, MSG),
     "time_scales": C.CFUNCTYPE(C.c_int, D, C.c_void_p, C.POINTER(C.c_int), MSG),  # PgScale *out
@@ -35,7 +35,8 @@ class PgModel(C.Structure):
                 ("has_time_scales", C.c_int), ("has_error_scales", C.c_int),
                 *((n, FN[n]) for n in ("check_settings", "check", "initial", "flow", "guard", "active", "jump",
                                        "outputs", "domain", "time_scales", "error_scales")),
-                ("flow_jvp", C.c_void_p), ("outputs_jvp", C.c_void_p)]
+                ("flow_jvp", C.c_void_p), ("outputs_jvp", C.c_void_p),
+                ("nte", C.c_int), ("time_event_names", STRS), ("time_event", C.c_void_p), ("time_jump", C.c_void_p)]
 
 
 def arr(values, n=None):
@@ -79,9 +80,9 @@ class NativeModel:
         rc = self.m.flow(t, arr(x), arr(q), arr(u), arr(p), dx, C.byref(msg))
         return self._end(rc, msg, lambda: list(dx[:self.m.nx]))
 
-    def guard(self, k, x, q, u, p):
+    def guard(self, k, x, q, u, p, t=0.0):
         msg, g = PgMsg(), C.c_double()
-        rc = self.m.guard(k, arr(x), arr(q), arr(u), arr(p), C.byref(g), C.byref(msg))
+        rc = self.m.guard(k, t, arr(x), arr(q), arr(u), arr(p), C.byref(g), C.byref(msg))
         return self._end(rc, msg, lambda: g.value)
 
     def active(self, k, q):
@@ -89,9 +90,9 @@ class NativeModel:
         rc = self.m.active(k, arr(q), C.byref(on), C.byref(msg))
         return self._end(rc, msg, lambda: bool(on.value))
 
-    def jump(self, k, x, q, u, p):
+    def jump(self, k, x, q, u, p, t=0.0):
         msg, xn, qn = PgMsg(), (C.c_double * max(self.m.nx, 1))(), (C.c_double * max(self.m.nq, 1))()
-        rc = self.m.jump(k, arr(x), arr(q), arr(u), arr(p), xn, qn, C.byref(msg))
+        rc = self.m.jump(k, t, arr(x), arr(q), arr(u), arr(p), xn, qn, C.byref(msg))
         return self._end(rc, msg, lambda: (list(xn[:self.m.nx]), list(qn[:self.m.nq])))
 
     def outputs(self, t, x, q, u, p):

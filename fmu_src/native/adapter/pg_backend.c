@@ -1,6 +1,7 @@
 /* The native backend of the FMI entry files (pg_backend.h): an instance of the adapter
  * (pg_instance.c, pg_instance3.c) over the generated C of one model (`PG_FMU`), its FMU states
  * (pg_handles.c) and its directional derivatives (pg_derivatives.c). No Python, no resources. */
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -164,6 +165,13 @@ int pgb_update_discrete_states(PgBackend *b, PgEventFlags *f)
     int st = pg3_update_discrete_states(&b->inst, &changed);
     memset(f, 0, sizeof *f);
     f->values_changed = changed;
+    if (st == PG_ST_OK && b->inst.mode == 'm' && b->inst.st.has_sim) { /* model exchange: the next time event */
+        double next = pg_engine_next_time_event(&b->inst.st.sim);
+        f->next_event_time_defined = isfinite(next) != 0;
+        f->next_event_time = f->next_event_time_defined ? next : 0.0;
+        /* another time event due at this instant: an update more (event iteration) */
+        f->discrete_states_need_update = f->next_event_time_defined && next <= b->inst.st.me_t;
+    }
     return st;
 }
 

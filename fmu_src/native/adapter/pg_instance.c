@@ -318,7 +318,8 @@ static void on_event(void *ctx, const PgEngine *e, const PgEvent *ev, long numbe
     const PgModel *md = nt->in->fmu->model;
     PgMsg m;
     pg_msg_clear(&m);
-    pg_msg_printf(&m, "event %ld %s at t = ", number, md->event_names[ev->index]);
+    pg_msg_printf(&m, "event %ld %s at t = ", number,
+                  ev->index < md->ne ? md->event_names[ev->index] : md->time_event_names[ev->index - md->ne]);
     pg_msg_value(&m, ev->time, 'f', "r");
     pg_msg_str(&m, " s; state before jump: ");
     for (int i = 0; i < e->nx; ++i) {

@@ -19,13 +19,13 @@ static int falling(const PgModel *md, int k) { return md->event_direction[k] == 
 #define PG_UNARMED_FLOOR 1e-300 /* fmi3.py UNARMED_FLOOR */
 
 /* _indicators: each event's guard where it is active in mode q, 1 (it cannot cross zero) elsewhere */
-static int indicators(const PgModel *md, const double *x, const double *q, const double *u, const double *p,
-                      double *z, PgMsg *m)
+static int indicators(const PgModel *md, double t, const double *x, const double *q, const double *u,
+                      const double *p, double *z, PgMsg *m)
 {
     for (int k = 0; k < md->ne; ++k) {
         int on = 0;
         int rc = md->active(k, q, &on, m);
-        if (!rc && on) rc = md->guard(k, x, q, u, p, &z[k], m);
+        if (!rc && on) rc = md->guard(k, t, x, q, u, p, &z[k], m);
         else if (!rc) z[k] = 1.0;
         if (rc) return rc;
     }
@@ -164,7 +164,7 @@ double pg3_derived(PgInstance *in, const PgVar *v)
     }
     if (v->role == 'd') {
         if (md->flow(t, x, q, u, p, out, &m) != PG_OK) return 0.0;
-    } else if (indicators(md, x, q, u, p, out, &m) != PG_OK) {
+    } else if (indicators(md, t, x, q, u, p, out, &m) != PG_OK) {
         return 0.0;
     }
     return out[v->index];
@@ -179,7 +179,7 @@ static void arm(PgInstance *in)
     PgMsg m;
     for (int k = 0; k < md->ne; ++k) {
         double g = 0.0;
-        in->st.armed[k] = is_active(md, k, e->q) && md->guard(k, in->st.me_x, e->q, e->u, e->p, &g, &m) == PG_OK &&
+        in->st.armed[k] = is_active(md, k, e->q) && md->guard(k, in->st.me_t, in->st.me_x, e->q, e->u, e->p, &g, &m) == PG_OK &&
                           before_side(falling(md, k), g);
     }
 }
@@ -298,13 +298,13 @@ int pg3_get_event_indicators(PgInstance *in, double *z)
         double x[PG_MAX_X], q[PG_MAX_Q];
         int rc = initial_point(in, "fmi3GetEventIndicators", x, q);
         if (rc) return rc;
-        if (indicators(md, x, q, in->st.u, in->st.par, z, &m) != PG_OK) return pg_inst_refuse(in, &m);
+        if (indicators(md, in->st.t_start, x, q, in->st.u, in->st.par, z, &m) != PG_OK) return pg_inst_refuse(in, &m);
         return PG_ST_OK;
     }
     int rc = me_instance(in, "fmi3GetEventIndicators");
     if (rc) return rc;
     PgEngine *e = &in->st.sim;
-    if (indicators(md, in->st.me_x, e->q, e->u, e->p, z, &m) != PG_OK) return pg_inst_refuse(in, &m);
+    if (indicators(md, in->st.me_t, in->st.me_x, e->q, e->u, e->p, z, &m) != PG_OK) return pg_inst_refuse(in, &m);
     for (int k = 0; k < md->ne; ++k)
         if (!in->st.armed[k] && is_active(md, k, e->q) && before_side(falling(md, k), z[k]))
             in->st.armed[k] = 1; /* seen on the side before its crossing: may fire */
@@ -360,10 +360,11 @@ static int me_update(PgInstance *in, int *changed)
     PgMsg m;
     for (int k = 0; k < md->ne && fired < 0; ++k) { /* priority order */
         double g = 0.0;
-        if (in->st.armed[k] && is_active(md, k, e->q) && md->guard(k, in->st.me_x, e->q, e->u, e->p, &g, &m) == PG_OK &&
+        if (in->st.armed[k] && is_active(md, k, e->q) && md->guard(k, in->st.me_t, in->st.me_x, e->q, e->u, e->p, &g, &m) == PG_OK &&
             !before_side(falling(md, k), g))
             fired = k;
     }
+    if (fired < 0) fired = pg_engine_time_event_due(e, in->st.me_t); /* a time event reached: its jump */
     if (fired >= 0) {
         double x[PG_MAX_X];
         memcpy(x, in->st.me_x, sizeof x);

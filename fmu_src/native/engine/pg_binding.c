@@ -85,7 +85,7 @@ PGB_API void pgb_py_api(const PgbPyApi *a)
 typedef struct PgbPy {
     void (*switch_text)(const char *text); /* a method switch (method = 0), its text */
     PyObject *sync, *fail, *fun_for, *domain_text; /* the Simulator's methods */
-    PyObject *guards, *actives;                    /* lists: each event's guard, activity */
+    PyObject *guards, *guard_times, *actives;      /* lists: each event's guard, whether it reads t, activity */
     PyObject *output_fn, *output_names, *domain, *p, *slack;
     int nx, nq, nu, ny;
     int q_ok, u_ok;
@@ -267,13 +267,19 @@ static int tr_flow(double t, const double *x, const double *q, const double *u, 
     return bad ? py_failed(c, m) : PG_OK;
 }
 
-static int tr_guard(int k, const double *x, const double *q, const double *u, const double *p, double *g, PgMsg *m)
+static int tr_guard(int k, double t, const double *x, const double *q, const double *u, const double *p, double *g,
+                    PgMsg *m)
 {
     PgbPy *c = current;
     if (!c) return no_run(m);
     if (py_sync(c, q, u)) return py_failed(c, m);
-    PyObject *a[4] = {py_list(x, c->nx), ref(c->qdict), ref(c->uc), ref(c->p)};
-    PyObject *r = py_call(api.List_GetItem(c->guards, k), 4, a);
+    /* guard(x, q, u, p), or guard(t, x, q, u, p) for one that reads the time */
+    int timed = api.Object_IsTrue(api.List_GetItem(c->guard_times, k)) == 1;
+    PyObject *a[5];
+    int n = 0;
+    if (timed) a[n++] = api.Float_FromDouble(t);
+    a[n++] = py_list(x, c->nx), a[n++] = ref(c->qdict), a[n++] = ref(c->uc), a[n++] = ref(c->p);
+    PyObject *r = py_call(api.List_GetItem(c->guards, k), n, a);
     if (!r) return py_failed(c, m);
     double v = api.Float_AsDouble(r);
     api.DecRef(r);
@@ -445,6 +451,10 @@ PGB_API int pgb_apply_event(PgEngine *e, int index, double t, const double *x)
     LEAVE();
     return rc;
 }
+
+/* the next time event's instant (INFINITY: none); the first time event due at t (-1: none) */
+PGB_API double pgb_next_time_event(const PgEngine *e) { return pg_engine_next_time_event(e); }
+PGB_API int pgb_time_event_due(const PgEngine *e, double t) { return pg_engine_time_event_due(e, t); }
 
 PGB_API int pgb_restart_at(PgEngine *e, double t, const double *x, const double *u)
 {

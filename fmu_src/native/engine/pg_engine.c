@@ -29,6 +29,8 @@
 /* an event that fires this many times in a row from zero, its guard never leaving its band in
  * between, is an accumulation (Zeno): the storm error */
 #define ZERO_REFIRES 5
+/* a time event is due at t when its instant is within this many ulps of max(|t|, 1) */
+#define TIME_EVENT_ULPS 16.0
 /* method = 0: DOPRI5's stiffness test (Hairer-Wanner II, IV.10; dopri5.f): h*rho > STIFF_H_RHO in
  * STIFF_STEPS accepted steps (CALM_RESET steps below it in a row forget them) switches to Rodas5P;
  * h*rho < STIFF_H_RHO in CALM_STEPS accepted Rodas5P steps in a row (rho from the Jacobian) back.
@@ -46,11 +48,15 @@
 #define TRY(call) do { int rc_ = (call); if (rc_) return rc_; } while (0)
 
 static int rearm(PgEngine *e, const signed char *was, int own, double own_g);
+static int time_events_init(PgEngine *e, double t0);
 
 static double pmax(double a, double b) { return b > a ? b : a; } /* Python's max(a, b) */
 static double pmin(double a, double b) { return b < a ? b : a; } /* Python's min(a, b) */
 
-static const char *event_name(const PgEngine *e, int i) { return e->model->event_names[i]; }
+static const char *event_name(const PgEngine *e, int i)
+{
+    return i < e->model->ne ? e->model->event_names[i] : e->model->time_event_names[i - e->model->ne];
+}
 
 /* ---- messages ------------------------------------------------------------------------------ */
 static int raise_text(PgEngine *e, const char *text)
@@ -160,10 +166,10 @@ static int model_fun(void *ctx, double t, const double *y, double *dy, PgMsg *m)
     return e->model->flow(t, y, e->q, u_at(e, t), e->p, dy, m);
 }
 
-/* guard i at the state x of time t (the model's guard takes no time: it sees the inputs of t) */
+/* guard i at the state x of time t (with the inputs of t) */
 static int guard_at(PgEngine *e, int i, double t, const double *x, double *g)
 {
-    return e->model->guard(i, x, e->q, u_at(e, t), e->p, g, &e->msg);
+    return e->model->guard(i, t, x, e->q, u_at(e, t), e->p, g, &e->msg);
 }
 
 /* ---- the Jacobian (Rodas5P) ---------------------------------------------------------------- */
@@ -710,6 +716,8 @@ int pg_engine_init(PgEngine *e, const PgModel *model, const double *p, const dou
     e->zeno_max_events = 200;
     e->zeno_window = 1e-6;
     e->t = e->t_out = t0;
+    rc = time_events_init(e, t0);
+    if (rc) return at_time(e, rc, "initialization", 0, NULL);
     e->keep_history = s[PG_S_LOG_EVENTS] != 0.0;
     e->budget = s[PG_S_MAX_STEPS_PER_SECOND] * BUDGET_WINDOW;
     e->win_t0 = e->t, e->win_n = 0, e->warned = 0;
@@ -969,6 +977,72 @@ static void armed_after_step(PgEngine *e, const double *g)
     }
 }
 
+/* ---- time events ----------------------------------------------------------------------------- */
+/* each time event's instants from the parameters, the first at or after t0 */
+static int time_events_init(PgEngine *e, double t0)
+{
+    const PgModel *md = e->model;
+    if (md->nte > PG_MAX_TIME_EVENTS) {
+        pg_msg_clear(&e->msg);
+        pg_msg_printf(&e->msg, "the model has %d time events; the engine takes at most %d (PG_MAX_TIME_EVENTS)",
+                      md->nte, PG_MAX_TIME_EVENTS);
+        return PG_RAISE;
+    }
+    for (int k = 0; k < md->nte; ++k) {
+        double at = 0, every = 0;
+        TRY(md->time_event(k, e->p, &at, &every, &e->msg));
+        if (!isfinite(at) || !isfinite(every) || every < 0.0) {
+            PgMsg *m = &e->msg;
+            pg_msg_clear(m);
+            pg_msg_printf(m, "time event %s: at = ", md->time_event_names[k]);
+            pg_msg_value(m, at, 'f', "r");
+            pg_msg_str(m, " s, every = ");
+            pg_msg_value(m, every, 'f', "r");
+            pg_msg_str(m, " s violate the rule: at is finite, every is finite and >= 0 (0: once)");
+            return PG_RAISE;
+        }
+        long n = 0;
+        if (at < t0 && every > 0.0) n = (long)ceil((t0 - at) / every);
+        double next = at + (double)n * every;
+        if (next < t0) next = every > 0.0 ? at + (double)(++n) * every : INFINITY;
+        e->te_at[k] = at, e->te_every[k] = every, e->te_count[k] = n, e->te_next[k] = next;
+    }
+    return PG_OK;
+}
+
+double pg_engine_next_time_event(const PgEngine *e)
+{
+    double t = INFINITY;
+    for (int k = 0; k < e->model->nte; ++k) t = pmin(t, e->te_next[k]);
+    return t;
+}
+
+/* the first time event whose instant is at or before `reach` */
+static int time_event_by(const PgEngine *e, double reach)
+{
+    for (int k = 0; k < e->model->nte; ++k)
+        if (e->te_next[k] <= reach) return e->model->ne + k;
+    return -1;
+}
+
+/* for an importer's solver (model exchange): within TIME_EVENT_ULPS of t, so that a time rounded
+ * off the instant (0.3 against 0.1 * 3 = 0.30000000000000004) still meets it; the engine's own
+ * steps land on the instants exactly */
+int pg_engine_time_event_due(const PgEngine *e, double t)
+{
+    return time_event_by(e, t + TIME_EVENT_ULPS * EPS * pmax(fabs(t), 1.0));
+}
+
+/* a time event due at e->t becomes the pending event (state events pending first) */
+static void time_event_pending(PgEngine *e)
+{
+    if (e->has_pending) return;
+    int i = time_event_by(e, e->t);
+    if (i < 0) return;
+    e->has_pending = 1, e->pending_index = i, e->zero_hit = 0;
+    memcpy(e->pending_x, e->x, sizeof e->x);
+}
+
 /* ---- locating events ------------------------------------------------------------------------ */
 /* _locate: earliest time in [a, b] where guard i crosses zero in its direction */
 static int locate_level(PgEngine *e, PgSeg *seg, int i, double level, double a, double ga, double gb,
@@ -1172,11 +1246,16 @@ static int step(PgEngine *e, double t_target)
     int rejected = 0;
     double t_new, y_new[PG_MAX_X], f_new[PG_MAX_X];
     double K[PG_MAX_STAGES * PG_MAX_X];
+    double t_time = pg_engine_next_time_event(e); /* the steps land on it exactly */
+    double h_prop = h;                               /* the step the error control asked for */
+    int on_time = 0;
     for (;;) {
         t_new = t + h;
         if (t_new >= e->t_stop && e->t_stop > t + 10 * EPS * pmax(fabs(t), 1.0)) t_new = e->t_stop;
+        on_time = t_new >= t_time;
+        if (on_time) t_new = t_time;
         h = t_new - t;
-        if (h <= MIN_STEP_ULPS * EPS * pmax(fabs(t), 1.0)) return collapse_error(e, t, h);
+        if (h <= MIN_STEP_ULPS * EPS * pmax(fabs(t), 1.0) && !(on_time && h > 0.0)) return collapse_error(e, t, h);
         TRY(pair_step(e, t, y, f, h, y_new, f_new, K));
         long n = e->win_n = e->win_n + 1;
         if (n >= e->warn_n || t - e->win_t0 >= BUDGET_WINDOW) TRY(spend(e, t, h));
@@ -1192,6 +1271,8 @@ static int step(PgEngine *e, double t_target)
             }
             if (rejected) factor = pmin(1.0, factor);
             e->h = pmin(h * factor, e->max_step);
+            /* a step shortened to land on a time event does not shrink the next one */
+            if (on_time && h < h_prop) e->h = pmin(pmax(e->h, h_prop), e->max_step);
             break;
         }
         e->n_rejected += 1;
@@ -1255,6 +1336,7 @@ static int step(PgEngine *e, double t_target)
             memcpy(e->g_prev, e->g, sizeof e->g), e->has_g_prev = 1;
             memcpy(e->g, g_new, sizeof g_new);
             armed_after_step(e, g_new);
+            if (on_time) time_event_pending(e); /* the step landed on a time event's instant */
         }
         return PG_OK;
     }
@@ -1338,8 +1420,16 @@ static int apply_pending_event(PgEngine *e)
     signed char was[PG_MAX_EVENTS];
     arming_before(e, was);
     double own_g = 0.0; /* its guard at the crossing, before the jump */
-    TRY(guard_at(e, i, e->t, e->x, &own_g));
-    TRY(e->model->jump(i, e->x, e->q, u_at(e, e->t), e->p, x_new, q_new, &e->msg));
+    int ne = e->model->ne;
+    if (i < ne) {
+        TRY(guard_at(e, i, e->t, e->x, &own_g));
+        TRY(e->model->jump(i, e->t, e->x, e->q, u_at(e, e->t), e->p, x_new, q_new, &e->msg));
+    } else {
+        int k = i - ne;
+        TRY(e->model->time_jump(k, e->t, e->x, e->q, u_at(e, e->t), e->p, x_new, q_new, &e->msg));
+        e->te_count[k] += 1; /* the next instant counted from the first: no drift over many periods */
+        e->te_next[k] = e->te_every[k] > 0.0 ? e->te_at[k] + (double)e->te_count[k] * e->te_every[k] : INFINITY;
+    }
     size_t nx = sizeof(double) * (size_t)e->nx;
     e->last.time = e->t, e->last.index = i;
     memcpy(e->last.x_before, e->pending_x, nx);
@@ -1396,6 +1486,10 @@ static int run(PgEngine *e, double t_target, int apply_events)
             }
         }
         if (t_target <= e->t) return PG_OK;
+        if (time_event_by(e, e->t) >= 0) { /* due at this instant (several at one, or the start) */
+            time_event_pending(e);
+            continue;
+        }
         if ((double)(e->n_steps + e->n_rejected) >= limit) return call_budget_error(e, t_target);
         int rc = step(e, t_target);
         if (rc) return at_time(e, rc, "t = ", e->t, " s");
@@ -1426,7 +1520,14 @@ int pg_engine_advance(PgEngine *e, double t_target)
         return PG_RAISE;
     }
     if (e->stateless) {
-        while (e->has_pending && t_target >= e->t) { /* an event its inputs caused: at its instant */
+        for (;;) { /* events its inputs caused, and time events, each at its instant */
+            if (!e->has_pending) {
+                double tt = pg_engine_next_time_event(e);
+                if (!(tt <= t_target)) break;
+                e->t = pmax(e->t, tt);
+                time_event_pending(e);
+            }
+            if (!(e->has_pending && t_target >= e->t)) break;
             int rc = apply_pending_event(e);
             if (rc) return at_time(e, rc, "t = ", e->t, " s");
         }
@@ -1450,7 +1551,7 @@ int pg_engine_advance_to_event(PgEngine *e, double t_target, int *stopped)
 {
     *stopped = 0;
     if (t_target < e->t_out) return pg_engine_advance(e, t_target); /* (the same refusal) */
-    if (e->model->ne == 0 || e->stateless) return pg_engine_advance(e, t_target);
+    if ((e->model->ne == 0 && e->model->nte == 0) || e->stateless) return pg_engine_advance(e, t_target);
     TRY(run(e, t_target, 0));
     if (e->has_pending && e->t <= t_target) {
         e->t_out = e->t;

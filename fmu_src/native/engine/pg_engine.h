@@ -39,6 +39,9 @@
 #ifndef PG_MAX_EVENTS
 #define PG_MAX_EVENTS 16
 #endif
+#ifndef PG_MAX_TIME_EVENTS
+#define PG_MAX_TIME_EVENTS 16
+#endif
 #define PG_RECENT 200 /* max(zeno_max_events, STORM_EVENTS) */
 
 enum { PG_S_METHOD, PG_S_REL_TOL, PG_S_ABS_TOL, PG_S_MAX_STEP, PG_S_INITIAL_STEP, PG_S_LOG_EVENTS,
@@ -110,6 +113,9 @@ struct PgEngine {
     /* the pending event fires from zero without its guard having left its band (zero_hit), and how
      * many of the latest events in a row of event zrun_event did (a storm at ZERO_REFIRES) */
     int zero_hit, zrun, zrun_event;
+    /* time events: each one's next instant (INFINITY: no more), first instant, period and count */
+    double te_next[PG_MAX_TIME_EVENTS], te_at[PG_MAX_TIME_EVENTS], te_every[PG_MAX_TIME_EVENTS];
+    long te_count[PG_MAX_TIME_EVENTS];
     double f[PG_MAX_X], g[PG_MAX_EVENTS], g_prev[PG_MAX_EVENTS];
     int has_g_prev;
     double h;
@@ -157,6 +163,10 @@ int pg_engine_apply_event(PgEngine *e, int index, double t, const double *x);
 int pg_engine_restart_at(PgEngine *e, double t, const double *x, const double *u);
 /* the domain condition at (t, x) in the current mode: 1 with its text in e->msg, 0 inside */
 int pg_engine_domain_problem(PgEngine *e, double t, const double *x);
+/* the next time event's instant (INFINITY: none), for FMI nextEventTime */
+double pg_engine_next_time_event(const PgEngine *e);
+/* the engine index (ne + k) of the first time event due at t (its instant <= t), -1 for none */
+int pg_engine_time_event_due(const PgEngine *e, double t);
 /* the flow and the active guards at (t, x) in the current mode (for model exchange) */
 int pg_engine_flow(PgEngine *e, double t, const double *x, double *dx);
 int pg_engine_guard(PgEngine *e, int k, const double *x, double *g); /* (at t_out) */

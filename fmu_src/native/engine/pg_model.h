@@ -60,9 +60,11 @@ typedef struct PgModel {
     int (*check)(const double *p, PgMsg *m);           /* the parameter rules */
     int (*initial)(const double *p, double *x, double *q, PgMsg *m);
     int (*flow)(double t, const double *x, const double *q, const double *u, const double *p, double *dx, PgMsg *m);
-    int (*guard)(int k, const double *x, const double *q, const double *u, const double *p, double *g, PgMsg *m);
+    /* event k's guard and jump at time t (a model's guard or jump may read the time) */
+    int (*guard)(int k, double t, const double *x, const double *q, const double *u, const double *p, double *g,
+                 PgMsg *m);
     int (*active)(int k, const double *q, int *on, PgMsg *m);
-    int (*jump)(int k, const double *x, const double *q, const double *u, const double *p, double *x_new,
+    int (*jump)(int k, double t, const double *x, const double *q, const double *u, const double *p, double *x_new,
                 double *q_new, PgMsg *m);
     int (*outputs)(double t, const double *x, const double *q, const double *u, const double *p, double *y, PgMsg *m);
     /* PG_RAISE with the condition's text when (t, x) leaves the domain, PG_OK inside it */
@@ -76,6 +78,13 @@ typedef struct PgModel {
                     const double *su, double *df, PgMsg *m);
     int (*outputs_jvp)(double t, const double *x, const double *q, const double *u, const double *p, const double *sx,
                        const double *su, double *dy, PgMsg *m);
+    /* time events (after the ne state events in the engine's numbering: event ne + k): k's first
+     * instant *at and period *every (0: once), from the parameters; its jump at time t */
+    int nte;
+    const char *const *time_event_names;
+    int (*time_event)(int k, const double *p, double *at, double *every, PgMsg *m);
+    int (*time_jump)(int k, double t, const double *x, const double *q, const double *u, const double *p,
+                     double *x_new, double *q_new, PgMsg *m);
 } PgModel;
 
 #endif

@@ -74,7 +74,7 @@ def reserved_names(model) -> dict:
 
 def check_declarations(model) -> None:
     """Names, types, units, descriptions and cross references of a model's declarations."""
-    from pogofmu.runtime.model import Event, HybridModel, Parameter, Variable
+    from pogofmu.runtime.model import Event, HybridModel, Parameter, TimeEvent, Variable
 
     if not isinstance(model, HybridModel):
         raise ModelFileError(f"{model!r} is not a HybridModel")
@@ -83,7 +83,8 @@ def check_declarations(model) -> None:
                              f"FMU's files and C functions, so letters, digits and _ only, not starting with a digit")
     inputs, outputs = model.declared_inputs(), model.declared_outputs()
     groups = (("state", model.states, Variable), ("parameter", model.parameters, Parameter),
-              ("input", inputs, Variable), ("output", outputs, Variable), ("event", model.events, Event))
+              ("input", inputs, Variable), ("output", outputs, Variable), ("event", model.events, Event),
+              ("time event", model.time_events, TimeEvent))
     for what, items, cls in groups:
         if not isinstance(items, tuple):
             raise ModelFileError(f"{_at(model, model)}: {what}s={type(items).__name__}: HybridModel takes a tuple "
@@ -98,10 +99,10 @@ def check_declarations(model) -> None:
             if not isinstance(name, str) or not NAME.match(name):
                 raise ModelFileError(f"{_at(item, model)}: {what} name {name!r} is not a valid name: letters, digits "
                                      f"and _ only, not starting with a digit (FMI flat names, C identifiers)")
-            if name in reserved and what != "event":
+            if name in reserved and what not in ("event", "time event"):
                 raise ModelFileError(f"{_at(item, model)}: {what} {name!r} collides with {reserved[name]}: "
                                      f"choose another name")
-            if what != "event":
+            if what not in ("event", "time event"):
                 if not isinstance(item.description, str) or not item.description.strip():
                     raise ModelFileError(f"{_at(item, model)}: {what} {name!r} has no description: every FMU "
                                          f"variable needs one (description=\"...\")")
@@ -114,7 +115,7 @@ def check_declarations(model) -> None:
     # an output of the same name, carrying its value, but not a parameter or an input); the events
     spaces = ((("parameter", model.parameters), ("input", inputs), ("output", outputs)),
               (("state", model.states), ("parameter", model.parameters), ("input", inputs)),
-              (("event", model.events),))
+              (("event", model.events), ("time event", model.time_events)))
     for space in spaces:
         seen = {}
         for what, items in space:
@@ -229,7 +230,7 @@ def _rule_breaker(exc, model):
 
 def check_behaviour(model, files: Iterable) -> None:
     """Call the model's functions at its default initial state and check what they return."""
-    from pogofmu.runtime.model import ModelError, ParameterError
+    from pogofmu.runtime.model import Event, ModelError, ParameterError
 
     files = list(files)
     p = model.params()
@@ -273,17 +274,25 @@ def check_behaviour(model, files: Iterable) -> None:
     if bad:
         raise ModelFileError(f"{_fn_at(model.flow)}: flow returns {dx[bad[0]]!r} for d{model.states[bad[0]].name}/dt: "
                              f"a rate is a float")
-    for ev in model.events:
-        active = _call(files, model, f"the activity of event {ev.name}", ev.active, q)
+    for ev in model.time_events:
+        for what, fn in (("at", ev.at), ("every", ev.period)):
+            value = _call(files, model, f"the {what} of time event {ev.name}", fn, p)
+            if not _is_number(value) or not math.isfinite(value) or (what == "every" and value < 0):
+                rule = "a finite time in s" if what == "at" else "a finite period in s, > 0 (or None: once)"
+                raise ModelFileError(f"{_at(ev, model)}: time event {ev.name}: {what}(p) returns {value!r}: {rule}")
+    for ev in model.all_events():
+        active = _call(files, model, f"the activity of event {ev.name}", ev.active, q) \
+            if isinstance(ev, Event) else True
         if not isinstance(active, (bool, int)):
             raise ModelFileError(f"{_fn_at(ev.active)}: event {ev.name}: active(q) returns {active!r}: True or False")
-        g = _call(files, model, f"the guard of event {ev.name}", ev.guard, x, q, u, p)
+        g = _call(files, model, f"the guard of event {ev.name}", ev.guard_t, t, x, q, u, p) \
+            if isinstance(ev, Event) else 0.0
         if not _is_number(g):
             raise ModelFileError(f"{_fn_at(ev.guard)}: event {ev.name}: the guard returns {g!r} "
                                  f"({type(g).__name__}): a guard is a number whose zero crossing is the event "
                                  f"(write h, not h > 0)")
         try:
-            jumped = _call(files, model, f"the jump of event {ev.name}", ev.jump, x, q, u, p)
+            jumped = _call(files, model, f"the jump of event {ev.name}", ev.jump_t, t, x, q, u, p)
         except ModelError:
             continue  # a jump may refuse the initial state; what it returns is checked where it runs
         if not isinstance(jumped, (tuple, list)) or len(jumped) != 2 or len(jumped[0]) != len(model.states) \

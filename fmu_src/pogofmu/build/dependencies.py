@@ -57,7 +57,7 @@ def _quantities(model, t, x, q, u, p):
     if model.states:
         out.update({f"der:{v.name}": d for v, d in zip(model.states, model.flow(t, x, q, u, p))})
     for ev in model.events:
-        out[f"indicator:{ev.name}"] = ev.guard(x, q, u, p) if ev.active(q) else 1.0
+        out[f"indicator:{ev.name}"] = ev.guard_t(t, x, q, u, p) if ev.active(q) else 1.0
     return out
 
 

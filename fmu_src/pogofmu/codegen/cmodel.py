@@ -30,10 +30,11 @@ ARGS = {
     "check": "const double *p, PgMsg *m",
     "initial": "const double *p, double *x_out, double *q_out, PgMsg *m",
     "flow": "double t, const double *x, const double *q, const double *u, const double *p, double *dx, PgMsg *m",
-    "guard": "const double *x, const double *q, const double *u, const double *p, double *g, PgMsg *m",
+    "guard": "double t, const double *x, const double *q, const double *u, const double *p, double *g, PgMsg *m",
     "active": "const double *q, int *on, PgMsg *m",
-    "jump": "const double *x, const double *q, const double *u, const double *p, double *x_new, double *q_new, "
-            "PgMsg *m",
+    "jump": "double t, const double *x, const double *q, const double *u, const double *p, double *x_new, "
+            "double *q_new, PgMsg *m",
+    "time_event": "const double *p, double *at, double *every, PgMsg *m",
     "outputs": "double t, const double *x, const double *q, const double *u, const double *p, double *y, PgMsg *m",
     "domain": "double t, const double *x, const double *q, const double *u, const double *p, const double *s, "
               "PgMsg *m",
@@ -185,13 +186,24 @@ class ModelWriter:
         counts["flow"] = self.function("pg_flow", ARGS["flow"], flow, self._vector("dx", nx, "the flow"), "flow")
         for k, ev in enumerate(model.events):
             counts[f"guard {ev.name}"] = self.function(
-                f"pg_guard_{k}", ARGS["guard"], lambda ev=ev: ev.guard(inp.x(), inp.q(), inp.u(), inp.p()),
+                f"pg_guard_{k}", ARGS["guard"],
+                lambda ev=ev: ev.guard_t(inp.t(), inp.x(), inp.q(), inp.u(), inp.p()),
                 lambda v, ref: [f"*g = {ref(v)};", "return PG_OK;"], f"guard of {ev.name}")
             counts[f"active {ev.name}"] = self.function(
                 f"pg_active_{k}", ARGS["active"], lambda ev=ev: ev.active(inp.q()),
                 lambda v, ref: [f"*on = ({ref(v)}) ? 1 : 0;", "return PG_OK;"], f"activity of {ev.name}")
             counts[f"jump {ev.name}"] = self.function(
-                f"pg_jump_{k}", ARGS["jump"], lambda ev=ev: ev.jump(inp.x(), inp.q(), inp.u(), inp.p()),
+                f"pg_jump_{k}", ARGS["jump"],
+                lambda ev=ev: ev.jump_t(inp.t(), inp.x(), inp.q(), inp.u(), inp.p()),
+                self._state_leaf("x_new", "q_new", f"jump of {ev.name}"), f"jump of {ev.name}")
+        for k, ev in enumerate(model.time_events):
+            counts[f"time event {ev.name}"] = self.function(
+                f"pg_time_event_{k}", ARGS["time_event"], lambda ev=ev: (ev.at(inp.p()), ev.period(inp.p())),
+                lambda v, ref: [f"*at = {ref(v[0])};", f"*every = {ref(v[1])};", "return PG_OK;"],
+                f"instants of {ev.name}")
+            counts[f"time jump {ev.name}"] = self.function(
+                f"pg_time_jump_{k}", ARGS["jump"],
+                lambda ev=ev: ev.jump_t(inp.t(), inp.x(), inp.q(), inp.u(), inp.p()),
                 self._state_leaf("x_new", "q_new", f"jump of {ev.name}"), f"jump of {ev.name}")
         names = [v.name for v in model.outputs]
 
@@ -254,6 +266,7 @@ class ModelWriter:
         model = self.model
         size = model_sizes(model)
         ne = size["EVENTS"]
+        nte = size["TIME_EVENTS"]
 
         def strings(name, items):
             if not items:
@@ -265,9 +278,12 @@ class ModelWriter:
             '#include <math.h>', '#include "pg_model.h"', '#include "pg_support.h"', "",
         ]
         tail = [
-            self._dispatch("pg_guard", ARGS["guard"], "x, q, u, p, g, m", ne),
+            self._dispatch("pg_guard", ARGS["guard"], "t, x, q, u, p, g, m", ne),
             self._dispatch("pg_active", ARGS["active"], "q, on, m", ne),
-            self._dispatch("pg_jump", ARGS["jump"], "x, q, u, p, x_new, q_new, m", ne),
+            self._dispatch("pg_jump", ARGS["jump"], "t, x, q, u, p, x_new, q_new, m", ne),
+            self._dispatch("pg_time_event", ARGS["time_event"], "p, at, every, m", nte),
+            self._dispatch("pg_time_jump", ARGS["jump"], "t, x, q, u, p, x_new, q_new, m", nte),
+            strings("TIME_EVENT_NAMES", [ev.name for ev in model.time_events]),
             strings("STATE_NAMES", [v.name for v in model.states]),
             strings("Q_NAMES", [k for k, _ in self.layout]),
             strings("INPUT_NAMES", [v.name for v in model.inputs]),
@@ -285,6 +301,7 @@ class ModelWriter:
             f"    {int(model.time_scales is not None)}, {int(model.error_scales is not None)},",
             "    pg_check_settings, pg_check, pg_initial, pg_flow, pg_guard, pg_active, pg_jump, pg_outputs, "
             "pg_domain, pg_time_scales, pg_error_scales, pg_flow_jvp, pg_outputs_jvp,",
+            f"    {nte}, TIME_EVENT_NAMES, pg_time_event, pg_time_jump,",
             "};", "",
         ]
         tables = []
@@ -294,14 +311,14 @@ class ModelWriter:
 
 
 SIZES = (("X", "states"), ("U", "inputs"), ("P", "parameters"), ("EVENTS", "events"), ("Y", "outputs"),
-         ("Q", "discrete state entries"))
+         ("Q", "discrete state entries"), ("TIME_EVENTS", "time events"))
 
 
 def model_sizes(model: HybridModel) -> Dict[str, int]:
     """The model's count of each engine size (``PG_MAX_<key>``): states, inputs, parameters,
     events, outputs and discrete state entries (the counts ``PG_MODEL`` declares)."""
     counts = (len(model.states), len(model.inputs), len(model.parameters), len(model.events), len(model.outputs),
-              len(discrete_layout(model)))
+              len(discrete_layout(model)), len(model.time_events))
     return {key: n for (key, _), n in zip(SIZES, counts)}
 
 

@@ -18,10 +18,10 @@ name private to each build (``_pogofmu_<Model>_<hash>``), and rewrites a user's 
 __version__ = "0.3.0"  # the project's version (pyproject.toml reads it; every FMU carries it)
 
 from . import fmath  # noqa: E402
-from .model import (FALLING, RISING, DomainError, Event, HybridModel, ModelError, Parameter,  # noqa: E402
+from .model import (FALLING, RISING, DomainError, Event, HybridModel, TimeEvent, ModelError, Parameter,  # noqa: E402
                     ParameterError, Params, Variable, ZenoError, require, require_finite, require_nonnegative,
                     require_positive)
 
-__all__ = ["HybridModel", "Event", "Variable", "Parameter", "FALLING", "RISING", "Params", "ModelError",
+__all__ = ["HybridModel", "Event", "TimeEvent", "Variable", "Parameter", "FALLING", "RISING", "Params", "ModelError",
            "ParameterError", "DomainError", "ZenoError", "require", "require_finite", "require_positive",
            "require_nonnegative", "fmath", "__version__"]

@@ -127,9 +127,9 @@ def _before_side(falling, g):
     return g > 0.0 if falling else g < 0.0
 
 
-def _indicators(events, x, q, u, p):
+def _indicators(events, t, x, q, u, p):
     """Each event's guard where the event is active in mode ``q``, 1 (cannot cross zero) elsewhere."""
-    return [ev.guard(x, q, u, p) if ev.active(q) else 1.0 for ev in events]
+    return [ev.guard_t(t, x, q, u, p) if ev.active(q) else 1.0 for ev in events]
 
 
 UNARMED_FLOOR = 1e-300  # the least magnitude an unarmed indicator is reported with
@@ -208,7 +208,7 @@ class Fmi3Slave(HybridSlave):
             t, x, q, u, p = sim.t_out, sim.x_out, sim.q_out, sim.u, sim.p
         f = model.flow(t, x, q, u, p) if model.states else []
         out = {f"der({var.name})": v for var, v in zip(model.states, f)}
-        out.update(zip(map(indicator_name, model.events), _indicators(model.events, x, q, u, p)))
+        out.update(zip(map(indicator_name, model.events), _indicators(model.events, t, x, q, u, p)))
         return out
 
     def _initial_outputs(self):
@@ -299,7 +299,7 @@ class Fmi3Slave(HybridSlave):
         side before its crossing (a guard exactly zero waits until it leaves zero)."""
         sim = self._sim
         q, u, p, x = sim.q, sim.u, sim.p, self._me_x
-        self._armed = [ev.active(q) and _before_side(ev.direction == FALLING, ev.guard(x, q, u, p))
+        self._armed = [ev.active(q) and _before_side(ev.direction == FALLING, ev.guard_t(self._me_t, x, q, u, p))
                        for ev in type(self).model.events]
 
     # ---- model exchange ---------------------------------------------------------------------
@@ -360,12 +360,12 @@ class Fmi3Slave(HybridSlave):
     def get_event_indicators(self):
         if self._sim is None and self._mode == "me":
             t, x, q, u, p = self._initial_point("fmi3GetEventIndicators")
-            return _indicators(type(self).model.events, x, q, u, p)
+            return _indicators(type(self).model.events, t, x, q, u, p)
         sim = self._me_instance("fmi3GetEventIndicators")
         q, u, p, x = sim.q, sim.u, sim.p, self._me_x
         armed = self._armed
         events = type(self).model.events
-        z = _indicators(events, x, q, u, p)
+        z = _indicators(events, self._me_t, x, q, u, p)
         for k, (ev, g) in enumerate(zip(events, z)):
             if not armed[k] and ev.active(q) and _before_side(ev.direction == FALLING, g):
                 armed[k] = True  # seen on the side before its crossing: may fire
@@ -396,9 +396,11 @@ class Fmi3Slave(HybridSlave):
         q, u, p = sim.q, sim.u, sim.p
         fired = None
         for k, ev in enumerate(model.events):  # priority order
-            if self._armed[k] and ev.active(q) and not _before_side(ev.direction == FALLING, ev.guard(x, q, u, p)):
+            if self._armed[k] and ev.active(q) and not _before_side(ev.direction == FALLING, ev.guard_t(t, x, q, u, p)):
                 fired = k
                 break
+        if fired is None:
+            fired = sim.time_event_due(t)  # a time event reached: its jump
         changed = False
         if fired is not None:
             try:
@@ -477,6 +479,10 @@ class Fmi3Slave(HybridSlave):
         """(discreteStatesNeedUpdate, terminateSimulation, nominalsOfContinuousStatesChanged,
         valuesOfContinuousStatesChanged, nextEventTimeDefined, nextEventTime)"""
         changed = self._me_update() if self._mode == "me" else self._cs_update()
+        if self._mode == "me" and self._sim is not None:  # model exchange: the next time event
+            t_next = self._sim.next_time_event()
+            if math.isfinite(t_next):  # another due at this instant: an update more (event iteration)
+                return (t_next <= self._me_t, False, False, changed, True, t_next)
         return (False, False, False, changed, False, 0.0)
 
     def _get_fmu_state(self):

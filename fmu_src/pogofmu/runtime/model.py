@@ -10,13 +10,17 @@ Conventions (docs/models.md):
   :class:`Params` with attribute access), inputs ``u`` (a tuple of floats, held over a
   communication step);
 * ``flow(t, x, q, u, p) -> dx/dt``;
-* every :class:`Event` has a guard ``h(x, q, u, p)`` with a direction: ``FALLING`` fires where
-  ``h`` goes from ``> 0`` to ``<= 0``, ``RISING`` where it goes from ``< 0`` to ``>= 0``; and a
-  jump ``(x, q) <- jump(x, q, u, p)``.  Events listed first win when several fire at the same
-  instant (the documented priority).
+* every :class:`Event` has a guard ``h(x, q, u, p)`` (or ``h(t, x, q, u, p)``: a guard may read the
+  time) with a direction: ``FALLING`` fires where ``h`` goes from ``> 0`` to ``<= 0``, ``RISING``
+  where it goes from ``< 0`` to ``>= 0``; and a jump ``(x, q) <- jump(x, q, u, p)`` (or ``jump(t, x,
+  q, u, p)``).  Events listed first win when several fire at the same instant (the documented
+  priority, docs/solver.md "Event semantics");
+* a :class:`TimeEvent` fires at given instants (``at(p)``, then every ``every(p)``), hit exactly by
+  the steps; listed in ``events`` beside the state events, it comes after them at one instant.
 """
 from __future__ import annotations
 
+import inspect
 import os
 import sys
 from dataclasses import dataclass, field
@@ -144,20 +148,70 @@ class Parameter:
             object.__setattr__(self, "site", _site())
 
 
+def reads_time(fn) -> bool:
+    """A guard or jump written ``(t, x, q, u, p)`` (five required positional parameters) reads the
+    time; one written ``(x, q, u, p)`` does not (the signature of every model before time could be
+    read, which keeps working unchanged)."""
+    try:
+        params = inspect.signature(fn).parameters.values()
+    except (TypeError, ValueError):
+        return False
+    kinds = (inspect.Parameter.POSITIONAL_ONLY, inspect.Parameter.POSITIONAL_OR_KEYWORD)
+    return sum(1 for a in params if a.kind in kinds and a.default is inspect.Parameter.empty) == 5
+
+
+def with_time(fn):
+    """``fn`` as ``(t, x, q, u, p) -> ...`` whichever of the two signatures it was written with."""
+    if fn is None or reads_time(fn):
+        return fn
+    return lambda t, x, q, u, p: fn(x, q, u, p)
+
+
 @dataclass(frozen=True)
 class Event:
-    """One guard with its direction, the modes it is active in and its jump map."""
+    """One guard with its direction, the modes it is active in and its jump map.
+
+    ``guard`` and ``jump`` take ``(x, q, u, p)`` or, to read the time, ``(t, x, q, u, p)``;
+    ``guard_t`` and ``jump_t`` are both as ``(t, x, q, u, p)``, whichever was written."""
 
     name: str
     direction: int
-    guard: Callable  # (x, q, u, p) -> float
-    jump: Callable  # (x, q, u, p) -> (x_new, q_new)
+    guard: Callable  # (x, q, u, p) or (t, x, q, u, p) -> float
+    jump: Callable  # (x, q, u, p) or (t, x, q, u, p) -> (x_new, q_new)
     active: Callable = lambda q: True  # (q) -> bool
     site: Optional[tuple] = field(default=None, compare=False, repr=False)  # (file, line) of the declaration
+    guard_t: Optional[Callable] = field(default=None, compare=False, repr=False)
+    jump_t: Optional[Callable] = field(default=None, compare=False, repr=False)
 
     def __post_init__(self):
         if self.site is None:
             object.__setattr__(self, "site", _site())
+        object.__setattr__(self, "guard_t", with_time(self.guard))
+        object.__setattr__(self, "jump_t", with_time(self.jump))
+
+
+@dataclass(frozen=True)
+class TimeEvent:
+    """An event at given instants: ``at(p)`` the first, then every ``every(p)`` seconds (``every``
+    omitted, or returning 0: once). The steps land on each instant exactly, with no root finding;
+    ``jump`` as an :class:`Event`'s, ``(x, q, u, p)`` or ``(t, x, q, u, p)``. At one instant the
+    state events come first, then the time events in their order (docs/solver.md)."""
+
+    name: str
+    at: Callable  # p -> float
+    jump: Callable  # (x, q, u, p) or (t, x, q, u, p) -> (x_new, q_new)
+    every: Optional[Callable] = None  # p -> float (> 0), or None: once
+    site: Optional[tuple] = field(default=None, compare=False, repr=False)
+    jump_t: Optional[Callable] = field(default=None, compare=False, repr=False)
+
+    def __post_init__(self):
+        if self.site is None:
+            object.__setattr__(self, "site", _site())
+        object.__setattr__(self, "jump_t", with_time(self.jump))
+
+    def period(self, p) -> float:
+        """``every(p)``, 0.0 for a single instant."""
+        return 0.0 if self.every is None else self.every(p)
 
 
 class Params:
@@ -239,10 +293,16 @@ class HybridModel:
     # what the model file declared, where it has arrays (see _expand_arrays): a dict with the keys
     # inputs, outputs, output_fn, default_input, feedthrough, sizes; None for a model of scalars only
     declared: Optional[dict] = field(default=None, compare=False, repr=False)
+    # the TimeEvents listed in ``events``, taken out of it (``events`` keeps the state events)
+    time_events: Tuple[TimeEvent, ...] = ()
 
     def __post_init__(self):
         if self.site is None:
             object.__setattr__(self, "site", _site())
+        if isinstance(self.events, (tuple, list)) and any(isinstance(ev, TimeEvent) for ev in self.events):
+            object.__setattr__(self, "time_events",
+                               tuple(self.time_events) + tuple(ev for ev in self.events if isinstance(ev, TimeEvent)))
+            object.__setattr__(self, "events", tuple(ev for ev in self.events if not isinstance(ev, TimeEvent)))
         # (inputs or outputs that are not tuples are left to the build's checks, which name the rule)
         if self.declared is None and isinstance(self.inputs, tuple) and isinstance(self.outputs, tuple) \
                 and any(array_size(v) for v in self.inputs + self.outputs):
@@ -307,12 +367,17 @@ class HybridModel:
 
     def engine_outputs(self) -> Tuple[Variable, ...]:
         """Outputs every model has, kept by the engine: event counter, time and kind of the latest."""
-        codes = ", ".join(f"{i} {ev.name}" for i, ev in enumerate(self.events, start=1))
+        codes = ", ".join(f"{i} {ev.name}" for i, ev in enumerate(self.all_events(), start=1))
+        what = "state event" if not self.time_events else "event (state or time)"
         return (
-            Variable("n_events", "", "number of state events handled so far"),
-            Variable("t_last_event", "s", "time of the latest state event (the start time before the first)"),
-            Variable("last_event", "", f"kind of the latest state event: 0 none, {codes}"),
+            Variable("n_events", "", f"number of {what}s handled so far"),
+            Variable("t_last_event", "s", f"time of the latest {what} (the start time before the first)"),
+            Variable("last_event", "", f"kind of the latest {what}: 0 none, {codes}"),
         )
+
+    def all_events(self) -> tuple:
+        """The state events, then the time events: the engine's event indices."""
+        return tuple(self.events) + tuple(self.time_events)
 
     def feeds_through(self, output: str) -> Tuple[str, ...]:
         """The inputs ``output`` depends on directly (empty for the engine's own outputs)."""

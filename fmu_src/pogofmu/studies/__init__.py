@@ -168,7 +168,7 @@ def scipy_work(method: str, max_step: float, rel_tol: float, stop: float = STOP)
         funcs = []
         for ev in active:
             def g(t, y, ev=ev, q=q):
-                return ev.guard(list(y), q, u, p)
+                return ev.guard_t(t, list(y), q, u, p)
             g.terminal, g.direction = True, float(ev.direction)
             funcs.append(g)
         sol = solve_ivp(lambda t, y: f(t, list(y)), (t, stop), list(x), method=method, rtol=rel_tol, atol=ABS_TOL,
@@ -179,7 +179,7 @@ def scipy_work(method: str, max_step: float, rel_tol: float, stop: float = STOP)
             break
         k = min((i for i, te in enumerate(sol.t_events) if len(te)), key=lambda i: sol.t_events[i][0])
         t = float(sol.t_events[k][0])
-        x, q = active[k].jump(list(sol.y_events[k][0]), q, u, p)
+        x, q = active[k].jump_t(t, list(sol.y_events[k][0]), q, u, p)
         events.append((active[k].name, t))
     cpu = time.process_time() - t0
     names = [v.name for v in model.states]

@@ -41,7 +41,7 @@ from dataclasses import dataclass
 from typing import List, Optional
 
 from ..dual import Dual, value_and_tangent
-from ..model import FALLING, DomainError, HybridModel, ModelError, ParameterError, Params, ZenoError
+from ..model import FALLING, DomainError, HybridModel, ModelError, ParameterError, Params, ZenoError, reads_time
 from .settings import SOLVER_PARAMETERS, check_solver_parameters, domain_slack, split_parameters
 
 PG_OK, PG_RAISE, PG_ARITH, PG_NO_JVP = 0, 1, 2, 3
@@ -62,20 +62,22 @@ FN = {
     "check": C.CFUNCTYPE(C.c_int, P, P),
     "initial": C.CFUNCTYPE(C.c_int, P, P, P, P),
     "flow": C.CFUNCTYPE(C.c_int, C.c_double, P, P, P, P, P, P),
-    "guard": C.CFUNCTYPE(C.c_int, C.c_int, P, P, P, P, P, P),
+    "guard": C.CFUNCTYPE(C.c_int, C.c_int, C.c_double, P, P, P, P, P, P),
     "active": C.CFUNCTYPE(C.c_int, C.c_int, P, P, P),
-    "jump": C.CFUNCTYPE(C.c_int, C.c_int, P, P, P, P, P, P, P),
+    "jump": C.CFUNCTYPE(C.c_int, C.c_int, C.c_double, P, P, P, P, P, P, P),
     "outputs": C.CFUNCTYPE(C.c_int, C.c_double, P, P, P, P, P, P),
     "domain": C.CFUNCTYPE(C.c_int, C.c_double, P, P, P, P, P, P),
     "time_scales": C.CFUNCTYPE(C.c_int, P, P, P, P),
     "error_scales": C.CFUNCTYPE(C.c_int, P, P, P, P),
     "flow_jvp": C.CFUNCTYPE(C.c_int, C.c_double, P, P, P, P, P, P, P, P),
     "outputs_jvp": C.CFUNCTYPE(C.c_int, C.c_double, P, P, P, P, P, P, P, P),
+    "time_event": C.CFUNCTYPE(C.c_int, C.c_int, P, P, P, P),
+    "time_jump": C.CFUNCTYPE(C.c_int, C.c_int, C.c_double, P, P, P, P, P, P, P),
 }
 STRS = C.POINTER(C.c_char_p)
 _FUNCTIONS = ("check_settings", "check", "initial", "flow", "guard", "active", "jump", "outputs", "domain",
               "time_scales", "error_scales", "flow_jvp", "outputs_jvp")
-_BOUND = _FUNCTIONS[:12]  # the ones a Simulator gives (outputs_jvp: NULL, the engine does not call it)
+_BOUND = _FUNCTIONS[:12] + ("time_event", "time_jump")  # a Simulator's (outputs_jvp: NULL, never called)
 
 
 class PgModel(C.Structure):
@@ -85,7 +87,9 @@ class PgModel(C.Structure):
                 ("parameter_names", STRS), ("parameter_kinds", C.c_char_p), ("output_names", STRS),
                 ("event_names", STRS), ("event_direction", C.POINTER(C.c_byte)),
                 ("has_time_scales", C.c_int), ("has_error_scales", C.c_int),
-                *((n, FN[n]) for n in _FUNCTIONS)]
+                *((n, FN[n]) for n in _FUNCTIONS),
+                ("nte", C.c_int), ("time_event_names", STRS), ("time_event", FN["time_event"]),
+                ("time_jump", FN["time_jump"])]
 
 
 EVENT_HOOK = C.CFUNCTYPE(None, C.c_void_p, C.c_void_p, C.c_void_p, C.c_long)  # the PgEvent by address
@@ -127,7 +131,8 @@ class PgbPy(C.Structure):
     """``PgbPy`` of pg_binding.c: one run's Python objects (borrowed: the Simulator keeps them) and the
     trampolines' cache (owned by the C, dropped with pgb_py_forget)."""
     _fields_ = [("switch_text", C.c_void_p),
-                *((n, C.c_void_p) for n in ("sync", "fail", "fun_for", "domain_text", "guards", "actives",
+                *((n, C.c_void_p) for n in ("sync", "fail", "fun_for", "domain_text", "guards", "guard_times",
+                                            "actives",
                                             "output_fn", "output_names", "domain", "p", "slack")),
                 *((n, C.c_int) for n in ("nx", "nq", "nu", "ny", "q_ok", "u_ok")),
                 ("qdict", C.c_void_p), ("uc", C.c_void_p), ("bound", C.c_void_p)]
@@ -196,6 +201,9 @@ def library():
             lib.pgb_apply_event.argtypes = [C.c_void_p, C.c_int, C.c_double, D]
             lib.pgb_restart_at.argtypes = [C.c_void_p, C.c_double, D, D]
             lib.pgb_event_due.argtypes = [C.c_void_p]
+            lib.pgb_next_time_event.argtypes = [C.c_void_p]
+            lib.pgb_next_time_event.restype = C.c_double
+            lib.pgb_time_event_due.argtypes = [C.c_void_p, C.c_double]
             lib.pgb_read.argtypes = [C.c_void_p, C.c_void_p]
             lib.pgb_read.restype = None
             lib.pgb_last_event.argtypes = [C.c_void_p, D, D]
@@ -268,11 +276,13 @@ class _Static:
         m.name = self.keep[-1]
         m.nx, m.nq, m.nu, m.np = len(model.states), len(layout), len(model.inputs), len(model.parameters)
         m.ns, m.ny, m.ne = len(SOLVER_PARAMETERS), len(model.outputs), len(model.events)
+        m.nte = len(model.time_events)
         for field, names in (("state_names", [v.name for v in model.states]), ("q_names", [k for k, _ in layout]),
                              ("input_names", [v.name for v in model.inputs]),
                              ("parameter_names", [par.name for par in model.parameters]),
                              ("output_names", [v.name for v in model.outputs]),
-                             ("event_names", [ev.name for ev in model.events])):
+                             ("event_names", [ev.name for ev in model.events]),
+                             ("time_event_names", [ev.name for ev in model.time_events])):
             arr, raw = _strings(names)
             self.keep += [arr, raw]
             setattr(m, field, arr)
@@ -394,7 +404,10 @@ class Simulator:
         self._qbytes = 8 * self._nq
         self._qfmt = f"={self._nq}d"
         self._U, self._ubytes, self._ukey, self._uc = C.c_double * max(self._nu, 1), 8 * self._nu, None, self.u
-        self._guards = [ev.guard for ev in model.events]
+        self._guards = [ev.guard_t for ev in model.events]
+        # the guards as written, and whether each reads the time (pg_binding.c's trampoline calls them)
+        self._guards_raw = [ev.guard for ev in model.events]
+        self._guard_times = [reads_time(ev.guard) for ev in model.events]
         n = _READ_HEAD + 2 * self._nx + 2 * self._nq + self._nu
         self._buf = (C.c_double * n)()
         # the buffer read in one unpack (native doubles: the bits as they are; a ctypes slice costs
@@ -441,7 +454,8 @@ class Simulator:
         self._forget()
         keep = self._py_keep = {
             "sync": self._tsync, "fail": self._fail, "fun_for": self._fun_for, "domain_text": self._domain_text,
-            "guards": list(self._guards), "actives": [ev.active for ev in model.events],
+            "guards": list(self._guards_raw), "guard_times": list(self._guard_times),
+            "actives": [ev.active for ev in model.events],
             "output_fn": model.output_fn, "output_names": tuple(v.name for v in model.outputs),
             "domain": model.domain, "p": self.p, "slack": self._slack}
         for name, obj in keep.items():
@@ -572,9 +586,10 @@ class Simulator:
         except BaseException as exc:
             return self._fail(exc, m)
 
-    def _cb_guard(self, k, x, q, u, p, g, m):
+    def _cb_guard(self, k, t, x, q, u, p, g, m):
         try:
-            C.c_double.from_address(g).value = self._guards[k](self._X.from_address(x)[:self._nx], self._q(q, u), self._uc, self.p)
+            C.c_double.from_address(g).value = self._guards[k](t, self._X.from_address(x)[:self._nx], self._q(q, u),
+                                                               self._uc, self.p)
             return PG_OK
         except BaseException as exc:
             return self._fail(exc, m)
@@ -586,11 +601,25 @@ class Simulator:
         except BaseException as exc:
             return self._fail(exc, m)
 
-    def _cb_jump(self, k, x, q, u, p, x_new, q_new, m):
+    def _cb_jump(self, k, t, x, q, u, p, x_new, q_new, m):
+        return self._jump(self.model.events[k], t, x, q, u, x_new, q_new, m)
+
+    def _cb_time_jump(self, k, t, x, q, u, p, x_new, q_new, m):
+        return self._jump(self.model.time_events[k], t, x, q, u, x_new, q_new, m)
+
+    def _jump(self, ev, t, x, q, u, x_new, q_new, m):
         try:
-            ev = self.model.events[k]
-            x2, q2 = ev.jump(self._X.from_address(x)[:self._nx], self._q(q, u), self._uc, self.p)
+            x2, q2 = ev.jump_t(t, self._X.from_address(x)[:self._nx], self._q(q, u), self._uc, self.p)
             self._put_state(f"the jump of {ev.name}", x_new, q_new, x2, q2)
+            return PG_OK
+        except BaseException as exc:
+            return self._fail(exc, m)
+
+    def _cb_time_event(self, k, p, at, every, m):
+        try:
+            ev = self.model.time_events[k]
+            C.c_double.from_address(at).value = float(ev.at(self.p))
+            C.c_double.from_address(every).value = float(ev.period(self.p))
             return PG_OK
         except BaseException as exc:
             return self._fail(exc, m)
@@ -646,7 +675,7 @@ class Simulator:
         if self._history is None:
             return
         e = self._lib.layouts.event.from_address(ev)
-        record = EventRecord(e.time, self.model.events[e.index].name, e.index, list(e.x_before[:self._nx]),
+        record = EventRecord(e.time, self.model.all_events()[e.index].name, e.index, list(e.x_before[:self._nx]),
                              list(e.x_after[:self._nx]))
         self._history.append(record)
         self.new_events.append(record)
@@ -695,9 +724,18 @@ class Simulator:
                 xb, xa = (C.c_double * max(nx, 1))(), (C.c_double * max(nx, 1))()
                 self._lib.pgb_last_event(self._engine, xb, xa)
                 i = int(last_index)
-                self.last_event = EventRecord(last_time, self.model.events[i].name, i, xb[:nx], xa[:nx])
+                self.last_event = EventRecord(last_time, self.model.all_events()[i].name, i, xb[:nx], xa[:nx])
             else:
                 self.last_event = None
+
+    def next_time_event(self) -> float:
+        """The next time event's instant (``inf``: none): FMI's ``nextEventTime``."""
+        return self._lib.pgb_next_time_event(self._engine)
+
+    def time_event_due(self, t: float) -> Optional[int]:
+        """The event index of the first time event due at ``t`` (its instant reached), or None."""
+        i = self._lib.pgb_time_event_due(self._engine, float(t))
+        return None if i < 0 else i
 
     def _qdict_key(self, qd):
         return struct.pack(self._qfmt, *(float(qd[k]) for k, _ in self._layout))
