@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from pogofmu import ssp as master
-from pogofmu.references.closed_loop import apex_of_run, first_apex
+from pogofmu.references.closed_loop import apex_of_run, first_apex, first_apex_sampled
 from support import DIST, ROOT, clean_venv
 from test_ssp import law, ssv_values, variant
 
@@ -100,6 +100,26 @@ def test_synchronized_first_apex_on_the_earth_is_the_sampled_laws_first_order_er
         assert errs[h] <= 1.1 * figure, (package, h, errs[h])
         assert first_apex_error(fixed, "earth") > 1.5 * errs[h], (package, h)
     assert 5 < errs[1e-2] / errs[1e-3] < 20
+
+
+SAMPLED_EXACT = 1e-8  # [m] issue 43: the sampled-data loop met to the FMUs' tolerance
+
+
+@pytest.mark.parametrize("package", sorted(PACKAGES))
+def test_a_sampled_controller_meets_the_sampled_data_closed_loop(package):
+    """HopController at 100 Hz (sample_period = 0.01 s, parameter set earth-100Hz: a zero-order
+    hold updated by a periodic time event) against the sampled-data closed loop computed by scipy,
+    restarted at every tick and every contact (pogofmu.references.closed_loop.first_apex_sampled):
+    the first apex within 1e-8 m at communication steps of 1e-2 and 1e-3 s. The same bodies with
+    the continuous law are 3.5e-3 m off their continuous loop (the law sampled once per step)."""
+    p = ssv_values("earth-100Hz")
+    ref = first_apex_sampled(p, p["sample_period"])
+    assert abs(ref - first_apex(p)) > 1e-3  # the control: sampling at 100 Hz moves the apex
+    for h in (1e-2, 1e-3):
+        res = master.simulate(PACKAGES[package], parameters="earth-100Hz", stop_time=STOP["earth"], step=h,
+                              echo_log=False)
+        got = apex_of_run(res, p["g"])
+        assert got is not None and abs(got - ref) < SAMPLED_EXACT, (package, h, got, ref)
 
 
 @pytest.mark.parametrize("package", sorted(PACKAGES))

@@ -991,14 +991,14 @@ static int time_events_init(PgEngine *e, double t0)
     for (int k = 0; k < md->nte; ++k) {
         double at = 0, every = 0;
         TRY(md->time_event(k, e->p, &at, &every, &e->msg));
-        if (!isfinite(at) || !isfinite(every) || every < 0.0) {
+        if (isnan(at) || at == -INFINITY || !isfinite(every) || every < 0.0) {
             PgMsg *m = &e->msg;
             pg_msg_clear(m);
             pg_msg_printf(m, "time event %s: at = ", md->time_event_names[k]);
             pg_msg_value(m, at, 'f', "r");
             pg_msg_str(m, " s, every = ");
             pg_msg_value(m, every, 'f', "r");
-            pg_msg_str(m, " s violate the rule: at is finite, every is finite and >= 0 (0: once)");
+            pg_msg_str(m, " s violate the rule: at is a time (inf: never), every is finite and >= 0 (0: once)");
             return PG_RAISE;
         }
         long n = 0;
@@ -1025,19 +1025,19 @@ static int time_event_by(const PgEngine *e, double reach)
     return -1;
 }
 
-/* for an importer's solver (model exchange): within TIME_EVENT_ULPS of t, so that a time rounded
- * off the instant (0.3 against 0.1 * 3 = 0.30000000000000004) still meets it; the engine's own
- * steps land on the instants exactly */
-int pg_engine_time_event_due(const PgEngine *e, double t)
-{
-    return time_event_by(e, t + TIME_EVENT_ULPS * EPS * pmax(fabs(t), 1.0));
-}
+/* an importer's time t (a communication point, the time of its solver) meets the instants up to
+ * TIME_EVENT_ULPS after it: its grid and the model's instants differ by rounding (0.41 against
+ * 41 * 0.01 = 0.41000000000000003), not in meaning. Between communication points the steps land on
+ * the instants exactly. */
+static double reach_of(double t) { return t + TIME_EVENT_ULPS * EPS * pmax(fabs(t), 1.0); }
 
-/* a time event due at e->t becomes the pending event (state events pending first) */
-static void time_event_pending(PgEngine *e)
+int pg_engine_time_event_due(const PgEngine *e, double t) { return time_event_by(e, reach_of(t)); }
+
+/* a time event due by `reach` becomes the pending event at e->t (state events pending first) */
+static void time_event_pending(PgEngine *e, double reach)
 {
     if (e->has_pending) return;
-    int i = time_event_by(e, e->t);
+    int i = time_event_by(e, reach);
     if (i < 0) return;
     e->has_pending = 1, e->pending_index = i, e->zero_hit = 0;
     memcpy(e->pending_x, e->x, sizeof e->x);
@@ -1247,6 +1247,7 @@ static int step(PgEngine *e, double t_target)
     double t_new, y_new[PG_MAX_X], f_new[PG_MAX_X];
     double K[PG_MAX_STAGES * PG_MAX_X];
     double t_time = pg_engine_next_time_event(e); /* the steps land on it exactly */
+    if (t_time > t_target && t_time <= reach_of(t_target)) t_time = t_target; /* (at the point asked for) */
     double h_prop = h;                               /* the step the error control asked for */
     int on_time = 0;
     for (;;) {
@@ -1336,7 +1337,7 @@ static int step(PgEngine *e, double t_target)
             memcpy(e->g_prev, e->g, sizeof e->g), e->has_g_prev = 1;
             memcpy(e->g, g_new, sizeof g_new);
             armed_after_step(e, g_new);
-            if (on_time) time_event_pending(e); /* the step landed on a time event's instant */
+            if (on_time) time_event_pending(e, t_new == t_target ? reach_of(t_new) : t_new); /* landed on it */
         }
         return PG_OK;
     }
@@ -1485,11 +1486,12 @@ static int run(PgEngine *e, double t_target, int apply_events)
                 continue;
             }
         }
-        if (t_target <= e->t) return PG_OK;
-        if (time_event_by(e, e->t) >= 0) { /* due at this instant (several at one, or the start) */
-            time_event_pending(e);
+        double reach = e->t == t_target ? reach_of(e->t) : e->t;
+        if (e->t <= t_target && time_event_by(e, reach) >= 0) { /* due now (several at one, the start) */
+            time_event_pending(e, reach);
             continue;
         }
+        if (t_target <= e->t) return PG_OK;
         if ((double)(e->n_steps + e->n_rejected) >= limit) return call_budget_error(e, t_target);
         int rc = step(e, t_target);
         if (rc) return at_time(e, rc, "t = ", e->t, " s");
@@ -1523,9 +1525,9 @@ int pg_engine_advance(PgEngine *e, double t_target)
         for (;;) { /* events its inputs caused, and time events, each at its instant */
             if (!e->has_pending) {
                 double tt = pg_engine_next_time_event(e);
-                if (!(tt <= t_target)) break;
-                e->t = pmax(e->t, tt);
-                time_event_pending(e);
+                if (!(tt <= reach_of(t_target))) break;
+                e->t = pmax(e->t, pmin(tt, t_target));
+                time_event_pending(e, reach_of(e->t));
             }
             if (!(e->has_pending && t_target >= e->t)) break;
             int rc = apply_pending_event(e);

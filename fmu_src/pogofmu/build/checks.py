@@ -277,8 +277,10 @@ def check_behaviour(model, files: Iterable) -> None:
     for ev in model.time_events:
         for what, fn in (("at", ev.at), ("every", ev.period)):
             value = _call(files, model, f"the {what} of time event {ev.name}", fn, p)
-            if not _is_number(value) or not math.isfinite(value) or (what == "every" and value < 0):
-                rule = "a finite time in s" if what == "at" else "a finite period in s, > 0 (or None: once)"
+            bad = not _is_number(value) or math.isnan(value) or value == -math.inf \
+                or (what == "every" and not (math.isfinite(value) and value >= 0))
+            if bad:
+                rule = "a time in s (math.inf: never)" if what == "at" else "a finite period in s, > 0 (or None: once)"
                 raise ModelFileError(f"{_at(ev, model)}: time event {ev.name}: {what}(p) returns {value!r}: {rule}")
     for ev in model.all_events():
         active = _call(files, model, f"the activity of event {ev.name}", ev.active, q) \

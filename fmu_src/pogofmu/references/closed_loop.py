@@ -71,3 +71,41 @@ def apex_of_run(res, g, component="PogoStick"):
         elif contact and F[k] == 0.0:
             return float(y[k] + yd[k] ** 2 / (2 * g))
     return None
+
+
+def first_apex_sampled(p, period: float) -> float:
+    """First apex height [m] of the sampled-data closed loop: the stick's equations with the thrust
+    law evaluated at the instants ``0, period, 2 period, ...`` from the stick's state there and held
+    in between (a digital controller at ``1/period`` Hz, ``HopController.sample_period``). scipy's
+    DOP853 at rtol 1e-12, restarted at every tick and every contact; the apex is taken at the first
+    tick after the liftoff (the held thrust is zero from there: a parabola)."""
+    from scipy.integrate import solve_ivp
+
+    m, g, k, c, xi = p["m"], p["g"], p["k"], p["c"], p["x_i"]
+    t, y, v, s, F = 0.0, p["y_0"], 0.0, 0, 0.0
+    lifted, n = False, 0
+    while True:
+        F = thrust_law(y, v, s, p)  # the tick at t = n period: the law at this instant, held
+        if lifted and s == 0:
+            return float(y + v * v / (2 * g))
+        n += 1
+        t_tick = n * period
+        while t < t_tick:
+            if s == 0:
+                rhs = (lambda tt, X, F=F: [X[1], F / m - g])
+                guard = (lambda tt, X: X[0] - xi)
+                guard.direction = -1
+            else:
+                rhs = (lambda tt, X, F=F: [X[1], (F - k * (X[0] - xi) - c * X[1]) / m - g])
+                guard = (lambda tt, X: X[0] - xi)
+                guard.direction = 1
+            guard.terminal = True
+            sol = solve_ivp(rhs, (t, t_tick), [y, v], method="DOP853", rtol=1e-12, atol=1e-14, events=guard)
+            if sol.t_events[0].size and sol.t_events[0][0] > t:
+                t = float(sol.t_events[0][0])
+                y, v = (float(a) for a in sol.y_events[0][0])
+                y = xi  # on the leg's free length, exactly
+                lifted |= s == 1
+                s = 1 - s
+            else:
+                t, y, v = t_tick, float(sol.y[0][-1]), float(sol.y[1][-1])

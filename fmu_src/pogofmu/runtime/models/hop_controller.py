@@ -26,6 +26,11 @@ in contact), and the second makes the deficit decay as ``de/dt = -e/tau_E``: the
 liftoff, hence the next apex ``E/(m g)`` (flight is conservative), tends to ``E_T``.  The
 per-hop return map and the effect of the communication step are analysed in the README.
 
+Sampled (``sample_period > 0``): the law becomes a zero-order hold, evaluated at the instants
+``0, T_s, 2 T_s, ...`` by a periodic time event (``tick``) from the inputs of that instant and
+held in between, as a digital controller at ``1/T_s`` Hz; ``sample_period = 0`` (the default) is
+the continuous law above.
+
 ``m``, ``g``, ``k``, ``c``, ``x_i`` are the controller's knowledge of the plant: they carry the
 plant's names so that one SSP parameter set (.ssv) sets both components consistently.
 """
@@ -35,7 +40,7 @@ import math
 
 from .. import fmath
 from ..plant import DAMPING, FREE_LENGTH, GRAVITY, MASS, STIFFNESS, known_to_controller
-from ..model import RISING, Event, HybridModel, Parameter, Variable, require, require_finite, \
+from ..model import RISING, Event, HybridModel, Parameter, TimeEvent, Variable, require, require_finite, \
     require_nonnegative, require_positive
 
 PARAMETERS = (
@@ -43,6 +48,8 @@ PARAMETERS = (
     Parameter("tau_E", 0.02, "s", "time constant of the energy-deficit decay during leg extension (> 0)"),
     Parameter("K_D", 1.0, "", "fraction of the dashpot loss c*ydot fed forward (1: full compensation, 0: none)"),
     Parameter("F_max", 20.0, "N", "largest thrust (the thrust is clipped to [0, F_max])"),
+    Parameter("sample_period", 0.0, "s", "period of the law's zero-order hold (a digital controller at "
+              "1/sample_period Hz); 0: the continuous law"),
     known_to_controller(MASS), GRAVITY, known_to_controller(STIFFNESS), known_to_controller(DAMPING),
     known_to_controller(FREE_LENGTH),
 )
@@ -88,14 +95,14 @@ def energy(y, ydot, s, p):
 def _check(p):
     require_finite(p)
     require_positive(p, "m", "x_i", "tau_E", "F_max")
-    require_nonnegative(p, "g", "k", "c", "K_D")
+    require_nonnegative(p, "g", "k", "c", "K_D", "sample_period")
     require(p.h_target > p.x_i, "h_target", p.h_target,
             f"h_target > x_i = {p.x_i!r} (an apex below the free leg length never leaves the ground)")
 
 
 def _initial(p):
     _check(p)
-    return [], {}
+    return [], {"F_held": 0.0}  # the sampled law's held thrust (sample_period > 0)
 
 
 def _flow(t, x, q, u, p):
@@ -105,7 +112,19 @@ def _flow(t, x, q, u, p):
 def _outputs(t, x, q, u, p):
     y, ydot, s = u[0], u[1], fmath.trunc(u[2])
     F, E = thrust(y, ydot, s, p)
+    if p.sample_period > 0:
+        F = q["F_held"]
     return {"F_ext": F, "E_est": E, "E_err": p.m * p.g * p.h_target - E, "phase": phase(y, ydot, s)}
+
+
+def _first_tick(p):
+    """The sampled law's first instant (0), or never for the continuous law."""
+    return 0.0 if p.sample_period > 0 else math.inf
+
+
+def _tick(x, q, u, p):
+    """The zero-order hold: the law at this instant's inputs, held until the next tick."""
+    return x, {"F_held": thrust(u[0], u[1], fmath.trunc(u[2]), p)[0]}
 
 
 def _extension_guard(x, q, u, p):
@@ -118,7 +137,8 @@ def _no_jump(x, q, u, p):
     return x, q  # the law itself switches with its inputs: nothing to reset
 
 
-EVENTS = (Event("extension", RISING, _extension_guard, _no_jump),)
+EVENTS = (Event("extension", RISING, _extension_guard, _no_jump),
+          TimeEvent("tick", at=_first_tick, every=lambda p: p.sample_period, jump=_tick))
 
 
 def demo_hop(t, p):
