@@ -20,7 +20,6 @@ Conventions (docs/models.md):
 """
 from __future__ import annotations
 
-import inspect
 import os
 import sys
 from dataclasses import dataclass, field
@@ -152,6 +151,11 @@ def reads_time(fn) -> bool:
     """A guard or jump written ``(t, x, q, u, p)`` (five required positional parameters) reads the
     time; one written ``(x, q, u, p)`` does not (the signature of every model before time could be
     read, which keeps working unchanged)."""
+    code = getattr(fn, "__code__", None)
+    if code is not None and not hasattr(fn, "__self__"):  # a plain function or lambda: no inspect import
+        return code.co_argcount - len(getattr(fn, "__defaults__", None) or ()) == 5
+    import inspect
+
     try:
         params = inspect.signature(fn).parameters.values()
     except (TypeError, ValueError):
