@@ -64,6 +64,7 @@ void pg_inst_reset(PgInstance *in)
     st->t_start = 0.0, st->t_stop = INFINITY, st->t_ok = 0.0;
     in->inputs_changed = 1;
     in->h_fast = -1.0;
+    in->rel_tol_set = 0;
     if (f->fmi == 3) pg3_reset(in);
 }
 
@@ -231,6 +232,7 @@ static int set_value(PgInstance *in, const PgVar *v, double value, char kind)
         }
         if (v->role == 'm') st->par[v->index] = value;
         else st->set[v->index] = value;
+        if (v->role == 's' && v->index == PG_S_REL_TOL) in->rel_tol_set = 1;
         st->has_out = 0;
         return PG_ST_OK;
     }
@@ -373,7 +375,8 @@ void pg_inst_notes_end(PgInstance *in, PgNotes *nt)
 }
 
 /* ---- initialization ------------------------------------------------------------------------ */
-int pg_inst_setup_experiment(PgInstance *in, double start, int stop_defined, double stop)
+int pg_inst_setup_experiment(PgInstance *in, int tolerance_defined, double tolerance, double start, int stop_defined,
+                             double stop)
 {
     PgMsg m;
     pg_msg_clear(&m);
@@ -392,6 +395,9 @@ int pg_inst_setup_experiment(PgInstance *in, double start, int stop_defined, dou
     }
     in->st.t_start = in->st.t_ok = start;
     in->st.t_stop = stop_defined ? stop : INFINITY;
+    /* the importer's tolerance is the solver's relative tolerance, unless the user set rel_tol
+     * (before or after this call); its rule is checked with the others at initialization */
+    if (tolerance_defined && !in->rel_tol_set) in->st.set[PG_S_REL_TOL] = tolerance;
     return PG_ST_OK;
 }
 

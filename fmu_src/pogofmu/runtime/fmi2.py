@@ -198,6 +198,7 @@ class HybridSlave:
     def _reset_state(self):
         model = type(self).model
         self._par = {**model.defaults(), **solver_defaults()}
+        self._rel_tol_set = False  # set by the user: the importer's tolerance no longer applies
         self._u = [float(v.start) for v in model.inputs]
         # the inputs' first derivatives (fmi2SetRealInputDerivatives) from the communication point
         # the step starts at; fmi2SetReal of an input sets its derivative back to 0
@@ -291,6 +292,7 @@ class HybridSlave:
                                         f"(tried {value!r})")
                 # all rules (finite, signs, consistency) are checked in fmi2ExitInitializationMode
                 self._par[key] = value
+                self._rel_tol_set = self._rel_tol_set or key == "rel_tol"
                 self._out = None
                 self._ctl[0] = 0
             elif kind == "input":
@@ -410,6 +412,10 @@ class HybridSlave:
                                 f"= {start_time!r}")
         self._t_start = self._t_ok = start_time
         self._t_stop = math.inf if stop_time is None else float(stop_time)
+        # the importer's tolerance is the solver's relative tolerance, unless the user set rel_tol
+        # (before or after this call); its rule is checked with the others at initialization
+        if tolerance is not None and not self._rel_tol_set:
+            self._par["rel_tol"] = float(tolerance)
         return None
 
     def enter_initialization_mode(self):
