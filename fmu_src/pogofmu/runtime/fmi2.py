@@ -54,6 +54,7 @@ from typing import NamedTuple, Optional, Tuple
 
 from .engine import SOLVER_PARAMETERS, Simulator, snapshot_from_data, snapshot_to_data, solver_defaults, \
     split_parameters
+from .engine.settings import REL_TOL_MAX, REL_TOL_MIN
 from .eventlog import CATEGORY as EVENT_CATEGORY, event_message
 from .model import HybridModel, ModelError, Params
 from .status import ERROR, FATAL, OK, WARNING, log_category
@@ -413,9 +414,15 @@ class HybridSlave:
         self._t_start = self._t_ok = start_time
         self._t_stop = math.inf if stop_time is None else float(stop_time)
         # the importer's tolerance is the solver's relative tolerance, unless the user set rel_tol
-        # (before or after this call); its rule is checked with the others at initialization
+        # (before or after this call); a hint outside rel_tol's rule is brought into it, with a warning
         if tolerance is not None and not self._rel_tol_set:
-            self._par["rel_tol"] = float(tolerance)
+            tol = float(tolerance)
+            rel_tol = min(max(tol, REL_TOL_MIN), REL_TOL_MAX)
+            if rel_tol != tol:
+                self.log(f"{type(self).model.name}: the importer's tolerance = {tol!r} lies outside the rule of "
+                         f"rel_tol, {REL_TOL_MIN:g} <= rel_tol <= {REL_TOL_MAX:g}: the solver takes rel_tol = "
+                         f"{rel_tol!r}", WARNING)
+            self._par["rel_tol"] = rel_tol
         return None
 
     def enter_initialization_mode(self):
