@@ -6,6 +6,7 @@
                              # (pogofmu export) and run them -> results/examples/,
                              # run the SpaceHopper SSP on the Moon
     python3 tasks.py test    # the test suite (what CI runs)
+    python3 tasks.py build   # the venv and dist/ only (build_fmu.py), nothing run
     python3 tasks.py bench   # the benchmarks (benchmarks/)
 
 ``run`` forwards to the ``pogofmu`` command of the venv (``pogofmu run``, ``pogofmu ssp run``).

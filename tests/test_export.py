@@ -520,6 +520,26 @@ def test_a_mistake_in_a_model_file_is_one_line_naming_file_and_line(tmp_path, mi
     assert not (tmp_path / "out").exists()  # nothing written
 
 
+def test_an_int_default_without_integer_true_is_a_real_parameter(tmp_path):
+    """docs/writing-models.md: the declaration sets the type, not how the default is written. An int
+    default passes --check and the FMU declares a Real parameter that an importer sets to a value
+    that is not whole: the first bounce at t_1 = sqrt(2 h_0/g) for h_0 = 1.5."""
+    from fmpy import read_model_description
+
+    old = 'Parameter("h_0", 1.0, "m", "initial height")'
+    assert old in BALL
+    (tmp_path / "ball.py").write_text(BALL.replace(old, 'Parameter("h_0", 2, "m", "initial height")'))
+    proc = pogofmu("export", "ball.py", "--check", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    proc = pogofmu("export", "ball.py", "--out", "out", "--fmi", "2", "--backend", "python", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    path = tmp_path / "out" / "Ball.fmu"
+    h_0 = next(v for v in read_model_description(str(path)).modelVariables if v.name == "h_0")
+    assert h_0.type == "Real" and float(h_0.start) == 2.0
+    _, events = run(path, CS2, 0.6, 1e-2, start={"h_0": 1.5})
+    assert abs(events[0]["time"] - math.sqrt(2 * 1.5 / 9.81)) < 1e-8, events
+
+
 @pytest.mark.parametrize("case", ["syntax", "third-party", "host-side", "no model"])
 def test_files_that_cannot_be_exported_are_refused_in_one_line(tmp_path, case):
     text = {"syntax": BALL.replace("inputs=(),", "inputs=(,"),

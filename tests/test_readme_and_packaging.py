@@ -1,6 +1,6 @@
 """What users read and install: the README's commands run in the
 project's venv and say what fmpy really does with a refused step; pyproject.toml's license in the
-form current setuptools takes without a deprecation banner."""
+form current setuptools takes without a deprecation banner; the C layer packaged without a warning."""
 import importlib.metadata
 import re
 import subprocess
@@ -70,6 +70,26 @@ def test_license_is_an_spdx_expression_with_a_setuptools_that_reads_it():
     assert st.specifier.contains("77.0") and not st.specifier.contains("76.1"), st
     md = importlib.metadata.metadata("pogofmu")
     assert md["License-Expression"] == "MIT" and md.get("License") is None
+
+
+def test_every_folder_of_the_c_layer_is_a_listed_package_with_its_files():
+    """setuptools warns (BuildBackendWarning, on every `pip install`) for a folder under a package
+    that holds importable-looking files but is not in `packages`: each folder of fmu_src/native is
+    listed, and its package data takes every C, header and Python file in it (what the exporter
+    compiles from an installed wheel). Checked by hand as well: `pip wheel --no-deps .` prints no
+    warning of the project's and the wheel holds the same files."""
+    import fnmatch
+
+    cfg = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
+    native = ROOT / cfg["package-dir"]["pogofmu._native"]
+    for folder in [native, *sorted(p for p in native.rglob("*") if p.is_dir() and p.name != "__pycache__")]:
+        files = [f.name for f in folder.iterdir() if f.suffix in (".c", ".h", ".py")]
+        if not files:
+            continue
+        package = ".".join(["pogofmu._native", *folder.relative_to(native).parts])
+        assert package in cfg["packages"], package
+        patterns = cfg["package-data"].get(package, [])
+        assert all(any(fnmatch.fnmatch(f, pat) for pat in patterns) for f in files), (package, files, patterns)
 
 
 def test_readme_is_an_entry_and_every_page_it_names_exists():

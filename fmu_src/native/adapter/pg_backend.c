@@ -58,8 +58,7 @@ const unsigned *pgb_arrays(PgBackend *b, size_t *n)
 int pgb_setup_experiment(PgBackend *b, int tolerance_defined, double tolerance, double start, int stop_defined,
                          double stop)
 {
-    (void)tolerance_defined, (void)tolerance; /* the FMU's own rel_tol/abs_tol parameters set the solver */
-    return pg_inst_setup_experiment(&b->inst, start, stop_defined, stop);
+    return pg_inst_setup_experiment(&b->inst, tolerance_defined, tolerance, start, stop_defined, stop);
 }
 
 int pgb_enter_initialization(PgBackend *b)

@@ -64,6 +64,7 @@ void pg_inst_reset(PgInstance *in)
     st->t_start = 0.0, st->t_stop = INFINITY, st->t_ok = 0.0;
     in->inputs_changed = 1;
     in->h_fast = -1.0;
+    in->rel_tol_set = 0;
     if (f->fmi == 3) pg3_reset(in);
 }
 
@@ -231,6 +232,7 @@ static int set_value(PgInstance *in, const PgVar *v, double value, char kind)
         }
         if (v->role == 'm') st->par[v->index] = value;
         else st->set[v->index] = value;
+        if (v->role == 's' && v->index == PG_S_REL_TOL) in->rel_tol_set = 1;
         st->has_out = 0;
         return PG_ST_OK;
     }
@@ -374,7 +376,13 @@ void pg_inst_notes_end(PgInstance *in, PgNotes *nt)
 }
 
 /* ---- initialization ------------------------------------------------------------------------ */
-int pg_inst_setup_experiment(PgInstance *in, double start, int stop_defined, double stop)
+/* the rule of rel_tol: REL_TOL_MIN, REL_TOL_MAX of runtime/engine/settings.py (tests/test_tolerance.py
+ * holds the two to the same numbers) */
+#define REL_TOL_MIN 1e-14
+#define REL_TOL_MAX 1e-3
+
+int pg_inst_setup_experiment(PgInstance *in, int tolerance_defined, double tolerance, double start, int stop_defined,
+                             double stop)
 {
     PgMsg m;
     pg_msg_clear(&m);
@@ -393,6 +401,20 @@ int pg_inst_setup_experiment(PgInstance *in, double start, int stop_defined, dou
     }
     in->st.t_start = in->st.t_ok = start;
     in->st.t_stop = stop_defined ? stop : INFINITY;
+    /* the importer's tolerance is the solver's relative tolerance, unless the user set rel_tol
+     * (before or after this call); a hint outside rel_tol's rule is brought into it, with a warning */
+    if (tolerance_defined && !in->rel_tol_set) {
+        double rel_tol = tolerance < REL_TOL_MIN ? REL_TOL_MIN : tolerance > REL_TOL_MAX ? REL_TOL_MAX : tolerance;
+        in->st.set[PG_S_REL_TOL] = rel_tol;
+        if (rel_tol != tolerance) { /* a warning logged and returned, as by the Python backend */
+            pg_msg_printf(&m, "%s: the importer's tolerance = ", model_name(in));
+            pg_msg_value(&m, tolerance, 'f', "r");
+            pg_msg_str(&m, " lies outside the rule of rel_tol, 1e-14 <= rel_tol <= 0.001: the solver takes rel_tol = ");
+            pg_msg_value(&m, rel_tol, 'f', "r");
+            say(in, PG_ST_WARNING, "logStatusWarning", m.text);
+            return PG_ST_WARNING;
+        }
+    }
     return PG_ST_OK;
 }
 

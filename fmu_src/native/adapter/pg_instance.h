@@ -72,6 +72,7 @@ typedef struct PgInstance {
     PgState st;
     int inputs_changed;
     double h_fast;
+    int rel_tol_set; /* the user set rel_tol: the importer's tolerance no longer applies */
     /* FMI 3.0: the interface and its flags (fixed at instantiation), and what is not state */
     char mode; /* 'c' co-simulation, 'm' model exchange */
     int event_mode_used, early_return_allowed;
@@ -93,7 +94,9 @@ int pg_inst_set_input_derivatives(PgInstance *in, const unsigned vr[], size_t n,
 /* no Boolean or String variables: names the problem */
 int pg_inst_no_such_type(PgInstance *in, const unsigned vr[], size_t n, const char *type);
 
-int pg_inst_setup_experiment(PgInstance *in, double start, int stop_defined, double stop);
+/* the importer's tolerance (if defined) becomes rel_tol unless the user set rel_tol (fmi2.py) */
+int pg_inst_setup_experiment(PgInstance *in, int tolerance_defined, double tolerance, double start, int stop_defined,
+                             double stop);
 int pg_inst_exit_initialization(PgInstance *in);
 int pg_inst_do_step(PgInstance *in, double t, double h);
 double pg_inst_last_successful_time(const PgInstance *in);

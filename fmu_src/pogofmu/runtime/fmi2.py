@@ -54,6 +54,7 @@ from typing import NamedTuple, Optional, Tuple
 
 from .engine import SOLVER_PARAMETERS, Simulator, snapshot_from_data, snapshot_to_data, solver_defaults, \
     split_parameters
+from .engine.settings import REL_TOL_MAX, REL_TOL_MIN
 from .eventlog import CATEGORY as EVENT_CATEGORY, event_message
 from .model import HybridModel, ModelError, Params
 from .status import ERROR, FATAL, OK, WARNING, log_category
@@ -198,6 +199,7 @@ class HybridSlave:
     def _reset_state(self):
         model = type(self).model
         self._par = {**model.defaults(), **solver_defaults()}
+        self._rel_tol_set = False  # set by the user: the importer's tolerance no longer applies
         self._u = [float(v.start) for v in model.inputs]
         # the inputs' first derivatives (fmi2SetRealInputDerivatives) from the communication point
         # the step starts at; fmi2SetReal of an input sets its derivative back to 0
@@ -291,6 +293,7 @@ class HybridSlave:
                                         f"(tried {value!r})")
                 # all rules (finite, signs, consistency) are checked in fmi2ExitInitializationMode
                 self._par[key] = value
+                self._rel_tol_set = self._rel_tol_set or key == "rel_tol"
                 self._out = None
                 self._ctl[0] = 0
             elif kind == "input":
@@ -410,6 +413,16 @@ class HybridSlave:
                                 f"= {start_time!r}")
         self._t_start = self._t_ok = start_time
         self._t_stop = math.inf if stop_time is None else float(stop_time)
+        # the importer's tolerance is the solver's relative tolerance, unless the user set rel_tol
+        # (before or after this call); a hint outside rel_tol's rule is brought into it, with a warning
+        if tolerance is not None and not self._rel_tol_set:
+            tol = float(tolerance)
+            rel_tol = min(max(tol, REL_TOL_MIN), REL_TOL_MAX)
+            if rel_tol != tol:
+                self.log(f"{type(self).model.name}: the importer's tolerance = {tol!r} lies outside the rule of "
+                         f"rel_tol, {REL_TOL_MIN:g} <= rel_tol <= {REL_TOL_MAX:g}: the solver takes rel_tol = "
+                         f"{rel_tol!r}", WARNING)
+            self._par["rel_tol"] = rel_tol
         return None
 
     def enter_initialization_mode(self):

@@ -14,6 +14,19 @@ def _fmu_unit(var):
     return unit or None
 
 
+def _units_differ(a: Optional[str], b: Optional[str]) -> bool:
+    """Two units that cannot be connected: both declared and different. In SSP a connector's
+    unit is optional and a variable without a unit has none to convert: it connects to any unit
+    as it is, with no conversion (as libcosim and OMSimulator do)."""
+    return bool(a) and bool(b) and a != b
+
+
+def _connector_unit(comp, con) -> Optional[str]:
+    """The unit a connector carries: its own, else its FMU variable's (None: no unit)."""
+    var = comp.variables.get(con.name) if comp.variables else None
+    return con.unit or (_fmu_unit(var) if var is not None else None)
+
+
 def _dimensions(var) -> list:
     """The sizes of an FMI 3.0 array variable (fmpy's ``dimensions``), [] for a scalar or none."""
     return [None if d.start is None else int(d.start) for d in getattr(var, "dimensions", None) or ()] \
@@ -80,7 +93,7 @@ def validate(system: System, parameters: Optional[str] = None) -> Dict[str, Opti
             if con.kind in ("input", "output") and var.causality != con.kind:
                 problems.append(f"{where}: kind {con.kind} but the FMU's variable has causality {var.causality}")
             fu = _fmu_unit(var)
-            if con.type in REAL and (con.unit or None) != fu:
+            if con.type in REAL and _units_differ(con.unit, fu):
                 problems.append(f"{where}: unit mismatch: connector unit {con.unit!r}, FMU unit {fu!r}")
     # ---- connections ----
     fed = {}
@@ -107,9 +120,12 @@ def validate(system: System, parameters: Optional[str] = None) -> Dict[str, Opti
             problems.append(f"{c}: end connector {c.end_element}.{b.name} is an {b.kind}, not an input")
         if not same_type(a.type, b.type):
             problems.append(f"{c}: type mismatch: {a.type} -> {b.type}")
-        elif (a.unit or None) != (b.unit or None):
-            problems.append(f"{c}: unit mismatch: {c.start_element}.{a.name} is in {a.unit!r}, "
-                            f"{c.end_element}.{b.name} in {b.unit!r} (no unit conversion)")
+        else:
+            ua = _connector_unit(system.components[c.start_element], a)
+            ub = _connector_unit(system.components[c.end_element], b)
+            if _units_differ(ua, ub):
+                problems.append(f"{c}: unit mismatch: {c.start_element}.{a.name} is in {ua!r}, "
+                                f"{c.end_element}.{b.name} in {ub!r} (no unit conversion)")
         key = (c.end_element, c.end_connector)
         if key in fed:
             problems.append(f"{c}: input {c.end_element}.{c.end_connector} is already fed by Connection {fed[key]}")
@@ -160,7 +176,7 @@ def validate(system: System, parameters: Optional[str] = None) -> Dict[str, Opti
                                                         and float(p.value).is_integer()):
                 problems.append(f"{where}: type {p.type} but the FMU's variable is {var.type}")
             fu = _fmu_unit(var)
-            if p.unit is not None and fu is not None and p.unit != fu:
+            if _units_differ(p.unit, fu):
                 problems.append(f"{where}: unit mismatch: {p.unit!r} in the .ssv, {fu!r} in the FMU")
     for (source, name), applied in used.items():
         if not applied:

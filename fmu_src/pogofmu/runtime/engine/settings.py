@@ -27,6 +27,7 @@ SOLVER_PARAMETERS = (
               "more ends in an error; bounds how long one call blocks its caller"),
 )
 SOLVER_PARAMETER_NAMES = tuple(par.name for par in SOLVER_PARAMETERS)
+REL_TOL_MIN = 1e-14  # tighter ones are below the rounding of a double's state
 REL_TOL_MAX = 1e-3  # looser relative tolerances do not control the error (ode45's default)
 ABS_TOL_MAX_FRACTION = 1e-3  # abs_tol <= this fraction of the states' scale
 METHOD_NAMES = {0: "automatic", 1: "Rodas5P", 5: "DOPRI5", 8: "DOP853"}
@@ -72,8 +73,8 @@ def check_solver_parameters(s: Params, has_states: bool = True):
             raise ParameterError(f"parameter {name} = {v!r} violates the rule: {name} must be a number")
     require(s.method in tuple(METHOD_NAMES), "method", s.method, "method must be 0 (automatic: DOPRI5, Rodas5P "
             "while the problem is stiff), 1 (Rodas5P, stiff), 5 (DOPRI5) or 8 (DOP853)")
-    require(1e-14 <= s.rel_tol <= REL_TOL_MAX, "rel_tol", s.rel_tol,
-            f"1e-14 <= rel_tol <= {REL_TOL_MAX:g} (a looser relative tolerance does not control the error)")
+    require(REL_TOL_MIN <= s.rel_tol <= REL_TOL_MAX, "rel_tol", s.rel_tol,
+            f"{REL_TOL_MIN:g} <= rel_tol <= {REL_TOL_MAX:g} (a looser relative tolerance does not control the error)")
     require(s.abs_tol > 0 and fmath.isfinite(s.abs_tol), "abs_tol", s.abs_tol, "0 < abs_tol < inf")
     require(s.max_step >= 0, "max_step", s.max_step, "max_step >= 0 (0 or inf: unbounded)")
     budget = s.max_steps_per_second
