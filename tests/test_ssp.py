@@ -79,9 +79,10 @@ def variant(tmp_path, edit_ssd=None, files=None, remove=()):
 def test_package_holds_ssd_ssv_and_fmus():
     with zipfile.ZipFile(SSP) as z:
         names = set(z.namelist())
-    parts = {f"resources/{body}.{comp}.ssv" for body in BODIES for comp in ("PogoStick", "HopController")}
-    assert names == {"SystemStructure.ssd", "resources/earth.ssv", "resources/moon.ssv", "resources/ceres.ssv",
-                     "resources/PogoStick.fmu", "resources/HopController.fmu"} | parts
+    sets = tuple(BODIES) + ("earth-100Hz",)  # (the Earth with the controller sampled at 100 Hz)
+    parts = {f"resources/{body}.{comp}.ssv" for body in sets for comp in ("PogoStick", "HopController")}
+    assert names == {"SystemStructure.ssd", "resources/PogoStick.fmu", "resources/HopController.fmu"} \
+        | {f"resources/{body}.ssv" for body in sets} | parts
 
 
 def test_ssd_and_ssv_validate_against_the_ssp_1_0_schemas():
@@ -328,7 +329,7 @@ def test_a_stop_time_that_is_not_a_whole_number_of_steps_is_refused(tmp_path):
 
 
 def test_unknown_parameter_set_and_stray_parameter_are_rejected(tmp_path):
-    with pytest.raises(master.SSPError, match=r"parameter set 'mars'.*available: ceres, earth, moon"):
+    with pytest.raises(master.SSPError, match=r"parameter set 'mars'.*available: ceres, earth-100Hz, earth, moon"):
         master.simulate(SSP, parameters="mars", stop_time=0.01)
     text = (ROOT / "ssp" / "SpaceHopper" / "moon.ssv").read_text()
     pkg = variant(tmp_path, files={"resources/moon.ssv": text.replace('name="tau_E"', 'name="tau_F"')})

@@ -1304,9 +1304,9 @@ static int step(PgEngine *e, double t_target)
             if (!(sgn * g1 > z)) continue;
             /* a dip to the before side resolved inside the step: the crossing is the return's */
             TRY(hidden_return(e, &seg, i, sgn, g0, g1, f_new, z, &te, &found));
-            if (!found) {
+            if (!found) { /* it left zero without a dip floating point resolves: where it was last at zero */
                 level = z;
-                TRY(locate_level(e, &seg, i, z, t, g0, g1, NULL, &te));
+                te = t;
             }
         } else if (sgn * g1 < 0.0) {
             if (sgn * g0 >= 0.0 || (e->has_g_prev && sgn * (g0 - e->g_prev[k]) < 0.0)) continue;

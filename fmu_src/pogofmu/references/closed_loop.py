@@ -75,8 +75,8 @@ def apex_of_run(res, g, component="PogoStick"):
 
 def first_apex_sampled(p, period: float) -> float:
     """First apex height [m] of the sampled-data closed loop: the stick's equations with the thrust
-    law evaluated at the instants ``0, period, 2 period, ...`` from the stick's state there and held
-    in between (a digital controller at ``1/period`` Hz, ``HopController.sample_period``). scipy's
+    law evaluated at the instants ``period, 2 period, ...`` from the stick's state there and held
+    in between (zero before the first) (a digital controller at ``1/period`` Hz, ``HopController.sample_period``). scipy's
     DOP853 at rtol 1e-12, restarted at every tick and every contact; the apex is taken at the first
     tick after the liftoff (the held thrust is zero from there: a parabola)."""
     from scipy.integrate import solve_ivp
@@ -85,7 +85,7 @@ def first_apex_sampled(p, period: float) -> float:
     t, y, v, s, F = 0.0, p["y_0"], 0.0, 0, 0.0
     lifted, n = False, 0
     while True:
-        F = thrust_law(y, v, s, p)  # the tick at t = n period: the law at this instant, held
+        F = thrust_law(y, v, s, p) if n else 0.0  # the tick at t = n period: the law there, held
         if lifted and s == 0:
             return float(y + v * v / (2 * g))
         n += 1

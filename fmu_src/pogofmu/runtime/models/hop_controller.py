@@ -27,8 +27,8 @@ liftoff, hence the next apex ``E/(m g)`` (flight is conservative), tends to ``E_
 per-hop return map and the effect of the communication step are analysed in the README.
 
 Sampled (``sample_period > 0``): the law becomes a zero-order hold, evaluated at the instants
-``0, T_s, 2 T_s, ...`` by a periodic time event (``tick``) from the inputs of that instant and
-held in between, as a digital controller at ``1/T_s`` Hz; ``sample_period = 0`` (the default) is
+``T_s, 2 T_s, ...`` by a periodic time event (``tick``) from the inputs of that instant and held
+in between (zero before the first sample), as a digital controller at ``1/T_s`` Hz; ``sample_period = 0`` (the default) is
 the continuous law above.
 
 ``m``, ``g``, ``k``, ``c``, ``x_i`` are the controller's knowledge of the plant: they carry the
@@ -118,8 +118,9 @@ def _outputs(t, x, q, u, p):
 
 
 def _first_tick(p):
-    """The sampled law's first instant (0), or never for the continuous law."""
-    return 0.0 if p.sample_period > 0 else math.inf
+    """The sampled law's first instant (one period in; the thrust is zero before it), or never for
+    the continuous law."""
+    return p.sample_period if p.sample_period > 0 else math.inf
 
 
 def _tick(x, q, u, p):
