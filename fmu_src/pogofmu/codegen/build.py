@@ -185,13 +185,18 @@ NO_FAST_MATH = ("-fno-fast-math",)
 
 
 def zig_cc(target: str) -> Optional[list]:
-    """The command that compiles C for ``target`` with the ziglang package, or None without it."""
+    """The command that compiles C for ``target`` with the ziglang package's zig, or None without it.
+    The zig executable by its absolute path, run from its own folder (:func:`compile_units`): zig
+    keys its cache of the targets' C libraries (minutes of work for Windows' mingw-w64 CRT) by its
+    lib folder's path relative to the current folder, which must not change between callers."""
     import importlib.util
-    import sys
 
-    if importlib.util.find_spec("ziglang") is None:
+    spec = importlib.util.find_spec("ziglang")
+    if spec is None or not spec.submodule_search_locations:
         return None
-    return [sys.executable, "-m", "ziglang", "cc", "-target", target]
+    folder = Path(list(spec.submodule_search_locations)[0]).resolve()
+    exe = folder / ("zig.exe" if os.name == "nt" else "zig")
+    return [str(exe), "cc", "-target", target] if exe.is_file() else None
 
 
 def zig_version() -> str:
@@ -317,6 +322,9 @@ def compile_units(units: Sequence[Path], out: Path, include: Sequence[Path], cc=
     if command[0] is None:
         raise CompileError("no C compiler found (cc, gcc or clang; or set CC)")
     compiler = " ".join(command) + (f" zig {zig_version()}" if len(command) > 1 else "")
+    # zig names its lib folder relative to the current folder and keys its cache of the targets' C
+    # libraries by that name: run it from its own folder, so that one cache serves every caller
+    cwd = Path(command[0]).parent if len(command) > 1 else None
     shown = Path(command[0]).name if len(command) == 1 else " ".join(command[-3:])
     flags = [*CFLAGS, *(["-fPIC"] if pic else []), *extra, *(f"-I{p}" for p in include)]
     shared_units = set(shared_units)
@@ -334,7 +342,8 @@ def compile_units(units: Sequence[Path], out: Path, include: Sequence[Path], cc=
             if cached.exists():
                 shutil.copyfile(cached, obj)
                 return obj
-        proc = subprocess.run([*command, *flags, "-c", str(unit), "-o", str(obj)], capture_output=True, text=True)
+        proc = subprocess.run([*command, *flags, "-c", str(unit), "-o", str(obj)], capture_output=True, text=True,
+                              cwd=cwd)
         if proc.returncode != 0:
             lines = (proc.stderr or proc.stdout).strip().splitlines()
             raise CompileError(f"{shown} failed ({proc.returncode}) on {unit.name}: " + " | ".join(lines[:6]))
@@ -348,7 +357,7 @@ def compile_units(units: Sequence[Path], out: Path, include: Sequence[Path], cc=
     with ThreadPoolExecutor(max_workers=max(1, min(len(units), os.cpu_count() or 1))) as pool:
         objects = list(pool.map(one, units))
     cmd = [*command, "-shared", *extra, *(str(o) for o in objects), "-o", str(out), "-lm"]
-    proc = subprocess.run(cmd, capture_output=True, text=True)
+    proc = subprocess.run(cmd, capture_output=True, text=True, cwd=cwd)
     if proc.returncode != 0:
         lines = (proc.stderr or proc.stdout).strip().splitlines()
         raise CompileError(f"{shown} failed ({proc.returncode}) linking: " + " | ".join(lines[:6]))
