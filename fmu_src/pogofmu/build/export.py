@@ -95,6 +95,12 @@ class Exporter:
         from pogofmu.codegen.build import parse_platforms
 
         self.platforms = parse_platforms(platforms or "all")
+        # the native FMUs' model-independent objects (engine, adapter, entry files: every file but the
+        # model's own two), per platform: kept in the given cache, else in the user's cache folder
+        # (keyed by compiler, flags and contents), so that five platforms cost a model's two files each
+        from pogofmu.codegen.build import cache_dir
+
+        self.objects = (cache_dir() if self._tmp is not None else self.cache) / "objects"
         self._launchers = {}  # FMI version -> the launcher's compilation (model-independent)
         self._pool = None
 
@@ -166,7 +172,7 @@ class Exporter:
                 if backend == "python":
                     fmu = build_python_fmu(source, self.out, version, self.launcher(version), self.token_seed)
                 else:
-                    fmu = build_native_fmu(source, self.out, version, self.cache, platforms=self.platforms)
+                    fmu = build_native_fmu(source, self.out, version, objects=self.objects, platforms=self.platforms)
             except (BuildError, ModelFileError):
                 raise
             except Exception as exc:  # noqa: BLE001 - a model that fails while building: one line naming its line

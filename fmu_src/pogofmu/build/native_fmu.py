@@ -19,10 +19,11 @@ def zig_available() -> bool:
     return zig_cc("native") is not None
 
 
-def build_native_fmu(source, dest: Path, fmi_version: int, cache: Path = None, platforms=None) -> Path:
+def build_native_fmu(source, dest: Path, fmi_version: int, cache: Path = None, platforms=None, objects: Path = None) -> Path:
     """Build and validate the native FMU of ``source``: FMI 2.0 into ``dest/native/<Model>.fmu``,
     FMI 3.0 into ``dest/native/fmi3/<Model>.fmu``; with binaries for ``platforms`` (FMI 3.0 tuples,
-    default all of :data:`pogofmu.codegen.build.PLATFORMS`)."""
+    default all of :data:`pogofmu.codegen.build.PLATFORMS`); the model-independent objects kept in
+    ``objects`` (default ``cache/objects``)."""
     from pogofmu.codegen.build import PLATFORMS, CompileError, native_fmu
 
     from .description import build_description_fmi3, model_description_fmi2, model_description_fmi3
@@ -35,7 +36,7 @@ def build_native_fmu(source, dest: Path, fmi_version: int, cache: Path = None, p
     with tempfile.TemporaryDirectory(prefix="pogofmu_native_") as tmp:
         try:
             nb = native_fmu(source.model, fmi_version, Path(tmp), fmi_headers(), platforms=platforms,
-                            cache=None if cache is None else Path(cache) / "objects")
+                            cache=objects if objects is not None else None if cache is None else Path(cache) / "objects")
         except CompileError as exc:
             raise BuildError(f"{name}: the native FMU does not compile: {exc}") from None
         if fmi_version == 2:
