@@ -335,7 +335,8 @@ def compile_units(units: Sequence[Path], out: Path, include: Sequence[Path], cc=
         obj = objdir / (unit.stem + ".o")
         cached = None
         if cache is not None and unit.name in shared_units:
-            key = hashlib.sha256(" ".join([compiler, *flags]).encode())
+            # (not the include folders' paths, a temporary folder each build: their headers' contents)
+            key = hashlib.sha256(" ".join([compiler, *(f for f in flags if not f.startswith("-I"))]).encode())
             for part in _included(unit, include):  # the unit and every header it includes, by content
                 key.update(part.name.encode() + b"\0" + part.read_bytes())
             cached = Path(cache) / f"{unit.stem}-{key.hexdigest()[:20]}.o"
@@ -382,8 +383,10 @@ def native_fmu(model, fmi: int, folder: Path, fmi_headers: Path, token: Optional
     token = token or "{" + str(uuid.uuid5(uuid.NAMESPACE_URL, f"pogofmu/{build}/fmi{fmi}")) + "}"
     desc = write_fmu_source(model, fmi, src, token, build)
     units = sorted({*(f for f in files if f.endswith(".c")), desc.name})
-    own = {desc.name, f"{model_name}_model.c"}
-    shared = [u for u in units if u not in own]
+    # every object kept in the cache by its contents: the engine's and adapter's are the same for
+    # every model; a model's own two files are the same again when it is exported again unchanged
+    # (the tests' session build, a user's re-export), so that costs a link per platform only
+    shared = list(units)
 
     def one(platform: str) -> Path:
         _, target, suffix, extra = PLATFORMS[platform]
