@@ -382,3 +382,19 @@ def test_fmpy_builds_the_source_fmu_and_simulates_it(tmp_path, fmi):
             assert list(got[column]) == list(ref[column]), column
         else:
             assert max(abs(a - b) for a, b in zip(got[column], ref[column])) <= 1e-10, column
+
+
+@pytest.mark.parametrize("name", FMUS)
+def test_the_fmi3_build_description_validates_and_lists_every_c_file(name):
+    """``sources/buildDescription.xml`` as the Reference-FMUs carry it: valid against the standard's
+    schema (fmpy's read_build_description validates), one configuration of the model's identifier,
+    its source files every ``.c`` of ``sources/`` and nothing else."""
+    from fmpy.model_description import read_build_description
+
+    fmu = fmu_path(f"native/fmi3/{name}")
+    configs = read_build_description(str(fmu), validate=True)
+    assert len(configs) == 1 and configs[0].modelIdentifier == name
+    listed = [f for s in configs[0].sourceFileSets for f in s.sourceFiles]
+    with zipfile.ZipFile(fmu) as z:
+        on_disk = sorted(n.split("/", 1)[1] for n in z.namelist() if n.startswith("sources/") and n.endswith(".c"))
+    assert sorted(listed) == on_disk and len(listed) == len(set(listed))
