@@ -1,5 +1,6 @@
 """Compiling the native code: a model's generated C with the engine's C files, by the system C
-compiler (host-side; :mod:`pogofmu.build` and the tests use it).  Functions that take a model take
+compiler (host-side; :mod:`pogofmu.build` and the tests use it); the native FMUs' binaries, for
+every platform of :data:`PLATFORMS`, by zig (:func:`native_fmu`).  Functions that take a model take
 a :class:`~pogofmu.runtime.model.HybridModel` or the name of one of the project's models.
 
 Flags: C99, ``-O2`` and ``-ffp-contract=off`` — no fused multiply-add, so that every operation is
