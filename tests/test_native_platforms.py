@@ -398,3 +398,12 @@ def test_the_fmi3_build_description_validates_and_lists_every_c_file(name):
     with zipfile.ZipFile(fmu) as z:
         on_disk = sorted(n.split("/", 1)[1] for n in z.namelist() if n.startswith("sources/") and n.endswith(".c"))
     assert sorted(listed) == on_disk and len(listed) == len(set(listed))
+
+
+@pytest.mark.parametrize("fmi", [2, 3])
+@pytest.mark.parametrize("name", FMUS)
+def test_each_platform_adds_less_than_300_kb_to_the_fmu(name, fmi):
+    """Every binary of the native FMU, as stored (compressed) in its zip: under 300 kB."""
+    with zipfile.ZipFile(fmu_path(f"native/{'fmi3/' if fmi == 3 else ''}{name}")) as z:
+        sizes = {i.filename: i.compress_size for i in z.infolist() if i.filename.startswith("binaries/")}
+    assert len(sizes) >= 4 and all(size < 300_000 for size in sizes.values()), sizes
