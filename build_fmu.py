@@ -26,10 +26,18 @@ def main(argv=None):
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--dest", default=str(ROOT / "dist"), help="output folder (default: dist/)")
+    ap.add_argument("--platforms", default="all", help="the native FMUs' binaries: comma-separated FMI 3.0 platform "
+                    "tuples (x86_64-linux, aarch64-linux, x86_64-windows, x86_64-darwin, aarch64-darwin; default: all)")
     ap.add_argument("names", nargs="*", help="models to build (default: all, and the SSP systems)")
     args = ap.parse_args(argv)
+    from pogofmu.codegen.build import parse_platforms
+
     try:
-        return build_project(Path(args.dest).resolve(), args.names, ssp_dir=ROOT / "ssp", cache=ROOT / "build" / "native")
+        platforms = parse_platforms(args.platforms)
+        return build_project(Path(args.dest).resolve(), args.names, ssp_dir=ROOT / "ssp", cache=ROOT / "build" / "native",
+                             platforms=platforms)
+    except ValueError as exc:
+        sys.exit(f"build_fmu.py: --platforms: {exc}")
     except BuildError as exc:
         sys.exit(f"build_fmu.py: {exc}")
 

@@ -673,3 +673,20 @@ def test_the_engine_itself_refuses_a_model_wider_than_it_naming_the_count(tmp_pa
     sim = Simulator(models[1024], u=[0.0] * 1024)
     x, _ = sim.advance(0.1)
     assert x[0] == pytest.approx(1.0 - 9.81 * 0.1 ** 2 / 2, rel=1e-9)
+
+
+def test_platforms_chooses_the_native_binaries_and_an_unknown_one_is_refused(tmp_path):
+    """``--platforms``: the native FMUs carry exactly the binaries asked for (FMI 2.0's folder names
+    for them, FMI 3.0's tuples); an unknown platform is a command-line mistake (exit 2, one line)."""
+    (tmp_path / "ball.py").write_text(BALL)
+    bad = pogofmu("export", "ball.py", "--out", "out", "--platforms", "x86_64-linux,sparc-solaris", cwd=tmp_path)
+    assert bad.returncode == 2 and "sparc-solaris" in bad.stderr and len(bad.stderr.strip().splitlines()) == 1
+    proc = pogofmu("export", "ball.py", "--out", "out", "--backend", "native", "--platforms",
+                   "aarch64-darwin,x86_64-linux", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    for fmu, want in ((tmp_path / "out" / "native" / "Ball.fmu", {"darwin64/Ball.dylib", "linux64/Ball.so"}),
+                      (tmp_path / "out" / "native" / "fmi3" / "Ball.fmu",
+                       {"aarch64-darwin/Ball.dylib", "x86_64-linux/Ball.so"})):
+        with zipfile.ZipFile(fmu) as z:
+            got = {n.split("/", 1)[1] for n in z.namelist() if n.startswith("binaries/")}
+        assert got == want, (fmu, got)

@@ -7,8 +7,9 @@
  * point: time, the reals (%.17g), the integers.  The FMU's log goes to stderr.  Exit status 0 if
  * the run reached STOP, 1 otherwise.
  *
- * The same source builds for Windows with mingw-w64 (LoadLibrary, binaries/win64/<id>.dll; the
- * tests run it under wine against the native FMUs' Windows binaries).
+ * The same source builds for Windows with zig cc (LoadLibrary, binaries/win64/<id>.dll; the
+ * tests run it under wine against the native FMUs' Windows binaries) and for aarch64 Linux
+ * (binaries/aarch64-linux/<id>.so, run under qemu-aarch64).
  *
  * Built with -DRECORD_IN_MEMORY (benchmark (b), benchmarks/bench_fmu.py) it keeps every value in
  * memory instead, as fmpy's simulate_fmu does, and prints one summary line at the end, with the
@@ -23,7 +24,11 @@
 #define OPEN_ERROR() "LoadLibrary failed"
 #else
 #include <dlfcn.h>
+#if defined(__aarch64__)
+#define PLATFORM "aarch64-linux"
+#else
 #define PLATFORM "linux64"
+#endif
 #define SUFFIX ".so"
 #define OPEN(path) dlopen(path, RTLD_NOW | RTLD_LOCAL)
 #define SYMBOL(lib, name) dlsym(lib, name)

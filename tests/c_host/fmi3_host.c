@@ -15,8 +15,9 @@
  * Prints "end,<time>" after the last step.  The FMU's log goes to stderr.  Exit status 0 if the
  * run reached STOP, 1 if a call failed.
  *
- * The same source builds for Windows with mingw-w64 (LoadLibrary, binaries/x86_64-windows/<id>.dll;
- * the tests run it under wine against the native FMUs' Windows binaries). */
+ * The same source builds for Windows with zig cc (LoadLibrary, binaries/x86_64-windows/<id>.dll;
+ * the tests run it under wine against the native FMUs' Windows binaries) and for aarch64 Linux
+ * (binaries/aarch64-linux/<id>.so, run under qemu-aarch64). */
 #ifdef _WIN32
 #include <windows.h>
 #define PLATFORM "x86_64-windows"
@@ -27,7 +28,11 @@
 #define OPEN_ERROR() "LoadLibrary failed"
 #else
 #include <dlfcn.h>
+#if defined(__aarch64__)
+#define PLATFORM "aarch64-linux"
+#else
 #define PLATFORM "x86_64-linux"
+#endif
 #define SUFFIX ".so"
 #define OPEN(path) dlopen(path, RTLD_NOW | RTLD_LOCAL)
 #define SYMBOL(lib, name) dlsym(lib, name)

@@ -17,14 +17,14 @@ from typing import List, Optional, Sequence
 
 from .errors import BuildError, ModelFileError
 from .export import Exporter, NativeRefusal, export_files
-from .native_fmu import mingw_available
+from .native_fmu import zig_available
 from .python_fmu import NATIVE, compile_launcher, fmi_headers, launcher_sources
 from .source import ModelSource, load_model_file, project_sources
 from .ssp import pack_ssp
 
 __all__ = ["BuildError", "ModelFileError", "NativeRefusal", "Exporter", "export_files", "load_model_file",
            "ModelSource", "project_sources", "model_names", "source_of", "slave_class", "build_project",
-           "build_one", "build_native", "pack_ssp", "launcher_sources", "fmi_headers", "mingw_available", "NATIVE",
+           "build_one", "build_native", "pack_ssp", "launcher_sources", "fmi_headers", "zig_available", "NATIVE",
            "compile_launcher"]
 
 
@@ -63,7 +63,7 @@ def build_native(name: str, dest: Path, fmi_version: int = 2) -> Path:
 
 
 def build_project(dest: Path, names: Sequence[str] = (), ssp_dir: Optional[Path] = None,
-                  cache: Optional[Path] = None, log=print) -> List[Path]:
+                  cache: Optional[Path] = None, log=print, platforms: Optional[Sequence[str]] = None) -> List[Path]:
     """Every FMU of the project's models (``names``: only those) into ``dest`` — the same
     :class:`Exporter` as ``pogofmu export`` — and, for a full build, the SSP systems of ``ssp_dir``
     (SSP 1.0 with the FMI 2.0 FMUs, SSP 2.0 with the FMI 3.0 ones), with the Python-hosted FMUs
@@ -74,7 +74,7 @@ def build_project(dest: Path, names: Sequence[str] = (), ssp_dir: Optional[Path]
     if unknown:
         raise BuildError(f"no model {', '.join(map(repr, unknown))}; the models are {', '.join(known)}")
     built = []
-    with Exporter(dest, cache=cache, log=log) as ex:
+    with Exporter(dest, cache=cache, log=log, platforms=platforms) as ex:
         for source in project_sources():
             if not names or source.model.name in names:
                 built += ex.export(source)

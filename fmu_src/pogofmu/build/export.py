@@ -4,8 +4,11 @@
         dist/Ball.fmu               FMI 2.0 co-simulation, Python-hosted
         dist/fmi3/Ball.fmu          FMI 3.0 model exchange + co-simulation (event mode), Python-hosted
         dist/native/Ball.fmu        FMI 2.0, native (C generated from the model; no Python at run time)
-        dist/native/fmi3/Ball.fmu   FMI 3.0, native (with sources/, Windows binaries where mingw-w64 is)
+        dist/native/fmi3/Ball.fmu   FMI 3.0, native (with sources/)
     pogofmu export ball.py --check               # every check, nothing built
+
+The native FMUs carry binaries for x86_64-linux, aarch64-linux, x86_64-windows, x86_64-darwin and
+aarch64-darwin (cross-compiled with zig; ``--platforms`` chooses a subset) and their C sources.
 
 Every FMU is validated (fmpy's validation) as it is written.  A model the native generator cannot
 follow still gets its Python-hosted FMUs; the refusal names the file, the line, the construct
@@ -76,7 +79,7 @@ class Exporter:
     temporary folder of this exporter by default)."""
 
     def __init__(self, out: Path, fmi: Sequence[int] = (2, 3), backends: Sequence[str] = ("python", "native"),
-                 cache: Optional[Path] = None, log=print, token_seed: str = ""):
+                 cache: Optional[Path] = None, log=print, token_seed: str = "", platforms: Optional[Sequence[str]] = None):
         self.out = Path(out)
         self.kinds = [(b, v) for b, v in KINDS if b in backends and v in fmi]
         self.log = log
@@ -87,11 +90,17 @@ class Exporter:
             cache = Path(self._tmp.name)
         self.cache = Path(cache)
         self.refusals: List[str] = []
-        # decided once for every FMU of this export (a cross compiler appearing half-way through
-        # must not give some FMUs a Windows binary and others none); recorded in pogofmu-build.json
-        from .native_fmu import mingw_available
+        # the native FMUs' platforms (FMI 3.0 tuples), the same for every FMU of this export;
+        # recorded in pogofmu-build.json
+        from pogofmu.codegen.build import parse_platforms
 
-        self.windows = mingw_available()
+        self.platforms = parse_platforms(platforms or "all")
+        # the native FMUs' model-independent objects (engine, adapter, entry files: every file but the
+        # model's own two), per platform: kept in the given cache, else in the user's cache folder
+        # (keyed by compiler, flags and contents), so that five platforms cost a model's two files each
+        from pogofmu.codegen.build import cache_dir
+
+        self.objects = (cache_dir() if self._tmp is not None else self.cache) / "objects"
         self._launchers = {}  # FMI version -> the launcher's compilation (model-independent)
         self._pool = None
 
@@ -143,7 +152,7 @@ class Exporter:
     def export(self, source: ModelSource) -> List[Path]:
         """Check and build the FMUs of one model; returns their paths."""
         from .native_fmu import build_native_fmu
-        from .python_fmu import build_python_fmu, c_compiler
+        from .python_fmu import build_python_fmu
 
         self._start_launchers()
         refusal = self.check(source)
@@ -154,14 +163,16 @@ class Exporter:
             if backend == "native":
                 if refusal:
                     continue
-                if c_compiler() is None:
-                    self.refusals.append(f"no native FMU of {source.model.name}: no C compiler found (set CC)")
+                from .native_fmu import zig_available
+
+                if not zig_available():
+                    self.refusals.append(f"no native FMU of {source.model.name}: no ziglang (pip install ziglang)")
                     continue
             try:
                 if backend == "python":
                     fmu = build_python_fmu(source, self.out, version, self.launcher(version), self.token_seed)
                 else:
-                    fmu = build_native_fmu(source, self.out, version, self.cache, windows=self.windows)
+                    fmu = build_native_fmu(source, self.out, version, objects=self.objects, platforms=self.platforms)
             except (BuildError, ModelFileError):
                 raise
             except Exception as exc:  # noqa: BLE001 - a model that fails while building: one line naming its line
@@ -186,7 +197,7 @@ class Exporter:
             record = json.loads(path.read_text()) if path.exists() else {}
         except ValueError:
             record = {}
-        record[fmu.relative_to(self.out).as_posix()] = {"binaries": platforms, "windows_compiler": self.windows}
+        record[fmu.relative_to(self.out).as_posix()] = {"binaries": platforms, "platforms": list(self.platforms)}
         path.write_text(json.dumps(record, indent=1, sort_keys=True) + "\n")
 
 
@@ -200,7 +211,7 @@ def _shown(path: Path) -> str:
 
 def export_files(files: Sequence[str], out: Path, names: Sequence[str] = (), requires: Sequence[str] = (),
                  fmi: Sequence[int] = (2, 3), backends: Sequence[str] = ("python", "native"),
-                 log=print, cache: Optional[Path] = None) -> List[Path]:
+                 log=print, cache: Optional[Path] = None, platforms: Optional[Sequence[str]] = None) -> List[Path]:
     """Export every model of ``files`` (``names``: only those) into ``out``; raises the first mistake.
     Returns the FMUs written (native refusals are in the exception :class:`NativeRefusal` raised
     after everything else is written)."""
@@ -214,7 +225,7 @@ def export_files(files: Sequence[str], out: Path, names: Sequence[str] = (), req
                                  f"an FMU is named after its model")
         seen[s.model.name] = s.where()
     built = []
-    with Exporter(out, fmi, backends, cache=cache, log=log) as ex:
+    with Exporter(out, fmi, backends, cache=cache, log=log, platforms=platforms) as ex:
         for s in sources:
             built += ex.export(s)
         if ex.refusals:
@@ -241,6 +252,9 @@ def main(argv=None, prog="pogofmu export") -> int:
     ap.add_argument("--requires", action="append", default=[], metavar="MODULE",
                     help="allow the model to import this third-party module (recorded in the FMU's documentation; "
                          "the target's Python must have it; no native FMU can call it)")
+    ap.add_argument("--platforms", metavar="LIST", default="all",
+                    help="the native FMUs' binaries: comma-separated FMI 3.0 platform tuples of x86_64-linux, "
+                         "aarch64-linux, x86_64-windows, x86_64-darwin, aarch64-darwin (default: all)")
     ap.add_argument("--check", action="store_true", help="run every check, build nothing")
     ap.add_argument("--cache", metavar="DIR", help="keep the compiled launchers and C objects in DIR for the next "
                     "export (default: a temporary folder, removed afterwards)")
@@ -249,6 +263,13 @@ def main(argv=None, prog="pogofmu export") -> int:
         print(f"{prog}: --out DIR is required (or --check)", file=sys.stderr)
         return 2
     fmi = tuple(int(v) for v in (args.fmi or ("2", "3")))
+    from pogofmu.codegen.build import parse_platforms
+
+    try:
+        platforms = parse_platforms(args.platforms)
+    except ValueError as exc:
+        print(f"{prog}: --platforms: {exc}", file=sys.stderr)
+        return 2
     backends = tuple(args.backend or ("python", "native"))
     start = time.perf_counter()
     try:
@@ -267,7 +288,7 @@ def main(argv=None, prog="pogofmu export") -> int:
             return 1 if refusals else 0
         out = Path(args.out)
         built = export_files(args.files, out, args.model, args.requires, fmi, backends,
-                             cache=Path(args.cache) if args.cache else None)
+                             cache=Path(args.cache) if args.cache else None, platforms=platforms)
     except NativeRefusal as exc:
         print(f"{prog}: {one_line(exc)} (the Python-hosted FMUs are written)", file=sys.stderr)
         return 1

@@ -1,5 +1,6 @@
 """Compiling the native code: a model's generated C with the engine's C files, by the system C
-compiler (host-side; :mod:`pogofmu.build` and the tests use it).  Functions that take a model take
+compiler (host-side; :mod:`pogofmu.build` and the tests use it); the native FMUs' binaries, for
+every platform of :data:`PLATFORMS`, by zig (:func:`native_fmu`).  Functions that take a model take
 a :class:`~pogofmu.runtime.model.HybridModel` or the name of one of the project's models.
 
 Flags: C99, ``-O2`` and ``-ffp-contract=off`` — no fused multiply-add, so that every operation is
@@ -164,10 +165,85 @@ FMI_ENTRY = {v: (NATIVE / f"fmi{v}" / f"pg_fmi{v}.c", NATIVE / f"fmi{v}" / "pg_r
 ENTRY_SHARED = tuple(NATIVE / f for f in ("call_states.h", "pg_backend.h", "pg_logging.h", "pg_logging.c"))
 FMI_HEADERS = {2: ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"),
                3: ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")}
-MINGW = "x86_64-w64-mingw32-gcc"
-# Windows: mingw-w64's own C99 printf/strtod (not msvcrt's: "1e-005", inexact parsing), so that
-# the messages read as on Linux; libgcc linked in, symbols stripped, no build time stamp in the DLL
-WINDOWS_FLAGS = ("-D__USE_MINGW_ANSI_STDIO=1", "-static-libgcc", "-s", "-Wl,--no-insert-timestamp")
+# The native FMUs' binaries are cross-compiled by zig's clang (the ziglang package from PyPI, a
+# dependency: one compiler and its own libc stubs for every target), key: the FMI 3.0 platform
+# tuple -> (FMI 2.0 folder, zig target, library suffix, flags).  Every target gets CFLAGS'
+# -ffp-contract=off (aarch64 compilers contract a*b+c into a fused multiply-add by default) and
+# no fast-math, so that each platform computes the same bits.  Linux: glibc 2.17 symbols at most;
+# macOS: 10.13 / 11.0 at least; Windows: the UCRT (part of Windows 10 and later), symbols stripped.
+# FMI 2.0 names no aarch64 folder: fmpy's FMI 2.0 loader looks in binaries/<fmpy.platform>, which is
+# linux64 / darwin64 on aarch64 too; darwin64 therefore holds a universal (fat) Mach-O of both
+# macOS architectures, as the Reference-FMUs' FMI 2.0 builds do, and aarch64 Linux, which cannot
+# share linux64 with x86-64, gets the FMI 3.0 tuple's folder aarch64-linux (docs/native.md).
+PLATFORMS = {
+    "x86_64-linux": ("linux64", "x86_64-linux-gnu.2.17", ".so", ("-fPIC", "-fvisibility=hidden", "-s")),
+    "aarch64-linux": ("aarch64-linux", "aarch64-linux-gnu.2.17", ".so", ("-fPIC", "-fvisibility=hidden", "-s")),
+    "x86_64-windows": ("win64", "x86_64-windows-gnu", ".dll", ("-s",)),
+    "x86_64-darwin": ("darwin64", "x86_64-macos.10.13", ".dylib", ("-fPIC", "-fvisibility=hidden", "-s")),
+    "aarch64-darwin": ("darwin64", "aarch64-macos.11.0", ".dylib", ("-fPIC", "-fvisibility=hidden", "-s")),
+}
+NO_FAST_MATH = ("-fno-fast-math",)
+
+
+def zig_cc(target: str) -> Optional[list]:
+    """The command that compiles C for ``target`` with the ziglang package's zig, or None without it.
+    The zig executable by its absolute path, run from its own folder (:func:`compile_units`): zig
+    keys its cache of the targets' C libraries (minutes of work for Windows' mingw-w64 CRT) by its
+    lib folder's path relative to the current folder, which must not change between callers."""
+    import importlib.util
+
+    spec = importlib.util.find_spec("ziglang")
+    if spec is None or not spec.submodule_search_locations:
+        return None
+    folder = Path(list(spec.submodule_search_locations)[0]).resolve()
+    exe = folder / ("zig.exe" if os.name == "nt" else "zig")
+    return [str(exe), "cc", "-target", target] if exe.is_file() else None
+
+
+def zig_version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("ziglang")
+    except PackageNotFoundError:
+        return ""
+
+
+def platform_folder(platform: str, fmi: int) -> str:
+    """The FMU's ``binaries/`` folder of a platform (FMI 3.0 tuple) in that FMI version."""
+    return PLATFORMS[platform][0] if fmi == 2 else platform
+
+
+def parse_platforms(text) -> tuple:
+    """``--platforms``: comma-separated FMI 3.0 platform tuples (or ``all``), checked, in PLATFORMS' order."""
+    names = [t.strip() for t in (text.split(",") if isinstance(text, str) else text) if t.strip()]
+    if not names or names == ["all"]:
+        return tuple(PLATFORMS)
+    unknown = [n for n in names if n not in PLATFORMS]
+    if unknown:
+        raise ValueError(f"unknown platform {', '.join(map(repr, unknown))}; the platforms are {', '.join(PLATFORMS)}")
+    return tuple(p for p in PLATFORMS if p in names)
+
+
+def fat_macho(slices: Sequence[Path], out: Path) -> Path:
+    """A universal (fat) Mach-O of thin Mach-O ``slices`` (what ``lipo -create`` writes): the fat
+    header, big-endian, then each slice at a 16 KiB boundary."""
+    import struct
+
+    align = 14
+    datas = [Path(s).read_bytes() for s in slices]
+    header = struct.pack(">II", 0xCAFEBABE, len(datas))
+    offset = 1 << align
+    entries, body = [], b""
+    for data in datas:
+        cputype, subtype = struct.unpack_from("<ii", data, 4)
+        entries.append(struct.pack(">iiIII", cputype, subtype, offset, len(data), align))
+        pad = (-(offset + len(data))) % (1 << align) if data is not datas[-1] else 0
+        body += data + b"\0" * pad
+        offset += len(data) + pad
+    first = header + b"".join(entries)
+    out.write_bytes(first + b"\0" * ((1 << align) - len(first)) + body)
+    return out
 
 
 def stage_sources(model, fmi: int, folder: Path, fmi_headers: Path):
@@ -204,12 +280,6 @@ def write_fmu_source(model, fmi: int, folder: Path, token: str, build: str) -> P
     return path
 
 
-def mingw_compiler() -> Optional[str]:
-    """The mingw-w64 cross compiler for 64-bit Windows (``POGOFMU_MINGW`` or Debian's
-    ``gcc-mingw-w64-x86-64``), or None."""
-    return shutil.which(os.environ.get("POGOFMU_MINGW") or MINGW)
-
-
 class NativeBuild:
     """A native FMU's compiled parts: ``sources`` (the folder), ``units`` (its compilation units, in
     the order of ``<SourceFiles>``), ``token``, ``build`` (the build name) and ``binaries``
@@ -238,19 +308,25 @@ def _included(unit: Path, include: Sequence[Path]):
     return sorted(seen)
 
 
-def compile_units(units: Sequence[Path], out: Path, include: Sequence[Path], cc: Optional[str] = None,
+def compile_units(units: Sequence[Path], out: Path, include: Sequence[Path], cc=None,
                   extra: Sequence[str] = (), pic: bool = True, cache: Optional[Path] = None,
                   shared_units: Iterable[str] = ()) -> Path:
     """A shared library of ``units`` compiled one object per unit, in parallel, then linked: the
     objects of ``shared_units`` (the engine and adapter files, the same for every model) are kept in
     ``cache`` by the hash of the compiler, the flags, the unit and every header of ``include``, so a
-    second model (or FMI version) compiles only its own two files."""
+    second model (or FMI version) compiles only its own two files.  ``cc``: a compiler's name or
+    path, or a command (a list: :func:`zig_cc`)."""
     import hashlib
     from concurrent.futures import ThreadPoolExecutor
 
-    compiler = c_compiler(cc)
-    if compiler is None:
+    command = list(cc) if isinstance(cc, (list, tuple)) else [c_compiler(cc)]
+    if command[0] is None:
         raise CompileError("no C compiler found (cc, gcc or clang; or set CC)")
+    compiler = " ".join(command) + (f" zig {zig_version()}" if len(command) > 1 else "")
+    # zig names its lib folder relative to the current folder and keys its cache of the targets' C
+    # libraries by that name: run it from its own folder, so that one cache serves every caller
+    cwd = Path(command[0]).parent if len(command) > 1 else None
+    shown = Path(command[0]).name if len(command) == 1 else " ".join(command[-3:])
     flags = [*CFLAGS, *(["-fPIC"] if pic else []), *extra, *(f"-I{p}" for p in include)]
     shared_units = set(shared_units)
     objdir = out.parent / f"{out.stem}.objects"
@@ -260,17 +336,19 @@ def compile_units(units: Sequence[Path], out: Path, include: Sequence[Path], cc:
         obj = objdir / (unit.stem + ".o")
         cached = None
         if cache is not None and unit.name in shared_units:
-            key = hashlib.sha256(" ".join([compiler, *flags]).encode())
+            # (not the include folders' paths, a temporary folder each build: their headers' contents)
+            key = hashlib.sha256(" ".join([compiler, *(f for f in flags if not f.startswith("-I"))]).encode())
             for part in _included(unit, include):  # the unit and every header it includes, by content
                 key.update(part.name.encode() + b"\0" + part.read_bytes())
             cached = Path(cache) / f"{unit.stem}-{key.hexdigest()[:20]}.o"
             if cached.exists():
                 shutil.copyfile(cached, obj)
                 return obj
-        proc = subprocess.run([compiler, *flags, "-c", str(unit), "-o", str(obj)], capture_output=True, text=True)
+        proc = subprocess.run([*command, *flags, "-c", str(unit), "-o", str(obj)], capture_output=True, text=True,
+                              cwd=cwd)
         if proc.returncode != 0:
             lines = (proc.stderr or proc.stdout).strip().splitlines()
-            raise CompileError(f"{Path(compiler).name} failed ({proc.returncode}) on {unit.name}: " + " | ".join(lines[:6]))
+            raise CompileError(f"{shown} failed ({proc.returncode}) on {unit.name}: " + " | ".join(lines[:6]))
         if cached is not None:
             cached.parent.mkdir(parents=True, exist_ok=True)
             tmp = cached.with_suffix(f".{os.getpid()}.tmp")
@@ -280,21 +358,23 @@ def compile_units(units: Sequence[Path], out: Path, include: Sequence[Path], cc:
 
     with ThreadPoolExecutor(max_workers=max(1, min(len(units), os.cpu_count() or 1))) as pool:
         objects = list(pool.map(one, units))
-    cmd = [compiler, "-shared", *extra, *(str(o) for o in objects), "-o", str(out), "-lm"]
-    proc = subprocess.run(cmd, capture_output=True, text=True)
+    cmd = [*command, "-shared", *extra, *(str(o) for o in objects), "-o", str(out), "-lm"]
+    proc = subprocess.run(cmd, capture_output=True, text=True, cwd=cwd)
     if proc.returncode != 0:
         lines = (proc.stderr or proc.stdout).strip().splitlines()
-        raise CompileError(f"{Path(compiler).name} failed ({proc.returncode}) linking: " + " | ".join(lines[:6]))
+        raise CompileError(f"{shown} failed ({proc.returncode}) linking: " + " | ".join(lines[:6]))
     shutil.rmtree(objdir, ignore_errors=True)
     return out
 
 
-def native_fmu(model, fmi: int, folder: Path, fmi_headers: Path, cc: Optional[str] = None,
-               token: Optional[str] = None, windows: bool = False, cache: Optional[Path] = None) -> NativeBuild:
-    """Stage the native FMU's sources in ``folder/sources`` and compile them: the Linux library with
-    the system compiler and, with ``windows``, the Windows DLL with mingw-w64 (objects of the
-    model-independent files kept in ``cache``, see :func:`compile_units`)."""
+def native_fmu(model, fmi: int, folder: Path, fmi_headers: Path, token: Optional[str] = None,
+               platforms: Sequence[str] = tuple(PLATFORMS), cache: Optional[Path] = None) -> NativeBuild:
+    """Stage the native FMU's sources in ``folder/sources`` and compile them for each of
+    ``platforms`` (FMI 3.0 tuples, keys of :data:`PLATFORMS`) with zig (objects of the
+    model-independent files kept in ``cache``, see :func:`compile_units`); FMI 2.0's darwin64 gets
+    one universal library of the macOS platforms asked for."""
     import uuid
+    from concurrent.futures import ThreadPoolExecutor
 
     model = _model(model)
     model_name = model.name
@@ -304,18 +384,28 @@ def native_fmu(model, fmi: int, folder: Path, fmi_headers: Path, cc: Optional[st
     token = token or "{" + str(uuid.uuid5(uuid.NAMESPACE_URL, f"pogofmu/{build}/fmi{fmi}")) + "}"
     desc = write_fmu_source(model, fmi, src, token, build)
     units = sorted({*(f for f in files if f.endswith(".c")), desc.name})
+    # every object kept in the cache by its contents: the engine's and adapter's are the same for
+    # every model; a model's own two files are the same again when it is exported again unchanged
+    # (the tests' session build, a user's re-export), so that costs a link per platform only
+    shared = list(units)
+
+    def one(platform: str) -> Path:
+        _, target, suffix, extra = PLATFORMS[platform]
+        command = zig_cc(target)
+        if command is None:
+            raise CompileError("no ziglang (PyPI: ziglang, a dependency of pogofmu): the native binaries are "
+                               "compiled with zig cc")
+        out = folder / platform / f"{model_name}{suffix}"
+        out.parent.mkdir(parents=True, exist_ok=True)
+        return compile_units([src / u for u in units], out, include=[src], cc=command, extra=(*NO_FAST_MATH, *extra),
+                             pic=False, cache=cache, shared_units=shared)
+
+    with ThreadPoolExecutor(max_workers=len(platforms) or 1) as pool:
+        built = dict(zip(platforms, pool.map(one, platforms)))
     binaries = {}
-    own = {desc.name, f"{model_name}_model.c"}
-    shared = [u for u in units if u not in own]
-    jobs = [("linux64" if fmi == 2 else "x86_64-linux", folder / f"{model_name}.so", cc, True, ("-fvisibility=hidden",))]
-    if windows:
-        compiler = mingw_compiler()
-        if compiler is None:
-            raise CompileError(f"no {MINGW} (Debian: gcc-mingw-w64-x86-64; or set POGOFMU_MINGW)")
-        jobs.append(("win64" if fmi == 2 else "x86_64-windows", folder / f"{model_name}.dll", compiler, False,
-                     WINDOWS_FLAGS))
-    for platform, out, compiler, pic, extra in jobs:
-        compile_units([src / u for u in units], out, include=[src], cc=compiler, extra=extra, pic=pic, cache=cache,
-                      shared_units=shared)
-        binaries[platform] = out
-    return NativeBuild(src, units, token, build, binaries)
+    for platform, lib in built.items():
+        binaries.setdefault(platform_folder(platform, fmi), []).append(lib)
+    for name, libs in binaries.items():
+        if len(libs) > 1:  # FMI 2.0 darwin64: both macOS architectures in one file
+            binaries[name] = [fat_macho(libs, folder / f"{model_name}.universal{libs[0].suffix}")]
+    return NativeBuild(src, units, token, build, {name: libs[0] for name, libs in binaries.items()})
