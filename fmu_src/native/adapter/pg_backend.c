@@ -160,9 +160,10 @@ int pgb_enter_event_mode(PgBackend *b)
 
 int pgb_update_discrete_states(PgBackend *b, PgEventFlags *f)
 {
-    int changed = 0;
-    int st = pg3_update_discrete_states(&b->inst, &changed);
+    int need = 0, changed = 0;
+    int st = pg3_update_discrete_states(&b->inst, &need, &changed);
     memset(f, 0, sizeof *f);
+    f->discrete_states_need_update = need;
     f->values_changed = changed;
     return st;
 }
