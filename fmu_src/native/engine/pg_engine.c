@@ -1668,12 +1668,24 @@ int pg_engine_me_fired(PgEngine *e, double t, const double *x, int *index)
 
 int pg_engine_restart_at(PgEngine *e, double t, const double *x, const double *u)
 {
+    /* model exchange: the importer sets the inputs at every point it tries, beyond a crossing too;
+     * the arming is the observed trajectory's and is kept (an armed guard that the new inputs put on
+     * its after side fires: pg_engine_me_fired), and so is an event pending at this instant */
+    signed char armed[PG_MAX_EVENTS], zarm[PG_MAX_EVENTS];
+    double zband[PG_MAX_EVENTS], pending_x[PG_MAX_X];
+    memcpy(armed, e->armed, sizeof armed), memcpy(zarm, e->zarm, sizeof zarm), memcpy(zband, e->zband, sizeof zband);
+    int pending = e->has_pending && e->t == t, pending_index = e->pending_index;
+    memcpy(pending_x, e->pending_x, sizeof pending_x);
     e->t = e->t_out = t;
     memcpy(e->x, x, sizeof(double) * (size_t)e->nx);
     memcpy(e->x_out, x, sizeof(double) * (size_t)e->nx);
     e->has_seg = 0, e->has_pending = 0;
     /* set_input with the same inputs returns at once in Python: the rebinding happens only for a change */
-    return pg_engine_set_input(e, u);
+    int rc = pg_engine_set_input(e, u);
+    memcpy(e->armed, armed, sizeof armed), memcpy(e->zarm, zarm, sizeof zarm), memcpy(e->zband, zband, sizeof zband);
+    e->has_pending = pending, e->pending_index = pending_index;
+    memcpy(e->pending_x, pending_x, sizeof pending_x);
+    return rc;
 }
 
 const double *pg_engine_inputs_at(PgEngine *e, double t) { return u_at(e, t); }
