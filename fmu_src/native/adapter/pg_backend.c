@@ -160,16 +160,17 @@ int pgb_enter_event_mode(PgBackend *b)
 
 int pgb_update_discrete_states(PgBackend *b, PgEventFlags *f)
 {
-    int changed = 0;
-    int st = pg3_update_discrete_states(&b->inst, &changed);
+    int need = 0, changed = 0;
+    int st = pg3_update_discrete_states(&b->inst, &need, &changed);
     memset(f, 0, sizeof *f);
+    f->discrete_states_need_update = need;
     f->values_changed = changed;
     if (st == PG_ST_OK && b->inst.mode == 'm' && b->inst.st.has_sim) { /* model exchange: the next time event */
         double next = pg_engine_next_time_event(&b->inst.st.sim);
         f->next_event_time_defined = isfinite(next) != 0;
         f->next_event_time = f->next_event_time_defined ? next : 0.0;
         /* another time event due at this instant: an update more (event iteration) */
-        f->discrete_states_need_update = f->next_event_time_defined && next <= b->inst.st.me_t;
+        f->discrete_states_need_update |= f->next_event_time_defined && next <= b->inst.st.me_t;
     }
     return st;
 }

@@ -57,12 +57,11 @@ typedef struct PgState {
     double t_start, t_stop, t_ok;
     int failed;
     char failed_text[PG_MSG_MAX];
-    /* FMI 3.0 (fmi3.py, Fmi3Slave._get_fmu_state "fmi3"): model exchange's time and states, the
-     * guards armed to fire */
+    /* FMI 3.0 (fmi3.py, Fmi3Slave._get_fmu_state "fmi3"): model exchange's time and states (the
+     * arming of the guards is the engine's, in sim) */
     double me_t;
     int has_me_x;
     double me_x[PG_MAX_X];
-    int armed[PG_MAX_EVENTS];
 } PgState;
 
 typedef struct PgInstance {
@@ -131,7 +130,7 @@ int pg3_get_derivatives(PgInstance *in, double *dx);
 int pg3_get_event_indicators(PgInstance *in, double *z);
 int pg3_completed_integrator_step(PgInstance *in, int *enter_event_mode);
 /* valuesOfContinuousStatesChanged in *changed */
-int pg3_update_discrete_states(PgInstance *in, int *changed);
+int pg3_update_discrete_states(PgInstance *in, int *need, int *changed);
 int pg3_do_step(PgInstance *in, double t, double h, int *event_handling_needed, int *early_return, double *last);
 void pg3_set_event_mode(PgInstance *in, int on);
 

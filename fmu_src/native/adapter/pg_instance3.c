@@ -1,6 +1,7 @@
 /* pogofmu native FMUs: the FMI 3.0 extension of the adapter — the C twin of
  * fmu_src/pogofmu/runtime/fmi3.py (Fmi3Slave): model exchange (the importer integrates the states
- * and locates the indicators' sign changes; a guard fires in its direction once armed), and
+ * and locates the indicators' sign changes; the engine arms the guards and says which event fires:
+ * pg_engine_me_indicators, pg_engine_me_fired), and
  * co-simulation with event mode and early return. Each function names the method it follows; the
  * same rules in the same order with the same messages. */
 #include <math.h>
@@ -11,12 +12,6 @@
 #include "pg_support.h"
 
 static const PgModel *model_of(const PgInstance *in) { return in->fmu->model; }
-
-static int before_side(int falling, double g) { return falling ? g > 0.0 : g < 0.0; }
-
-static int falling(const PgModel *md, int k) { return md->event_direction[k] == PG_FALLING; }
-
-#define PG_UNARMED_FLOOR 1e-300 /* fmi3.py UNARMED_FLOOR */
 
 /* _indicators: each event's guard where it is active in mode q, 1 (it cannot cross zero) elsewhere */
 static int indicators(const PgModel *md, double t, const double *x, const double *q, const double *u,
@@ -30,13 +25,6 @@ static int indicators(const PgModel *md, double t, const double *x, const double
         if (rc) return rc;
     }
     return PG_OK;
-}
-
-static int is_active(const PgModel *md, int k, const double *q)
-{
-    int on = 0;
-    PgMsg m;
-    return md->active(k, q, &on, &m) == PG_OK && on;
 }
 
 void pg3_attach(PgInstance *in, char mode, int event_mode_used, int early_return_allowed)
@@ -170,20 +158,6 @@ double pg3_derived(PgInstance *in, const PgVar *v)
     return out[v->index];
 }
 
-/* _arm: after initialization and after each event, a guard is armed if it lies strictly on the side
- * before its crossing (a guard exactly zero waits until it leaves zero) */
-static void arm(PgInstance *in)
-{
-    const PgModel *md = model_of(in);
-    PgEngine *e = &in->st.sim;
-    PgMsg m;
-    for (int k = 0; k < md->ne; ++k) {
-        double g = 0.0;
-        in->st.armed[k] = is_active(md, k, e->q) && md->guard(k, in->st.me_t, in->st.me_x, e->q, e->u, e->p, &g, &m) == PG_OK &&
-                          before_side(falling(md, k), g);
-    }
-}
-
 /* exit_initialization_mode, after the FMI 2.0 part */
 void pg3_after_exit_initialization(PgInstance *in)
 {
@@ -191,8 +165,7 @@ void pg3_after_exit_initialization(PgInstance *in)
     PgEngine *e = &in->st.sim;
     in->st.me_t = e->t_out;
     memcpy(in->st.me_x, e->x_out, sizeof in->st.me_x);
-    in->st.has_me_x = 1;
-    arm(in);
+    in->st.has_me_x = 1; /* (the engine armed the guards) */
 }
 
 /* _set_fmu_state, after the FMI 2.0 part */
@@ -303,15 +276,8 @@ int pg3_get_event_indicators(PgInstance *in, double *z)
     }
     int rc = me_instance(in, "fmi3GetEventIndicators");
     if (rc) return rc;
-    PgEngine *e = &in->st.sim;
-    if (indicators(md, in->st.me_t, in->st.me_x, e->q, e->u, e->p, z, &m) != PG_OK) return pg_inst_refuse(in, &m);
-    for (int k = 0; k < md->ne; ++k)
-        if (!in->st.armed[k] && is_active(md, k, e->q) && before_side(falling(md, k), z[k]))
-            in->st.armed[k] = 1; /* seen on the side before its crossing: may fire */
-    /* _reported: an unarmed active indicator exactly 0 is reported on the side before its crossing */
-    for (int k = 0; k < md->ne; ++k)
-        if (!in->st.armed[k] && is_active(md, k, e->q) && z[k] == 0.0)
-            z[k] = falling(md, k) ? PG_UNARMED_FLOOR : -PG_UNARMED_FLOOR;
+    PgEngine *e = &in->st.sim; /* the engine's arming, updated from this observation */
+    if (pg_engine_me_indicators(e, in->st.me_t, in->st.me_x, z) != PG_OK) return pg_inst_refuse_text(in, e->msg.text);
     return PG_ST_OK;
 }
 
@@ -323,12 +289,11 @@ int pg3_completed_integrator_step(PgInstance *in, int *enter_event_mode)
     const PgModel *md = model_of(in);
     PgEngine *e = &in->st.sim;
     double z[PG_MAX_EVENTS];
-    rc = pg3_get_event_indicators(in, z);
+    rc = pg3_get_event_indicators(in, z); /* (an observation of the trajectory: the arming updated) */
     if (rc) return rc;
-    int pending = 0;
-    for (int k = 0; k < md->ne; ++k)
-        pending |= in->st.armed[k] && is_active(md, k, e->q) && !before_side(falling(md, k), z[k]);
-    if (pending) {
+    int fired = -1;
+    if (pg_engine_me_fired(e, in->st.me_t, in->st.me_x, &fired) != PG_OK) return pg_inst_model_failed(in);
+    if (fired >= 0) {
         *enter_event_mode = 1;
         return PG_ST_OK;
     }
@@ -348,22 +313,17 @@ int pg3_completed_integrator_step(PgInstance *in, int *enter_event_mode)
     return PG_ST_OK;
 }
 
-/* _me_update */
-static int me_update(PgInstance *in, int *changed)
+/* _me_update: the jump of the event that fires here (the engine's pg_engine_me_fired), which
+ * re-arms every guard; another update is needed while it leaves an event pending at this instant */
+static int me_update(PgInstance *in, int *need, int *changed)
 {
-    *changed = 0;
+    *need = 0, *changed = 0;
     int rc = me_instance(in, "fmi3UpdateDiscreteStates");
     if (rc) return rc;
     const PgModel *md = model_of(in);
     PgEngine *e = &in->st.sim;
     int fired = -1;
-    PgMsg m;
-    for (int k = 0; k < md->ne && fired < 0; ++k) { /* priority order */
-        double g = 0.0;
-        if (in->st.armed[k] && is_active(md, k, e->q) && md->guard(k, in->st.me_t, in->st.me_x, e->q, e->u, e->p, &g, &m) == PG_OK &&
-            !before_side(falling(md, k), g))
-            fired = k;
-    }
+    if (pg_engine_me_fired(e, in->st.me_t, in->st.me_x, &fired) != PG_OK) return pg_inst_model_failed(in);
     if (fired < 0) fired = pg_engine_time_event_due(e, in->st.me_t); /* a time event reached: its jump */
     if (fired >= 0) {
         double x[PG_MAX_X];
@@ -375,8 +335,8 @@ static int me_update(PgInstance *in, int *changed)
         for (int i = 0; i < md->nx; ++i) *changed |= !(e->x[i] == x[i]);
         memcpy(in->st.me_x, e->x, sizeof(double) * (size_t)md->nx);
         stale(in);
+        *need = pg_engine_event_due(e);
     }
-    arm(in);
     return PG_ST_OK;
 }
 
@@ -433,8 +393,8 @@ static int cs_update(PgInstance *in)
     return PG_ST_OK;
 }
 
-int pg3_update_discrete_states(PgInstance *in, int *changed)
+int pg3_update_discrete_states(PgInstance *in, int *need, int *changed)
 {
-    *changed = 0;
-    return in->mode == 'm' ? me_update(in, changed) : cs_update(in);
+    *need = 0, *changed = 0;
+    return in->mode == 'm' ? me_update(in, need, changed) : cs_update(in);
 }

@@ -464,6 +464,23 @@ PGB_API int pgb_restart_at(PgEngine *e, double t, const double *x, const double 
     return rc;
 }
 
+/* model exchange: the indicators at (t, x) into z[ne] (the arming updated), the event that fires there */
+PGB_API int pgb_me_indicators(PgEngine *e, double t, const double *x, double *z)
+{
+    ENTER(e);
+    int rc = pg_engine_me_indicators(e, t, x, z);
+    LEAVE();
+    return rc;
+}
+
+PGB_API int pgb_me_fired(PgEngine *e, double t, const double *x, int *index)
+{
+    ENTER(e);
+    int rc = pg_engine_me_fired(e, t, x, index);
+    LEAVE();
+    return rc;
+}
+
 PGB_API int pgb_event_due(const PgEngine *e) { return pg_engine_event_due(e); }
 
 /* Everything a caller reads after a call, into out[]:

@@ -1661,7 +1661,8 @@ int pg_engine_apply_event(PgEngine *e, int index, double t, const double *x)
     e->t = e->t_out = t;
     memcpy(e->x, x, sizeof(double) * (size_t)e->nx);
     e->has_seg = 0;
-    e->has_pending = 1, e->pending_index = index, e->zero_hit = 0;
+    /* (e->zero_hit: as pg_engine_me_fired found this event, from zero or not: the storm rule counts it) */
+    e->has_pending = 1, e->pending_index = index;
     memcpy(e->pending_x, e->x, sizeof e->x);
     int rc = apply_pending_event(e);
     if (rc) return at_time(e, rc, "t = ", e->t, " s");
@@ -1670,14 +1671,124 @@ int pg_engine_apply_event(PgEngine *e, int index, double t, const double *x)
     return PG_OK;
 }
 
+/* ---- model exchange: the importer integrates, the engine arms (docs/solver.md, "Event semantics") --
+ * The arming of each guard is the one co-simulation uses (armed[], zarm[], zband[], set by arm_guards
+ * at the start, after each jump and at each input change): an indicator evaluation at (t, x) is an
+ * observation of the trajectory, as the end of an accepted step is in co-simulation. The states come
+ * from the importer's interpolant, whose error is its tolerance, not the rounding: an event fires
+ * only where its guard is not carried back to its before side by the flow (pg_engine_me_fired). */
+#define ME_UNARMED_FLOOR 1e-300 /* the least magnitude an unarmed indicator is reported with */
+
+/* the importer located guard i at its threshold and the flow carried it back, no event: as many
+ * times as the storm bound (zeno_max_events) within zeno_window, of one event and none firing, is an
+ * accumulation below the importer's resolution: the storm error naming the event */
+static int me_decline_storm(PgEngine *e, int i, double t)
+{
+    if (e->me_decl_n && e->me_decl_event == i && t == e->me_decl_t) return PG_OK; /* (the same point again) */
+    if (e->me_decl_n == 0 || e->me_decl_event != i || t - e->me_decl_t0 > e->zeno_window)
+        e->me_decl_event = i, e->me_decl_t0 = t, e->me_decl_n = 0;
+    e->me_decl_t = t;
+    if (++e->me_decl_n < e->zeno_max_events) return PG_OK;
+    PgMsg *m = &e->msg;
+    pg_msg_clear(m);
+    pg_msg_printf(m, "event storm: %s happens again within the rounding of its own location at t = ", event_name(e, i));
+    pg_msg_value(m, t, 'f', ".15g");
+    pg_msg_printf(m, " s (the integrator located its guard at zero %d times within ", e->me_decl_n);
+    pg_msg_value(m, t - e->me_decl_t0, 'f', ".3g");
+    pg_msg_str(m, " s, the flow carrying it back each time: the events accumulate below the integrator's resolution "
+                  "(Zeno behaviour, e.g. a bouncing ball coming to rest). Model the rest (a mode without this event "
+                  "once the motion is small), or stop before this time");
+    e->me_decl_n = 0;
+    return PG_RAISE;
+}
+
+int pg_engine_me_indicators(PgEngine *e, double t, const double *x, double *z)
+{
+    for (int i = 0; i < e->model->ne; ++i) z[i] = 1.0; /* inactive: a value that cannot cross zero */
+    for (int k = 0; k < e->n_active; ++k) {
+        int i = e->active[k];
+        double g, sgn = sgn_of(e, i);
+        TRY(guard_at(e, i, t, x, &g)); /* (the model's own message, as the adapters gave it) */
+        double G = sgn * g, band = e->zband[i];
+        if (e->zarm[i] && G < -band) { /* it left zero to its before side: an ordinary armed guard */
+            if (i == e->zrun_event) e->zrun = 0; /* no accumulation */
+            e->zarm[i] = 0;
+        } else if (!e->armed[i] && G < 0.0 && !(t == e->t && G >= -band)) {
+            e->armed[i] = 1; /* seen on its before side (beyond the rounding of the restart point) */
+        }
+        if (e->zarm[i]) { /* a sign change where it leaves its band to its after side */
+            double r = G - band;
+            z[i] = r == 0.0 ? -sgn * ME_UNARMED_FLOOR : sgn * r;
+        } else if (!e->armed[i] && g == 0.0) {
+            /* an unarmed guard exactly 0 (after a jump) is reported on the side before its crossing:
+             * no indicator of a new mode starts at zero (an importer that does not restart its
+             * integrator after an event that changed no state meets no root at the restart point) */
+            z[i] = -sgn * ME_UNARMED_FLOOR;
+        } else {
+            z[i] = g;
+        }
+    }
+    return PG_OK;
+}
+
+int pg_engine_me_fired(PgEngine *e, double t, const double *x, int *index)
+{
+    *index = -1;
+    if (e->has_pending && e->t == t) { /* a cascade, or an event at the start or of an input change */
+        *index = e->pending_index;
+        return PG_OK;
+    }
+    e->zero_hit = 0;
+    for (int k = 0; k < e->n_active; ++k) { /* (active[] is in the model's order: priority) */
+        int i = e->active[k];
+        double g;
+        TRY(guard_at(e, i, t, x, &g));
+        double G = sgn_of(e, i) * g, band = e->zband[i];
+        if (!(e->zarm[i] ? G > band : e->armed[i] && G >= 0.0)) continue;
+        /* a crossing or a touch, unless the flow carries the guard back to its before side: the
+         * importer's interpolant, whose error is its tolerance, met the threshold where the motion
+         * leaves it (a mass leaving a wall at 1e-7 m/s seen 1e-13 m inside it) */
+        double f[PG_MAX_X], dg, d;
+        TRY(e->model->flow(t, x, e->q, u_at(e, t), e->p, f, &e->msg));
+        TRY(guard_change(e, i, t, x, f, &dg, &d));
+        if (dg < 0.0) {
+            TRY(me_decline_storm(e, i, t));
+            if (G <= 4 * band) {
+                /* at zero to rounding: armed at zero here, its band widened to this rounding, so that
+                 * its indicator is back on its before side for the importer's restart */
+                e->zarm[i] = 1, e->armed[i] = 1;
+                e->zband[i] = pmax(e->zband[i], 2 * fabs(G));
+            } /* (else its indicator changes sign on the way back, and again where it crosses) */
+            continue;
+        }
+        *index = i;
+        e->me_decl_n = 0;
+        e->zero_hit = e->zarm[i]; /* from zero, its guard never having left its band to its before side */
+        return PG_OK;
+    }
+    return PG_OK;
+}
+
 int pg_engine_restart_at(PgEngine *e, double t, const double *x, const double *u)
 {
+    /* model exchange: the importer sets the inputs at every point it tries, beyond a crossing too;
+     * the arming is the observed trajectory's and is kept (an armed guard that the new inputs put on
+     * its after side fires: pg_engine_me_fired), and so is an event pending at this instant */
+    signed char armed[PG_MAX_EVENTS], zarm[PG_MAX_EVENTS];
+    double zband[PG_MAX_EVENTS], pending_x[PG_MAX_X];
+    memcpy(armed, e->armed, sizeof armed), memcpy(zarm, e->zarm, sizeof zarm), memcpy(zband, e->zband, sizeof zband);
+    int pending = e->has_pending && e->t == t, pending_index = e->pending_index;
+    memcpy(pending_x, e->pending_x, sizeof pending_x);
     e->t = e->t_out = t;
     memcpy(e->x, x, sizeof(double) * (size_t)e->nx);
     memcpy(e->x_out, x, sizeof(double) * (size_t)e->nx);
     e->has_seg = 0, e->has_pending = 0;
     /* set_input with the same inputs returns at once in Python: the rebinding happens only for a change */
-    return pg_engine_set_input(e, u);
+    int rc = pg_engine_set_input(e, u);
+    memcpy(e->armed, armed, sizeof armed), memcpy(e->zarm, zarm, sizeof zarm), memcpy(e->zband, zband, sizeof zband);
+    e->has_pending = pending, e->pending_index = pending_index;
+    memcpy(e->pending_x, pending_x, sizeof pending_x);
+    return rc;
 }
 
 const double *pg_engine_inputs_at(PgEngine *e, double t) { return u_at(e, t); }

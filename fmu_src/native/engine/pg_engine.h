@@ -116,6 +116,10 @@ struct PgEngine {
     /* time events: each one's next instant (INFINITY: no more), first instant, period and count */
     double te_next[PG_MAX_TIME_EVENTS], te_at[PG_MAX_TIME_EVENTS], te_every[PG_MAX_TIME_EVENTS];
     long te_count[PG_MAX_TIME_EVENTS];
+    /* model exchange: guard me_decl_event located at its threshold with the flow carrying it back (no
+     * event) me_decl_n times in a row since me_decl_t0 (pg_engine_me_fired; a storm at the bound) */
+    int me_decl_n, me_decl_event;
+    double me_decl_t0, me_decl_t;
     double f[PG_MAX_X], g[PG_MAX_EVENTS], g_prev[PG_MAX_EVENTS];
     int has_g_prev;
     double h;
@@ -158,8 +162,25 @@ int pg_engine_advance(PgEngine *e, double t_target);
 /* stops before the jump of the first event in (t_out, t_target]: *stopped = 1 and t_out is its time */
 int pg_engine_advance_to_event(PgEngine *e, double t_target, int *stopped);
 int pg_engine_event_due(const PgEngine *e);
-/* FMI 3.0 model exchange: the importer's solver located the event / moved the states */
+/* FMI 3.0 model exchange: the importer's solver located the event / moved the states. The jump
+ * re-arms every guard; a cascade leaves the next event pending at t (pg_engine_event_due) */
 int pg_engine_apply_event(PgEngine *e, int index, double t, const double *x);
+/* model exchange, the arming of co-simulation (docs/solver.md, "Event semantics"): the event
+ * indicators the importer sees at (t, x) into z[ne], each guard's arming updated from this
+ * observation (seen on its before side: armed; a guard armed at zero that leaves its band to its
+ * before side: an ordinary armed guard). Reported: the guard; for one armed at zero, the guard
+ * shifted by its band, sgn (G - zband), so the sign changes where it leaves the band to its after
+ * side; an unarmed guard exactly 0 as 1e-300 on its before side; 1 for an inactive event */
+int pg_engine_me_indicators(PgEngine *e, double t, const double *x, double *z);
+/* the event that fires at (t, x), -1 for none: an event pending at t (a cascade of the latest jump,
+ * one at the start or of an input change), else the first in priority order whose armed guard is on
+ * its after side (beyond its band for one armed at zero: then the event fires from zero, and
+ * pg_engine_apply_event of it counts toward the storm, "event storm: ... happens again within the
+ * rounding of its own location") and not carried back to its before side by the flow there (the
+ * importer's interpolant, whose error is its tolerance, met the guard where the motion leaves it:
+ * no event; one within rounding of its threshold is armed at zero there, its band widened to it;
+ * zeno_max_events of these within zeno_window, none firing, end in the storm error naming the event) */
+int pg_engine_me_fired(PgEngine *e, double t, const double *x, int *index);
 int pg_engine_restart_at(PgEngine *e, double t, const double *x, const double *u);
 /* the domain condition at (t, x) in the current mode: 1 with its text in e->msg, 0 inside */
 int pg_engine_domain_problem(PgEngine *e, double t, const double *x);

@@ -18,11 +18,17 @@ value references), then
 * ``time``, the independent variable FMI 3.0 requires.
 
 Model exchange (``fmi3InstantiateModelExchange``): the importer integrates the states and locates
-the sign changes of the indicators.  ``fmi3UpdateDiscreteStates`` applies the jump of the first
-event (in the model's priority order) whose guard has crossed *in its direction*: a falling guard
-fires when it is ``<= 0`` and was ``> 0`` at some indicator evaluation since the latest event
-(a rising one: ``>= 0`` after ``< 0``).  A guard exactly zero after a jump is disarmed until it
-leaves zero, the engine's restart rule.  A sign change in the wrong direction applies nothing.
+the sign changes of the indicators.  The arming of the guards is the engine's, the one of
+co-simulation (docs/solver.md, "Event semantics"; ``pg_engine_me_indicators`` and
+``pg_engine_me_fired`` in ``pg_engine.c``): each indicator evaluation is an observation of the
+trajectory (a guard seen on its before side is armed); a guard armed at zero after a jump is
+reported shifted by its rounding band, so that the importer sees a sign change where it leaves the
+band to its after side.  ``fmi3UpdateDiscreteStates`` applies the jump of the event pending at this
+instant (a cascade of the latest jump) or else of the first event (in the model's priority order)
+whose armed guard is on its after side, and asks for another update
+(``discreteStatesNeedUpdate``) while the jump leaves an event pending at the same instant.  A sign
+change in the wrong direction applies nothing.  An event that fires from zero again and again ends
+in the engine's storm error naming it, as in co-simulation.
 ``valuesOfContinuousStatesChanged`` is true exactly when the jump changed a state;
 ``nominalsOfContinuousStatesChanged`` is always false (nominals are 1).  The domain of the model
 is checked in ``fmi3CompletedIntegratorStep`` (which asks for Event Mode instead when an armed
@@ -123,28 +129,9 @@ def check_state_outputs(model: HybridModel):
 _INTERFACES = {"me": "model-exchange", "cs": "co-simulation"}
 
 
-def _before_side(falling, g):
-    return g > 0.0 if falling else g < 0.0
-
-
 def _indicators(events, t, x, q, u, p):
     """Each event's guard where the event is active in mode ``q``, 1 (cannot cross zero) elsewhere."""
     return [ev.guard_t(t, x, q, u, p) if ev.active(q) else 1.0 for ev in events]
-
-
-UNARMED_FLOOR = 1e-300  # the least magnitude an unarmed indicator is reported with
-
-
-def _reported(events, z, armed, q):
-    """The indicators an importer sees: the guards, but an unarmed active guard that is exactly 0
-    (after a jump) is reported as UNARMED_FLOOR on the side before its crossing.  So no indicator of
-    a new mode starts at zero: an importer that does not restart its integrator after an event that
-    changed no state (fmusim with CVODE) meets no root at the restart point."""
-    out = list(z)
-    for k, ev in enumerate(events):
-        if not armed[k] and ev.active(q) and z[k] == 0.0:
-            out[k] = UNARMED_FLOOR if ev.direction == FALLING else -UNARMED_FLOOR
-    return out
 
 
 class Fmi3Slave(HybridSlave):
@@ -168,7 +155,6 @@ class Fmi3Slave(HybridSlave):
             self._mode, self._event_mode_used, self._early_return_allowed = "cs", False, False
         self._me_t = 0.0
         self._me_x = None
-        self._armed = [False] * len(type(self).model.events)
         self._me_stale = False
         self._cs_stale = False  # co-simulation: inputs set in Event Mode, outputs not yet refreshed
         self._event_mode = False
@@ -253,8 +239,7 @@ class Fmi3Slave(HybridSlave):
         # FMI 3.0: model exchange, and co-simulation with eventModeUsed, go on in Event Mode
         self._event_mode = self._mode == "me" or self._event_mode_used
         sim = self._sim
-        self._me_t, self._me_x = sim.t_out, list(sim.x_out)
-        self._arm()
+        self._me_t, self._me_x = sim.t_out, list(sim.x_out)  # (the engine armed the guards)
 
     def _require_mode(self, mode, what):
         """Refuse ``what`` (a function of interface ``mode``) on an instance of the other interface."""
@@ -293,14 +278,6 @@ class Fmi3Slave(HybridSlave):
             self._me_inputs()
             self._me_stale = False
         self._update_outputs((self._me_t, self._me_x, sim.q))
-
-    def _arm(self):
-        """After initialization and after each event: a guard is armed if it lies strictly on the
-        side before its crossing (a guard exactly zero waits until it leaves zero)."""
-        sim = self._sim
-        q, u, p, x = sim.q, sim.u, sim.p, self._me_x
-        self._armed = [ev.active(q) and _before_side(ev.direction == FALLING, ev.guard_t(self._me_t, x, q, u, p))
-                       for ev in type(self).model.events]
 
     # ---- model exchange ---------------------------------------------------------------------
     def set_time(self, t):
@@ -362,25 +339,20 @@ class Fmi3Slave(HybridSlave):
             t, x, q, u, p = self._initial_point("fmi3GetEventIndicators")
             return _indicators(type(self).model.events, t, x, q, u, p)
         sim = self._me_instance("fmi3GetEventIndicators")
-        q, u, p, x = sim.q, sim.u, sim.p, self._me_x
-        armed = self._armed
-        events = type(self).model.events
-        z = _indicators(events, self._me_t, x, q, u, p)
-        for k, (ev, g) in enumerate(zip(events, z)):
-            if not armed[k] and ev.active(q) and _before_side(ev.direction == FALLING, g):
-                armed[k] = True  # seen on the side before its crossing: may fire
-        return _reported(events, z, armed, q)
+        return sim.me_indicators(self._me_t, self._me_x)  # (the engine's arming, updated)
 
     def completed_integrator_step(self):
-        """(enterEventMode, terminateSimulation).  An armed guard on its after side asks for Event
-        Mode (the importer's step ended past an event; the state may lie a step beyond the guard,
-        outside the domain, until the jump); otherwise the model's domain is checked."""
+        """(enterEventMode, terminateSimulation).  An event that fires here (the engine's
+        pg_engine_me_fired: an armed guard on its after side) asks for Event Mode (the importer's
+        step ended past an event; the state may lie a step beyond the guard, outside the domain,
+        until the jump); otherwise the model's domain is checked."""
         sim = self._me_instance("fmi3CompletedIntegratorStep")
-        events = type(self).model.events
-        pending = False
-        for k, (ev, g) in enumerate(zip(events, self.get_event_indicators())):
-            pending |= self._armed[k] and ev.active(sim.q) and not _before_side(ev.direction == FALLING, g)
-        if pending:
+        self.get_event_indicators()  # (an observation of the trajectory: the arming updated)
+        try:
+            fired = sim.me_fired(self._me_t, self._me_x)
+        except ModelError as exc:  # (an event storm below the importer's resolution)
+            raise self._model_failed(exc) from None
+        if fired is not None:
             return (True, False)
         msg = sim.domain_problem(self._me_t, self._me_x)
         if msg is not None or not all(map(math.isfinite, self._me_x)):
@@ -390,18 +362,18 @@ class Fmi3Slave(HybridSlave):
         return (False, False)
 
     def _me_update(self):
+        """(discreteStatesNeedUpdate, valuesOfContinuousStatesChanged): the jump of the event that
+        fires here (the engine's pg_engine_me_fired), which re-arms every guard; another update is
+        needed while it leaves an event pending at this instant (a cascade)."""
         sim = self._me_instance("fmi3UpdateDiscreteStates")
-        model = type(self).model
         t, x = self._me_t, self._me_x
-        q, u, p = sim.q, sim.u, sim.p
-        fired = None
-        for k, ev in enumerate(model.events):  # priority order
-            if self._armed[k] and ev.active(q) and not _before_side(ev.direction == FALLING, ev.guard_t(t, x, q, u, p)):
-                fired = k
-                break
+        changed = need = False
+        try:
+            fired = sim.me_fired(t, x)
+        except ModelError as exc:
+            raise self._model_failed(exc) from None
         if fired is None:
             fired = sim.time_event_due(t)  # a time event reached: its jump
-        changed = False
         if fired is not None:
             try:
                 x_new = sim.apply_event(fired, t, x)
@@ -411,8 +383,8 @@ class Fmi3Slave(HybridSlave):
             self._me_x = list(x_new)
             self._drain_engine()
             self._stale()
-        self._arm()
-        return changed
+            need = sim.event_due
+        return need, changed
 
     # ---- co-simulation ----------------------------------------------------------------------
     def _advance_engine(self, sim, t_end):
@@ -478,23 +450,23 @@ class Fmi3Slave(HybridSlave):
     def update_discrete_states(self):
         """(discreteStatesNeedUpdate, terminateSimulation, nominalsOfContinuousStatesChanged,
         valuesOfContinuousStatesChanged, nextEventTimeDefined, nextEventTime)"""
-        changed = self._me_update() if self._mode == "me" else self._cs_update()
+        need, changed = self._me_update() if self._mode == "me" else (False, self._cs_update())
         if self._mode == "me" and self._sim is not None:  # model exchange: the next time event
             t_next = self._sim.next_time_event()
             if math.isfinite(t_next):  # another due at this instant: an update more (event iteration)
-                return (t_next <= self._me_t, False, False, changed, True, t_next)
-        return (False, False, False, changed, False, 0.0)
+                return (need or t_next <= self._me_t, False, False, changed, True, t_next)
+        return (need, False, False, changed, False, 0.0)
 
     def _get_fmu_state(self):
         state = super()._get_fmu_state()
-        state["fmi3"] = {"t": self._me_t, "x": None if self._me_x is None else list(self._me_x),
-                         "armed": list(self._armed)}
+        # (the arming of the guards is the engine's: in its snapshot)
+        state["fmi3"] = {"t": self._me_t, "x": None if self._me_x is None else list(self._me_x)}
         return state
 
     def _set_fmu_state(self, state):
         super()._set_fmu_state(state)
         extra = state["fmi3"]
-        self._me_t, self._armed = extra["t"], list(extra["armed"])
+        self._me_t = extra["t"]
         self._me_x = None if extra["x"] is None else list(extra["x"])
         self._stop = None
         if self._mode == "me" and self._sim is not None:

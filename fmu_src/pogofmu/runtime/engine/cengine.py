@@ -204,6 +204,8 @@ def library():
             lib.pgb_next_time_event.argtypes = [C.c_void_p]
             lib.pgb_next_time_event.restype = C.c_double
             lib.pgb_time_event_due.argtypes = [C.c_void_p, C.c_double]
+            lib.pgb_me_indicators.argtypes = [C.c_void_p, C.c_double, D, D]
+            lib.pgb_me_fired.argtypes = [C.c_void_p, C.c_double, D, C.POINTER(C.c_int)]
             lib.pgb_read.argtypes = [C.c_void_p, C.c_void_p]
             lib.pgb_read.restype = None
             lib.pgb_last_event.argtypes = [C.c_void_p, D, D]
@@ -420,6 +422,8 @@ class Simulator:
         self._slices = (slice(a, b), slice(b, c), slice(c, d), slice(d, e), slice(e, n))
         self._eaddr, self._baddr = C.addressof(self._engine), C.addressof(self._buf)
         self._ubuf = (C.c_double * max(self._nu, 1))()
+        self._ne = len(model.events)
+        self._zbuf = (C.c_double * max(self._ne, 1))()
         self.sloped = False  # the inputs lie on a line (set_inputs with a slope), not held
         self._slack = domain_slack(self.solver)
         self._exc = None
@@ -831,6 +835,20 @@ class Simulator:
         self._check(rc)
         self._read()
         return self.x
+
+    def me_indicators(self, t: float, x) -> list:
+        """Model exchange: the event indicators an importer sees at ``(t, x)`` in the current mode,
+        each guard's arming updated from this observation (the engine's rule, docs/solver.md "Event
+        semantics": ``pg_engine_me_indicators``)."""
+        self._check(self._lib.pgb_me_indicators(self._engine, float(t), _doubles(x, self._nx), self._zbuf))
+        return self._zbuf[:self._ne]
+
+    def me_fired(self, t: float, x) -> Optional[int]:
+        """Model exchange: the index of the event that fires at ``(t, x)`` (one pending at ``t``, or
+        the first armed guard on its after side, in priority order), None for none."""
+        index = C.c_int(-1)
+        self._check(self._lib.pgb_me_fired(self._engine, float(t), _doubles(x, self._nx), C.byref(index)))
+        return None if index.value < 0 else index.value
 
     def restart_at(self, t: float, x, u) -> None:
         """Go on from the state ``x`` at time ``t`` given from outside (an FMI 3.0 model-exchange
