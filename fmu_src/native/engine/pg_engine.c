@@ -910,8 +910,8 @@ static int arm_guards(PgEngine *e, const signed char *was, int own, double own_g
         } else if (G >= -z) {
             if (dg > 2 * z) {
                 if (before != 0 && i != own && *fire < 0) *fire = i;
-            } else {
-                e->zarm[i] = 1, e->armed[i] = 1;
+            } else { /* (2: at zero at a start, not after a jump of its own: it fires where it leaves zero) */
+                e->zarm[i] = before == -1 && i != own ? 2 : 1, e->armed[i] = 1;
             }
         } else {
             e->armed[i] = 1;
@@ -1304,9 +1304,10 @@ static int step(PgEngine *e, double t_target)
             if (!(sgn * g1 > z)) continue;
             /* a dip to the before side resolved inside the step: the crossing is the return's */
             TRY(hidden_return(e, &seg, i, sgn, g0, g1, f_new, z, &te, &found));
-            if (!found) { /* it left zero without a dip floating point resolves: where it was last at zero */
+            if (!found) { /* it left zero without a dip floating point resolves */
                 level = z;
-                te = t;
+                if (e->zarm[i] == 2) te = t; /* at zero from a start: it leaves zero there (old rule) */
+                else TRY(locate_level(e, &seg, i, z, t, g0, g1, NULL, &te)); /* after a jump: the return */
             }
         } else if (sgn * g1 < 0.0) {
             if (sgn * g0 >= 0.0 || (e->has_g_prev && sgn * (g0 - e->g_prev[k]) < 0.0)) continue;
