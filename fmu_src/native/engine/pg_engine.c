@@ -910,8 +910,9 @@ static int arm_guards(PgEngine *e, const signed char *was, int own, double own_g
         } else if (G >= -z) {
             if (dg > 2 * z || (i == own && e->own_same)) { /* (a jump that changed nothing: its crossing goes on) */
                 if (before != 0 && i != own && *fire < 0) *fire = i;
-            } else { /* (2: at zero at a start, not after a jump of its own: it fires where it leaves zero) */
-                e->zarm[i] = before == -1 && i != own ? 2 : 1, e->armed[i] = 1;
+            } else { /* 2: no direction to first order (it leaves zero by its curvature: where it was at
+                      * zero); 1: heading to its before side (a rebound: where it returns past its band) */
+                e->zarm[i] = dg >= -2 * z ? 2 : 1, e->armed[i] = 1;
             }
         } else {
             e->armed[i] = 1;
@@ -1306,7 +1307,7 @@ static int step(PgEngine *e, double t_target)
             TRY(hidden_return(e, &seg, i, sgn, g0, g1, f_new, z, &te, &found));
             if (!found) { /* it left zero without a dip floating point resolves */
                 level = z;
-                if (e->zarm[i] == 2) te = t; /* at zero from a start: it leaves zero there (old rule) */
+                if (e->zarm[i] == 2) te = t; /* no first-order direction: it leaves zero where it was */
                 else TRY(locate_level(e, &seg, i, z, t, g0, g1, NULL, &te)); /* after a jump: the return */
             }
         } else if (sgn * g1 < 0.0) {
