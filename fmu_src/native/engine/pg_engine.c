@@ -908,10 +908,11 @@ static int arm_guards(PgEngine *e, const signed char *was, int own, double own_g
         if (G > z) {
             if (before == 1 && i != own && *fire < 0) *fire = i;
         } else if (G >= -z) {
-            if (dg > 2 * z) {
+            if (dg > 2 * z || (i == own && e->own_same)) { /* (a jump that changed nothing: its crossing goes on) */
                 if (before != 0 && i != own && *fire < 0) *fire = i;
-            } else { /* (2: at zero at a start, not after a jump of its own: it fires where it leaves zero) */
-                e->zarm[i] = before == -1 && i != own ? 2 : 1, e->armed[i] = 1;
+            } else { /* 2: no direction to first order (it leaves zero by its curvature: where it was at
+                      * zero); 1: heading to its before side (a rebound: where it returns past its band) */
+                e->zarm[i] = dg >= -2 * z ? 2 : 1, e->armed[i] = 1;
             }
         } else {
             e->armed[i] = 1;
@@ -1306,7 +1307,7 @@ static int step(PgEngine *e, double t_target)
             TRY(hidden_return(e, &seg, i, sgn, g0, g1, f_new, z, &te, &found));
             if (!found) { /* it left zero without a dip floating point resolves */
                 level = z;
-                if (e->zarm[i] == 2) te = t; /* at zero from a start: it leaves zero there (old rule) */
+                if (e->zarm[i] == 2) te = t; /* no first-order direction: it leaves zero where it was */
                 else TRY(locate_level(e, &seg, i, z, t, g0, g1, NULL, &te)); /* after a jump: the return */
             }
         } else if (sgn * g1 < 0.0) {
@@ -1444,6 +1445,9 @@ static int apply_pending_event(PgEngine *e)
     if (e->keep_history && e->on_event) e->on_event(e->hook_ctx, e, &e->last, e->n_events);
     e->has_pending = 0;
     TRY(zero_storm(e, i));
+    int same = 1;
+    for (int k = 0; k < e->nx; ++k) same &= x_new[k] == e->x[k];
+    for (int k = 0; k < e->nq; ++k) same &= q_new[k] == e->q[k];
     memcpy(e->x, x_new, nx);
     memcpy(e->q, q_new, sizeof(double) * (size_t)e->nq);
     TRY(check_zeno(e));
@@ -1452,7 +1456,10 @@ static int apply_pending_event(PgEngine *e)
     double h0;
     TRY(initial_step(e, &h0));
     e->h = pmin(e->h, h0);
-    return rearm(e, was, i, own_g); /* a guard the jump left crossed fires at this instant (a cascade) */
+    e->own_same = same;
+    int rc = rearm(e, was, i, own_g); /* a guard the jump left crossed fires at this instant (a cascade) */
+    e->own_same = 0;
+    return rc;
 }
 
 /* _run */

@@ -113,6 +113,7 @@ struct PgEngine {
     /* the pending event fires from zero without its guard having left its band (zero_hit), and how
      * many of the latest events in a row of event zrun_event did (a storm at ZERO_REFIRES) */
     int zero_hit, zrun, zrun_event;
+    int own_same; /* (during a re-arming) the jump just applied left x and q as they were */
     /* time events: each one's next instant (INFINITY: no more), first instant, period and count */
     double te_next[PG_MAX_TIME_EVENTS], te_at[PG_MAX_TIME_EVENTS], te_every[PG_MAX_TIME_EVENTS];
     long te_count[PG_MAX_TIME_EVENTS];
