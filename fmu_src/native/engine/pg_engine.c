@@ -1780,8 +1780,9 @@ int pg_engine_me_fired(PgEngine *e, double t, const double *x, int *index)
 int pg_engine_restart_at(PgEngine *e, double t, const double *x, const double *u)
 {
     /* model exchange: the importer sets the inputs at every point it tries, beyond a crossing too;
-     * the arming is the observed trajectory's and is kept (an armed guard that the new inputs put on
-     * its after side fires: pg_engine_me_fired), and so is an event pending at this instant */
+     * the arming of a model with states is the observed trajectory's and is kept (an armed guard that
+     * the new inputs put on its after side fires: pg_engine_me_fired), and so is an event pending at
+     * this instant; a model without states is re-armed by the change, as in co-simulation */
     signed char armed[PG_MAX_EVENTS], zarm[PG_MAX_EVENTS];
     double zband[PG_MAX_EVENTS], pending_x[PG_MAX_X];
     memcpy(armed, e->armed, sizeof armed), memcpy(zarm, e->zarm, sizeof zarm), memcpy(zband, e->zband, sizeof zband);
@@ -1793,6 +1794,7 @@ int pg_engine_restart_at(PgEngine *e, double t, const double *x, const double *u
     e->has_seg = 0, e->has_pending = 0;
     /* set_input with the same inputs returns at once in Python: the rebinding happens only for a change */
     int rc = pg_engine_set_input(e, u);
+    if (e->stateless) return rc; /* (without states an input change is the only motion: armed as in co-simulation) */
     memcpy(e->armed, armed, sizeof armed), memcpy(e->zarm, zarm, sizeof zarm), memcpy(e->zband, zband, sizeof zband);
     e->has_pending = pending, e->pending_index = pending_index;
     memcpy(e->pending_x, pending_x, sizeof pending_x);
