@@ -909,7 +909,10 @@ static int arm_guards(PgEngine *e, const signed char *was, int own, double own_g
             if (before == 1 && i != own && *fire < 0) *fire = i;
         } else if (G >= -z) {
             if (dg > 2 * z || (i == own && e->own_same)) { /* (a jump that changed nothing: its crossing goes on) */
-                if (before != 0 && i != own && *fire < 0) *fire = i;
+                /* armed before: the restart crossed it (a cascade) and it fires now; of unknown arming (the
+                 * start, a newly active guard): it fires where the step shows it leave zero (at its start) */
+                if (i != own && before == -1) e->zarm[i] = 2, e->armed[i] = 1;
+                else if (i != own && before == 1 && *fire < 0) *fire = i;
             } else { /* 2: no direction to first order (it leaves zero by its curvature: where it was at
                       * zero); 1: heading to its before side (a rebound: where it returns past its band) */
                 e->zarm[i] = dg >= -2 * z ? 2 : 1, e->armed[i] = 1;
@@ -1302,7 +1305,9 @@ static int step(PgEngine *e, double t_target)
         int found = 1;
         if (e->zarm[i]) { /* at zero after a restart: fires once the flow carries it past its band */
             double z = e->zband[i];
-            if (!(sgn * g1 > z)) continue;
+            /* past its band; or, with no direction to first order, off zero and moving away from it */
+            int leaves = e->zarm[i] == 2 && sgn * g1 > 0.0 && sgn * g1 > sgn * g0;
+            if (!(sgn * g1 > z) && !leaves) continue;
             /* a dip to the before side resolved inside the step: the crossing is the return's */
             TRY(hidden_return(e, &seg, i, sgn, g0, g1, f_new, z, &te, &found));
             if (!found) { /* it left zero without a dip floating point resolves */
