@@ -26,7 +26,7 @@ def build_native_fmu(source, dest: Path, fmi_version: int, cache: Path = None, w
     from pogofmu.codegen.build import CompileError, native_fmu
 
     from .description import build_description_fmi3, model_description_fmi2, model_description_fmi3
-    from .package import documentation, validate, write_zip
+    from .package import documentation, write_zip
 
     name = source.model.name
     cls = source.slave_class()
@@ -52,6 +52,5 @@ def build_native_fmu(source, dest: Path, fmi_version: int, cache: Path = None, w
         members += [(f"sources/{p.name}", p.read_bytes(), False) for p in sorted(nb.sources.iterdir())]
         members += documentation(source, "native", fmi_version, sorted(nb.binaries))
     fmu = out_dir / f"{name}.fmu"
-    write_zip(fmu, members)
-    validate(fmu, f"native FMI {fmi_version}")
+    write_zip(fmu, members, f"native FMI {fmi_version}")
     return fmu
