@@ -79,7 +79,20 @@ def standard(fmi, interface="cs", event_mode=False):
         "fmi3GetContinuousStates": ({INIT, EVENT, CONT, TERM} if me else NONE, None),
         "fmi3SetContinuousStates": ({CONT} if me else NONE, None),
         "fmi3CompletedIntegratorStep": ({CONT} if me else NONE, None),
-        "fmi3SetFloat64": (ANY, None),  # of a continuous input
+        # §2.3.3 to §2.3.5, §3.2.1, §4.2.1, "Allowed Function Calls" of each state: fmi3Set{VariableType}
+        # in Instantiated, Initialization Mode, Event Mode, Step Mode, Continuous-Time Mode (a
+        # continuous input or state only); fmi3Get{VariableType} from Initialization Mode on.
+        # Terminated lists getters only ("the final values of all variables ... can be retrieved")
+        "fmi3SetFloat64": ({I, INIT, EVENT, CONT, STEP}, None),  # of a continuous input
+        "fmi3SetInt32": ({I, INIT, EVENT, STEP}, None),  # of a discrete input or a parameter
+        "fmi3GetFloat64": ({INIT, EVENT, CONT, STEP, TERM}, None),
+        # §2.3.2, Instantiated; §4.2.1, Step Mode; §2.3.6, Event Mode (to Reconfiguration Mode "in
+        # Model Exchange"): where fmi3EnterConfigurationMode may be called — and it "must not be
+        # called if the FMU contains no structural parameter", as these FMUs do: never legal here.
+        # fmi3ExitConfigurationMode: in Configuration Mode and Reconfiguration Mode only, which an
+        # FMU without structural parameters never enters
+        "fmi3EnterConfigurationMode": ({I, STEP} if cs else {I, EVENT}, None),
+        "fmi3ExitConfigurationMode": (NONE, None),
     })
     return table
 
@@ -360,6 +373,33 @@ class Fmi3Machine(Machine):
     def set_input(self, value):
         self.call("fmi3SetFloat64", self.input_vr(), 1, (D * 1)(value), 1)
 
+    @rule(value=st.integers(0, 1))
+    def set_discrete(self, value):
+        """An Int32: the controller's discrete input s (legal wherever the state allows it), else the
+        fixed parameter log_events (legal by its variability in Instantiated and Initialization Mode
+        only: elsewhere only a refusal by the call state is checked)."""
+        var = self.vars["s"] if "s" in self.vars and self.vars["s"].causality == "input" else self.vars["log_events"]
+        self.call("fmi3SetInt32", (ctypes.c_uint32 * 1)(var.valueReference), 1, (ctypes.c_int32 * 1)(value), 1,
+                  legal_args=var.causality == "input" or self.mode in (I, INIT))
+
+    @rule()
+    def get_output(self):
+        vr = next(v.valueReference for v in self.vars.values() if v.causality == "output" and v.type == "Float64")
+        self.call("fmi3GetFloat64", (ctypes.c_uint32 * 1)(vr), 1, (D * 1)(), 1)
+
+    @rule()
+    def configuration_mode(self):
+        """Never legal for an FMU without structural parameters: Error in every call state; where the
+        state allows fmi3EnterConfigurationMode the refusal names the missing structural parameters,
+        elsewhere the call state; fmi3ExitConfigurationMode is refused naming the call state."""
+        for name in ("fmi3EnterConfigurationMode", "fmi3ExitConfigurationMode"):
+            status = self.raw(name)
+            text = self.messages[-1][1] if self.messages else ""
+            assert status == ERROR and text.startswith(f"{name} refused"), (name, self.mode, status, text)
+            allowed = self.mode in self.table[name][0]
+            assert ("structural parameter" in text) == allowed and ("not allowed in" in text) != allowed, \
+                (name, self.mode, text)
+
 
 class Fmi3EventMode(Fmi3Machine):
     INTERFACE, EVENT_MODE = "cs", True
@@ -631,6 +671,37 @@ def test_fmi3_getters_and_setters_are_checked_against_the_call_state_table(backe
     finally:
         cs.close()
         me.close()
+
+
+@pytest.mark.parametrize("backend", BACKENDS, ids=["python", "native"])
+@pytest.mark.parametrize("interface", ["cs", "me"])
+def test_fmi3_terminated_allows_getters_and_reset_but_no_setter(backend, interface):
+    """FMI 3.0 §2.3.9 (Terminated): "the final values of all variables ... can be retrieved" — its
+    allowed calls are getters (and the FMU state functions, fmi3Reset, fmi3FreeInstance of the
+    super state), no fmi3Set{VariableType}. After fmi3Terminate every setter is refused naming
+    Terminated and nothing is set; the getters work; after fmi3Reset (Instantiated) the setters
+    work again. The controller has a Float64 and an Int32 input."""
+    inst = RawInstance(backend, 3, interface, name="HopController")
+    try:
+        vr = {name: (ctypes.c_uint32 * 1)(inst.vars[name].valueReference) for name in ("y", "s", "phase")}
+        inst.reach(TERM)
+        before = (D * 1)()
+        assert inst.raw("fmi3GetFloat64", vr["y"], 1, before, 1) == OK, inst.last()
+        assert inst.raw("fmi3SetFloat64", vr["y"], 1, (D * 1)(before[0] + 1.0), 1) == ERROR
+        assert "fmi3SetFloat64 refused: not allowed in Terminated" in inst.last(), inst.last()
+        assert inst.raw("fmi3SetInt32", vr["s"], 1, (ctypes.c_int32 * 1)(1), 1) == ERROR
+        assert "fmi3SetInt32 refused: not allowed in Terminated" in inst.last(), inst.last()
+        for type_ in FMI3_TYPES:
+            assert _get_or_set(inst, "Set", type_) == ERROR
+            assert f"fmi3Set{type_} refused: not allowed in Terminated" in inst.last(), inst.last()
+        after = (D * 1)()
+        assert inst.raw("fmi3GetFloat64", vr["y"], 1, after, 1) == OK and after[0] == before[0]
+        assert inst.raw("fmi3GetInt32", vr["phase"], 1, (ctypes.c_int32 * 1)(), 1) == OK, inst.last()
+        assert inst.raw("fmi3Reset") == OK, inst.last()
+        assert inst.raw("fmi3SetFloat64", vr["y"], 1, (D * 1)(0.5), 1) == OK, inst.last()
+        assert inst.raw("fmi3SetInt32", vr["s"], 1, (ctypes.c_int32 * 1)(1), 1) == OK, inst.last()
+    finally:
+        inst.close()
 
 # =============================================================================================
 # FMI 3.0 co-simulation: an event the FMU signalled is handled in Event Mode before the next step

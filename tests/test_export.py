@@ -690,3 +690,125 @@ def test_platforms_chooses_the_native_binaries_and_an_unknown_one_is_refused(tmp
         with zipfile.ZipFile(fmu) as z:
             got = {n.split("/", 1)[1] for n in z.namelist() if n.startswith("binaries/")}
         assert got == want, (fmu, got)
+
+
+# ---- a failed export: nothing left behind, the failure named, exit status 1 ---------------------
+
+def _leftovers(folder):
+    """Every file under ``folder`` (an FMU, a temporary file, the build record)."""
+    return sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*") if p.is_file()) if folder.exists() else []
+
+
+def _export_failing_on_the_machine(proc, cwd, out, reason):
+    """``out``: the FMU the export could not write (relative to ``cwd``, as the command shows it)."""
+    assert proc.returncode == 1, (proc.returncode, proc.stdout, proc.stderr)
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
+    assert f"cannot write {out}" in lines[0] and reason in lines[0], lines[0]
+    assert "ball.py" not in lines[0], lines[0]  # the model is not blamed
+    folder = (cwd / out).parent
+    assert _leftovers(folder) == [], _leftovers(folder)
+
+
+def _limit_file_size(limit):
+    """preexec_fn: files larger than ``limit`` bytes cannot be written (write fails with EFBIG:
+    SIGXFSZ ignored, which the exec'd Python keeps)."""
+    import resource
+    import signal
+
+    def apply():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+    return apply
+
+
+def test_an_fmu_too_large_for_the_file_system_leaves_nothing_and_blames_the_output(tmp_path):
+    """RLIMIT_FSIZE below the FMU's size (the cache of compiled launchers warm, so that only the FMU
+    itself is too large): exit status 1, one line naming the FMU and the reason, no temporary file,
+    no FMU; the same export without the limit writes it."""
+    import errno
+    import os
+    import sys
+
+    (tmp_path / "ball.py").write_text(BALL)
+    args = [sys.executable, "-m", "pogofmu.cli", "export", "ball.py", "--backend", "python", "--fmi", "2",
+            "--cache", "cache"]
+    warm = subprocess.run([*args, "--out", "warm"], cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    assert warm.returncode == 0, warm.stderr
+    size = (tmp_path / "warm" / "Ball.fmu").stat().st_size
+    limit = size * 3 // 4
+    proc = subprocess.run([*args, "--out", "out"], cwd=tmp_path, capture_output=True, text=True, timeout=600,
+                          preexec_fn=_limit_file_size(limit))
+    _export_failing_on_the_machine(proc, tmp_path, "out/Ball.fmu", os.strerror(errno.EFBIG))
+
+
+def test_an_export_under_a_file_leaves_nothing_and_blames_the_output(tmp_path):
+    """--out below a regular file (a folder that cannot be made, as a read-only one cannot be
+    written, even by root): exit status 1 naming the FMU and the reason."""
+    import errno
+    import os
+
+    (tmp_path / "ball.py").write_text(BALL)
+    (tmp_path / "taken").write_text("a file, not a folder\n")
+    proc = pogofmu("export", "ball.py", "--out", "taken/out", "--backend", "python", "--fmi", "2", cwd=tmp_path)
+    _export_failing_on_the_machine(proc, tmp_path, "taken/out/Ball.fmu", os.strerror(errno.ENOTDIR))
+    assert (tmp_path / "taken").read_text() == "a file, not a folder\n"
+
+
+def test_an_export_into_a_full_file_system_leaves_nothing_and_blames_the_output(tmp_path):
+    """A 64 KiB tmpfs (an FMU is ~140 KiB): "No space left on device", exit status 1, nothing left.
+    Skipped where tmpfs cannot be mounted (not root, no CAP_SYS_ADMIN)."""
+    import errno
+    import os
+
+    mnt = tmp_path / "mnt"
+    mnt.mkdir()
+    if subprocess.run(["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", str(mnt)], capture_output=True).returncode:
+        pytest.skip("cannot mount a tmpfs here")
+    try:
+        (tmp_path / "ball.py").write_text(BALL)
+        proc = pogofmu("export", "ball.py", "--out", "mnt", "--backend", "python", "--fmi", "2", cwd=tmp_path)
+        _export_failing_on_the_machine(proc, tmp_path, "mnt/Ball.fmu", os.strerror(errno.ENOSPC))
+    finally:
+        subprocess.run(["umount", str(mnt)], check=True)
+
+
+@pytest.mark.parametrize("failure", [KeyboardInterrupt, OSError(28, "No space left on device"), "invalid"])
+def test_an_fmu_is_written_whole_or_not_at_all(tmp_path, monkeypatch, failure):
+    """Ctrl-C or a failed write half-way through an FMU, or an FMU that does not validate: the
+    earlier FMU of that name is untouched and no temporary file stays; Ctrl-C stays Ctrl-C, a failed
+    write is an OutputError naming the FMU."""
+    from pogofmu.build import package
+    from pogofmu.build.errors import BuildError, OutputError
+
+    out = tmp_path / "Ball.fmu"
+    out.write_bytes(b"the earlier FMU")
+    members = [(f"resources/{k}.txt", b"x" * 1000, False) for k in range(5)]
+    if failure == "invalid":
+        with pytest.raises(BuildError, match="Ball.fmu .FMI 2.0.: fmpy validation failed"):
+            package.write_zip(out, members, "FMI 2.0")
+    else:
+        calls = []
+        real = zipfile.ZipFile.writestr
+
+        def writestr(self, *a, **kw):
+            calls.append(a)
+            if len(calls) == 3:
+                raise failure
+            return real(self, *a, **kw)
+        monkeypatch.setattr(zipfile.ZipFile, "writestr", writestr)
+        expected = (KeyboardInterrupt, "") if failure is KeyboardInterrupt else \
+            (OutputError, f"cannot write {out}: No space left on device")
+        with pytest.raises(expected[0], match=expected[1]):
+            package.write_zip(out, members)
+        assert len(calls) == 3
+    assert out.read_bytes() == b"the earlier FMU"
+    assert _leftovers(tmp_path) == ["Ball.fmu"]
+
+
+def test_export_help_tells_the_exit_statuses():
+    proc = run_pogofmu("export", "--help", cwd=".", timeout=60)
+    assert proc.returncode == 0
+    text = " ".join(proc.stdout.split())
+    assert "exit status: 0" in text and "2 a mistake in a model file or the command line" in text
+    assert "1 the machine failed the export" in text

@@ -20,11 +20,16 @@ typedef enum {
     MODE_EVENT = 1u << 3,          /* FMI 3.0 Event Mode */
     MODE_CONTINUOUS = 1u << 4,     /* FMI 3.0 Continuous-Time Mode (model exchange) */
     MODE_TERMINATED = 1u << 5,     /* after terminate */
-    MODE_STEP_FAILED = 1u << 6     /* FMI 2.0 after a step returned Discard (FMI 3.0: Step Discarded) */
+    MODE_STEP_FAILED = 1u << 6,    /* FMI 2.0 after a step returned Discard (FMI 3.0: Step Discarded) */
+    /* FMI 3.0 Configuration Mode and Reconfiguration Mode: entered only by an FMU with structural
+     * parameters, so never by these; in the table so that every rule reads as the standard's text
+     * (bit 8 is MODE_EVENT_PENDING, below) */
+    MODE_CONFIGURATION = 1u << 7,
+    MODE_RECONFIGURATION = 1u << 9
 } CallState;
 
 #define MODE_ANY (MODE_INSTANTIATED | MODE_INITIALIZATION | MODE_STEP | MODE_EVENT | MODE_CONTINUOUS | \
-                  MODE_TERMINATED | MODE_STEP_FAILED)
+                  MODE_TERMINATED | MODE_STEP_FAILED | MODE_CONFIGURATION | MODE_RECONFIGURATION)
 #define MODE_RUNNING (MODE_INITIALIZATION | MODE_STEP | MODE_EVENT | MODE_CONTINUOUS | MODE_STEP_FAILED | \
                       MODE_TERMINATED)
 
@@ -52,15 +57,23 @@ typedef struct {
     X(fmi2CancelStep, MODE_STEP, 0)                                                                       \
     X(fmi2GetStatus, MODE_STEP | MODE_STEP_FAILED | MODE_TERMINATED, 0)
 
-/* FMI 3.0: the states follow the standard's state machines. Getters: the standard's "Allowed
- * Function Calls" of Instantiated list fmi3Set{VariableType} and no getter (as FMI 2.0 has none
+/* FMI 3.0: the states follow the "Allowed Function Calls" of each state of the standard (§2.3,
+ * §3.2, §4.2). Getters: Instantiated lists fmi3Set{VariableType} and no getter (as FMI 2.0 has none
  * there); the Reference-FMUs allow getters in Instantiated since v0.0.21, these FMUs do not
- * (docs/fmi3.md). Every fmi3Get<T> / fmi3Set<T>, of a type the FMU has or not, is checked here. */
+ * (docs/fmi3.md). Setters: Instantiated, Configuration and Reconfiguration Mode (structural
+ * parameters), Initialization Mode, Event Mode, Step Mode, Continuous-Time Mode (continuous inputs
+ * and states only) — not Terminated, whose allowed calls are getters only (the Reference-FMUs
+ * accept setters there, these FMUs do not, as FMI 2.0 does not). Every fmi3Get<T> / fmi3Set<T>, of
+ * a type the FMU has or not, is checked here. The FMU state functions, fmi3Reset and
+ * fmi3SetDebugLogging belong to the super state FMU State Settable: every state. The counts
+ * (fmi3GetNumberOf...) and dependencies are constants of the FMU: allowed in every state, as by
+ * the Reference-FMUs (the standard lists the counts in Instantiated and Event Mode only; importers
+ * ask in Continuous-Time Mode). */
 #define FMI3_GET (MODE_INITIALIZATION | MODE_EVENT | MODE_CONTINUOUS | MODE_STEP | MODE_STEP_FAILED | \
                   MODE_TERMINATED)
-#define FMI3_SET_CONTINUOUS (MODE_INSTANTIATED | MODE_INITIALIZATION | MODE_EVENT | MODE_CONTINUOUS | MODE_STEP | \
-                             MODE_TERMINATED)
-#define FMI3_SET_DISCRETE (MODE_INSTANTIATED | MODE_INITIALIZATION | MODE_EVENT | MODE_STEP | MODE_TERMINATED)
+#define FMI3_SET_DISCRETE (MODE_INSTANTIATED | MODE_CONFIGURATION | MODE_RECONFIGURATION | MODE_INITIALIZATION | \
+                           MODE_EVENT | MODE_STEP)
+#define FMI3_SET_CONTINUOUS (FMI3_SET_DISCRETE | MODE_CONTINUOUS)
 #define FMI3_RULES(X)                                                                                      \
     X(fmi3SetDebugLogging, MODE_ANY, MODE_ANY)                                                            \
     X(fmi3EnterInitializationMode, MODE_INSTANTIATED, MODE_INSTANTIATED)                                  \
@@ -74,7 +87,9 @@ typedef struct {
     X(fmi3FMUState, MODE_ANY, MODE_ANY)                                                                   \
     X(fmi3GetDirectionalDerivative, MODE_INITIALIZATION | MODE_EVENT | MODE_STEP | MODE_TERMINATED,       \
       MODE_INITIALIZATION | MODE_EVENT | MODE_CONTINUOUS | MODE_TERMINATED)                              \
-    X(fmi3Configuration, MODE_INSTANTIATED | MODE_STEP | MODE_EVENT, MODE_INSTANTIATED | MODE_EVENT)      \
+    X(fmi3EnterConfigurationMode, MODE_INSTANTIATED | MODE_STEP, MODE_INSTANTIATED | MODE_EVENT)           \
+    X(fmi3ExitConfigurationMode, MODE_CONFIGURATION | MODE_RECONFIGURATION,                               \
+      MODE_CONFIGURATION | MODE_RECONFIGURATION)                                                          \
     X(fmi3Clocks, MODE_ANY, MODE_ANY)                                                                     \
     X(fmi3Dependencies, MODE_ANY, MODE_ANY)                                                               \
     X(fmi3UpdateDiscreteStates, MODE_EVENT, MODE_EVENT)                                                   \
@@ -115,6 +130,8 @@ static const char *mode_name(unsigned mode, int fmi3)
     case MODE_CONTINUOUS: return "Continuous-Time Mode";
     case MODE_TERMINATED: return "Terminated";
     case MODE_STEP_FAILED: return fmi3 ? "Step Discarded" : "Step Failed";
+    case MODE_CONFIGURATION: return "Configuration Mode";
+    case MODE_RECONFIGURATION: return "Reconfiguration Mode";
     default: return "an unknown state";
     }
 }
@@ -122,8 +139,8 @@ static const char *mode_name(unsigned mode, int fmi3)
 /* "Instantiated, Initialization Mode or Terminated" for a mask, into `out`. */
 static void mode_list(unsigned mask, int fmi3, char *out, size_t size)
 {
-    const unsigned all[] = {MODE_INSTANTIATED, MODE_INITIALIZATION, MODE_EVENT, MODE_CONTINUOUS, MODE_STEP,
-                            MODE_STEP_FAILED, MODE_TERMINATED};
+    const unsigned all[] = {MODE_INSTANTIATED, MODE_CONFIGURATION, MODE_RECONFIGURATION, MODE_INITIALIZATION,
+                            MODE_EVENT, MODE_CONTINUOUS, MODE_STEP, MODE_STEP_FAILED, MODE_TERMINATED};
     size_t n = 0, count = 0, total = 0;
     for (size_t i = 0; i < sizeof all / sizeof *all; ++i) total += (mask & all[i]) != 0;
     out[0] = '\0';

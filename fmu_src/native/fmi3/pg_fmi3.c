@@ -663,16 +663,23 @@ fmi3Status fmi3GetAdjointDerivative(fmi3Instance c, const fmi3ValueReference unk
     return unsupported(INST, "fmi3GetAdjointDerivative (providesAdjointDerivatives = false)");
 }
 
+/* The standard: fmi3EnterConfigurationMode "must not be called if the FMU contains no structural
+ * parameter" — these FMUs have none: refused in the states that allow it, naming that rule, and by
+ * the call state elsewhere; fmi3ExitConfigurationMode only in (Re)Configuration Mode, never here. */
 fmi3Status fmi3EnterConfigurationMode(fmi3Instance c)
 {
     CHECK(c);
-    return unsupported(INST, "fmi3EnterConfigurationMode (this FMU has no structural parameters)");
+    REQUIRE(fmi3EnterConfigurationMode, "fmi3EnterConfigurationMode");
+    emit(INST, ST_ERROR, "logStatusError", "fmi3EnterConfigurationMode refused: this FMU has no structural "
+         "parameters (the standard: it must not be called then)");
+    return fmi3Error;
 }
 
 fmi3Status fmi3ExitConfigurationMode(fmi3Instance c)
 {
     CHECK(c);
-    return unsupported(INST, "fmi3ExitConfigurationMode (this FMU has no structural parameters)");
+    REQUIRE(fmi3ExitConfigurationMode, "fmi3ExitConfigurationMode");
+    return fmi3Error; /* (not reached: no state of these FMUs allows it) */
 }
 
 #define NO_CLOCKS(call_) do { CHECK(c); return unsupported(INST, call_ " (this FMU has no clocks)"); } while (0)

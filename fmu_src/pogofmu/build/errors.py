@@ -7,3 +7,9 @@ class BuildError(Exception):
 
 class ModelFileError(BuildError):
     """A mistake in a model file: the message names the file and the line (``file.py:12: ...``)."""
+
+
+class OutputError(BuildError):
+    """The machine, not the model, failed the build: a file of the export cannot be written (disk
+    full, no permission, a path under a file, ...). The message names the file and the reason;
+    ``pogofmu export`` ends with exit status 1."""

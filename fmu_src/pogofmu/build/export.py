@@ -13,7 +13,10 @@ aarch64-darwin (cross-compiled with zig; ``--platforms`` chooses a subset) and t
 Every FMU is validated (fmpy's validation) as it is written.  A model the native generator cannot
 follow still gets its Python-hosted FMUs; the refusal names the file, the line, the construct
 and the rewrite, and the exit status is 1.  Exit status 2: a mistake in the model file or the
-command line (one line, no traceback).
+command line; 1: the machine failed the export (a file that cannot be written: disk full, no
+permission, ...; no C compiler) — one line, no traceback, naming what failed.  No temporary file
+and no half-written FMU stays behind, whatever ends the export (Ctrl-C included): each FMU is
+written beside its name and takes it only once complete and validated.
 """
 from __future__ import annotations
 
@@ -25,8 +28,8 @@ import time
 from pathlib import Path
 from typing import List, Optional, Sequence
 
-from .errors import BuildError, ModelFileError
-from .source import ModelSource, describe_exception, load_model_file
+from .errors import BuildError, ModelFileError, OutputError
+from .source import ModelSource, describe_exception, load_model_file, user_frame
 
 KINDS = (("python", 2), ("python", 3), ("native", 2), ("native", 3))
 
@@ -175,6 +178,11 @@ class Exporter:
                     fmu = build_native_fmu(source, self.out, version, objects=self.objects, platforms=self.platforms)
             except (BuildError, ModelFileError):
                 raise
+            except OSError as exc:
+                if user_frame(exc.__traceback__, source.user_files()) is None:  # the machine's, not the model's
+                    raise OutputError(f"cannot build the FMI {version}.0 {backend} FMU of {source.model.name}: "
+                                      f"{exc.filename + ': ' if exc.filename else ''}{exc.strerror or exc}") from None
+                raise ModelFileError(describe_exception(exc, source.user_files(), source.where())) from None
             except Exception as exc:  # noqa: BLE001 - a model that fails while building: one line naming its line
                 raise ModelFileError(describe_exception(exc, source.user_files(), source.where())) from None
             self.log(f"built and validated {_shown(fmu)}")
@@ -190,6 +198,8 @@ class Exporter:
         import json
         import zipfile
 
+        from .package import output_file
+
         with zipfile.ZipFile(fmu) as z:
             platforms = sorted({n.split("/")[1] for n in z.namelist() if n.startswith("binaries/") and n.count("/") == 2})
         path = self.out / self.RECORD
@@ -198,7 +208,8 @@ class Exporter:
         except ValueError:
             record = {}
         record[fmu.relative_to(self.out).as_posix()] = {"binaries": platforms, "platforms": list(self.platforms)}
-        path.write_text(json.dumps(record, indent=1, sort_keys=True) + "\n")
+        with output_file(path) as tmp:
+            tmp.write_text(json.dumps(record, indent=1, sort_keys=True) + "\n")
 
 
 def _shown(path: Path) -> str:
@@ -240,7 +251,12 @@ def one_line(text) -> str:
 def main(argv=None, prog="pogofmu export") -> int:
     ap = argparse.ArgumentParser(prog=prog, description="export hybrid models written in Python as FMUs: FMI 2.0 "
                                  "co-simulation and FMI 3.0 model exchange + co-simulation, Python-hosted and "
-                                 "native (docs/writing-models.md)")
+                                 "native (docs/writing-models.md)",
+                                 epilog="exit status: 0 every FMU written; 2 a mistake in a model file or the command "
+                                 "line; 1 the machine failed the export (a file that cannot be written: disk full, no "
+                                 "permission; no C compiler) or the native generator refused a model (its "
+                                 "Python-hosted FMUs are written). A failed export leaves no temporary or "
+                                 "half-written file.")
     ap.add_argument("files", nargs="+", metavar="FILE.py", help="model files (each defines MODEL, or HybridModels)")
     ap.add_argument("--out", help="output folder (laid out as dist/: <Model>.fmu, fmi3/, native/, native/fmi3/)")
     ap.add_argument("--model", action="append", default=[], metavar="NAME",
@@ -297,6 +313,9 @@ def main(argv=None, prog="pogofmu export") -> int:
         return 2
     except BuildError as exc:
         print(f"{prog}: {one_line(exc)}", file=sys.stderr)
+        return 1
+    except OSError as exc:  # the machine's (a temporary or cache folder that cannot be written, ...)
+        print(f"{prog}: {exc.filename + ': ' if exc.filename else ''}{exc.strerror or exc}", file=sys.stderr)
         return 1
     print(f"{len(built)} FMU(s) in {time.perf_counter() - start:.1f} s")
     return 0

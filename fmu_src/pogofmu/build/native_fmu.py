@@ -27,7 +27,7 @@ def build_native_fmu(source, dest: Path, fmi_version: int, cache: Path = None, p
     from pogofmu.codegen.build import PLATFORMS, CompileError, native_fmu
 
     from .description import build_description_fmi3, model_description_fmi2, model_description_fmi3
-    from .package import documentation, validate, write_zip
+    from .package import documentation, write_zip
 
     name = source.model.name
     cls = source.slave_class()
@@ -50,6 +50,5 @@ def build_native_fmu(source, dest: Path, fmi_version: int, cache: Path = None, p
         members += [(f"sources/{p.name}", p.read_bytes(), False) for p in sorted(nb.sources.iterdir())]
         members += documentation(source, "native", fmi_version, sorted(nb.binaries))
     fmu = out_dir / f"{name}.fmu"
-    write_zip(fmu, members)
-    validate(fmu, f"native FMI {fmi_version}")
+    write_zip(fmu, members, f"native FMI {fmi_version}")
     return fmu

@@ -1,36 +1,56 @@
 """Packing an FMU: the deterministic zip, its ``documentation/`` and fmpy's validation."""
 from __future__ import annotations
 
+import contextlib
 import html
 import os
 import zipfile
 from pathlib import Path
 
-from .errors import BuildError
+from .errors import BuildError, OutputError
 
 ZIP_DATE = (1980, 1, 1, 0, 0, 0)
 
 
-def write_zip(out: Path, members):
+@contextlib.contextmanager
+def output_file(out: Path):
+    """Yields a temporary path beside ``out`` to write ``out`` into; when the block ends, it becomes
+    ``out`` at once (os.replace) — on any failure (disk full, no permission, Ctrl-C, a refusal of the
+    block) it is removed and ``out`` is left as it was: no temporary file and no half-written ``out``
+    stays behind. An OSError is an :class:`OutputError` naming ``out`` and the reason."""
+    tmp = out.with_name(f"{out.name}.{os.getpid()}.tmp")
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        yield tmp
+        os.replace(tmp, out)
+    except OSError as exc:
+        raise OutputError(f"cannot write {out}: {exc.strerror or exc}") from None
+    finally:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+
+
+def write_zip(out: Path, members, what: str = ""):
     """members: (arcname, bytes, executable); deterministic (fixed dates, sorted): with
-    SOURCE_DATE_EPOCH set, the same sources give the same FMU bytes."""
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_suffix(f".{os.getpid()}.tmp")
-    with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
-        for name, data, executable in sorted(members, key=lambda m: m[0]):
-            info = zipfile.ZipInfo(name, ZIP_DATE)
-            info.compress_type = zipfile.ZIP_DEFLATED
-            info.external_attr = (0o755 if executable else 0o644) << 16
-            z.writestr(info, data)
-    os.replace(tmp, out)
+    SOURCE_DATE_EPOCH set, the same sources give the same FMU bytes. ``what``: an FMU, validated
+    (:func:`validate`) before it takes its name."""
+    with output_file(out) as tmp:
+        with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
+            for name, data, executable in sorted(members, key=lambda m: m[0]):
+                info = zipfile.ZipInfo(name, ZIP_DATE)
+                info.compress_type = zipfile.ZIP_DEFLATED
+                info.external_attr = (0o755 if executable else 0o644) << 16
+                z.writestr(info, data)
+        if what:
+            validate(tmp, what, out.name)
 
 
-def validate(fmu: Path, what: str) -> None:
+def validate(fmu: Path, what: str, name: str = "") -> None:
     from fmpy.validation import validate_fmu
 
     problems = validate_fmu(str(fmu))
     if problems:
-        raise BuildError(f"{fmu.name} ({what}): fmpy validation failed: " + "; ".join(problems))
+        raise BuildError(f"{name or fmu.name} ({what}): fmpy validation failed: " + "; ".join(problems))
 
 
 def _rows(variables):

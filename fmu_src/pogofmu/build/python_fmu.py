@@ -187,7 +187,7 @@ def build_python_fmu(source, dest: Path, fmi_version: int, launcher: Path, token
     which carries the engine): FMI 2.0 co-simulation into ``dest/<Model>.fmu``, FMI 3.0 (model exchange
     and co-simulation) into ``dest/fmi3/<Model>.fmu``."""
     from .description import model_description_fmi2, model_description_fmi3
-    from .package import documentation, validate, write_zip
+    from .package import documentation, write_zip
 
     name = source.model.name
     cls = source.slave_class()
@@ -206,11 +206,9 @@ def build_python_fmu(source, dest: Path, fmi_version: int, launcher: Path, token
         members.append(("modelDescription.xml", model_description_fmi3(cls, token), False))
         binaries = {"x86_64-linux": launcher}
         dest = dest / "fmi3"
-    dest.mkdir(parents=True, exist_ok=True)
     for platform, lib in binaries.items():
         members.append((f"binaries/{platform}/{name}{lib.suffix}", lib.read_bytes(), True))
     members += documentation(source, "python", fmi_version, sorted(binaries))
     fmu = dest / f"{name}.fmu"
-    write_zip(fmu, members)
-    validate(fmu, f"FMI {fmi_version}")
+    write_zip(fmu, members, f"FMI {fmi_version}")
     return fmu
