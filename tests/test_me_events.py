@@ -16,26 +16,7 @@ import pytest
 
 from support import ROOT, run_pogofmu
 
-# A forced oscillator against a rigid wall at x = d (tests/test_event_semantics.py's WALL):
-# F > k d presses the mass against the wall: the impacts accumulate (Zeno) at a finite time.
-WALL = '''
-from pogofmu import RISING, Event, HybridModel, Parameter, Variable
-
-MODEL = HybridModel(
-    name="{name}", description="forced oscillator against a wall",
-    states=(Variable("x", "m", "position"), Variable("v", "m/s", "velocity")),
-    parameters=(Parameter("m", 1.0, "kg", "mass"), Parameter("k", 40.0, "N/m", "stiffness"),
-                Parameter("c", 0.2, "N.s/m", "damping"), Parameter("d", 0.05, "m", "wall position"),
-                Parameter("e", 0.7, "", "restitution")),
-    inputs=(Variable("F", "N", "force", start=3.0),),
-    outputs=(Variable("x", "m", "position"), Variable("v", "m/s", "velocity")),
-    flow=lambda t, x, q, u, p: [x[1], (-p.k * (x[0] + {shift}) - p.c * x[1] + u[0]) / p.m],
-    events=(Event("impact", RISING, guard=lambda x, q, u, p: x[0] - {wall},
-                  jump=lambda x, q, u, p: ([x[0], -p.e * x[1]], q)),),
-    initial=lambda p: ([0.0 - {shift}, 0.0], {{}}),
-    output_fn=lambda t, x, q, u, p: {{"x": x[0], "v": x[1]}},
-)
-'''
+from test_event_semantics import WALL  # the forced oscillator pressed against a wall (Zeno)
 
 # a system of one component: the exported ball, its outputs h and v
 BALL_SSD = '''<?xml version="1.0" encoding="UTF-8"?>
