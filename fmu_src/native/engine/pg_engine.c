@@ -937,7 +937,7 @@ static int rearm(PgEngine *e, const signed char *was, int own, double own_g)
     int fire;
     TRY(arm_guards(e, was, own, own_g, &fire));
     if (fire >= 0) {
-        e->has_pending = 1, e->pending_index = fire;
+        e->has_pending = 1, e->pending_located = 0, e->pending_index = fire;
         e->zero_hit = 0;
         memcpy(e->pending_x, e->x, sizeof e->x);
     }
@@ -1043,7 +1043,7 @@ static void time_event_pending(PgEngine *e, double reach)
     if (e->has_pending) return;
     int i = time_event_by(e, reach);
     if (i < 0) return;
-    e->has_pending = 1, e->pending_index = i, e->zero_hit = 0;
+    e->has_pending = 1, e->pending_located = 0, e->pending_index = i, e->zero_hit = 0;
     memcpy(e->pending_x, e->x, sizeof e->x);
 }
 
@@ -1353,7 +1353,7 @@ static int step(PgEngine *e, double t_target)
     if (te == t) {
         e->has_seg = 0;
         memcpy(e->x, y, sizeof y), memcpy(e->f, f, sizeof f);
-        e->has_pending = 1, e->pending_index = i;
+        e->has_pending = 1, e->pending_index = i, e->pending_located = 1;
         e->zero_hit = hit_level > 0.0;
         memcpy(e->pending_x, y, sizeof y);
         return PG_OK;
@@ -1372,7 +1372,7 @@ static int step(PgEngine *e, double t_target)
         e->seg = seg, e->has_seg = 1;
         e->t = te;
         memcpy(e->x, y_e, sizeof y_e), memcpy(e->f, f_e, sizeof f_e);
-        e->has_pending = 1, e->pending_index = i;
+        e->has_pending = 1, e->pending_index = i, e->pending_located = 1;
         e->zero_hit = hit_level > 0.0;
         memcpy(e->pending_x, y_e, sizeof y_e);
     }
@@ -1427,10 +1427,12 @@ static int apply_pending_event(PgEngine *e)
     double x_new[PG_MAX_X], q_new[PG_MAX_Q];
     signed char was[PG_MAX_EVENTS];
     arming_before(e, was);
-    double own_g = 0.0; /* its guard at the crossing, before the jump */
+    /* its guard at the located crossing, before the jump: its zero (NaN, no zero to keep, for an event
+     * fired beyond it by an input change or a jump) */
+    double own_g = NAN;
     int ne = e->model->ne;
     if (i < ne) {
-        TRY(guard_at(e, i, e->t, e->x, &own_g));
+        if (e->pending_located) TRY(guard_at(e, i, e->t, e->x, &own_g));
         TRY(e->model->jump(i, e->t, e->x, e->q, u_at(e, e->t), e->p, x_new, q_new, &e->msg));
     } else {
         int k = i - ne;
@@ -1656,14 +1658,14 @@ int pg_engine_set_inputs(PgEngine *e, const double *u, const double *du)
     if (rc) return at_time(e, rc, "the input change at t = ", e->t, " s");
     e->h = pmin(e->h, h0);
     if (crossed >= 0) {
-        e->has_pending = 1, e->pending_index = crossed, e->zero_hit = 0;
+        e->has_pending = 1, e->pending_located = 0, e->pending_index = crossed, e->zero_hit = 0;
         memcpy(e->pending_x, e->x, sizeof e->x);
     }
     int fire = -1;
     rc = arm_guards(e, was, -1, 0.0, &fire);
     if (rc) return at_time(e, rc, "the input change at t = ", e->t, " s");
     if (fire >= 0 && !e->has_pending) {
-        e->has_pending = 1, e->pending_index = fire, e->zero_hit = 0;
+        e->has_pending = 1, e->pending_located = 0, e->pending_index = fire, e->zero_hit = 0;
         memcpy(e->pending_x, e->x, sizeof e->x);
     }
     return PG_OK;
@@ -1675,7 +1677,7 @@ int pg_engine_apply_event(PgEngine *e, int index, double t, const double *x)
     memcpy(e->x, x, sizeof(double) * (size_t)e->nx);
     e->has_seg = 0;
     /* (e->zero_hit: as pg_engine_me_fired found this event, from zero or not: the storm rule counts it) */
-    e->has_pending = 1, e->pending_index = index;
+    e->has_pending = 1, e->pending_index = index, e->pending_located = 1;
     memcpy(e->pending_x, e->x, sizeof e->x);
     int rc = apply_pending_event(e);
     if (rc) return at_time(e, rc, "t = ", e->t, " s");
