@@ -478,7 +478,7 @@ class HybridSlave:
         the engine noted, and return the error to raise (Error: the state saved before stays
         usable)."""
         self._failed = f"{type(self).model.name}: {exc}"
-        self._drain_engine()
+        self._drain_engine(failed=True)
         return FMUError(self._failed, ERROR if self._launcher else FATAL)
 
     def _stopped(self, call, t):
@@ -501,9 +501,10 @@ class HybridSlave:
             return limit if limit < math.inf else -1.0  # unbounded max_step: always the detailed check
         return 1e300
 
-    def _drain_engine(self):
+    def _drain_engine(self, failed=False):
         """Report what the engine noted during the call: its warnings, and every event when the
-        parameter log_events is 1."""
+        parameter log_events is 1. ``failed``: the call ended in an error, so the engine's counters
+        were not read back after it (they count the events reported before the call)."""
         sim = self._sim
         for text in sim.new_warnings:
             self.log(f"{type(self).model.name}: {text}", WARNING)
@@ -513,7 +514,7 @@ class HybridSlave:
         sim.new_switches.clear()
         new = list(sim.new_events)  # filled only with log_events = 1 (the engine keeps the history then)
         sim.new_events.clear()
-        first = sim.n_events - len(new) + 1
+        first = sim.n_events + 1 if failed else sim.n_events - len(new) + 1
         if new:
             names = [v.name for v in type(self).model.states]
             for k, ev in enumerate(new, start=first):
