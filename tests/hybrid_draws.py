@@ -113,7 +113,7 @@ def model_source(d: Draw, name: str) -> str:
         events.append('TimeEvent("tick", at=lambda p: p.T0' + every +
                       ',\n          jump=lambda x, q, u, p: ([x[0], x[1] + p.dv], q))')
     return f'''"""A drawn hybrid model (tests/hybrid_draws.py): {d!r}"""
-from pogofmu import FALLING, RISING, Event, HybridModel, Parameter, TimeEvent, Variable
+from pogofmu import FALLING, RISING, Event, HybridModel, Parameter, Variable{", TimeEvent" if d.tick else ""}
 
 
 def flow(t, x, q, u, p):
@@ -419,3 +419,17 @@ def _check_graze(sol, t0, t1, armed, G, q, u, names):
         i = int(np.argmax(vals))
         if -GRAZE < vals[i] < 0 and 0 < i < len(vals) - 1:
             raise Undecided(f"{name} grazes zero within {GRAZE:g}")
+
+
+def two_drawn_models():
+    """Two draws for the tests that need a fixed pair (the call-sequence machines): hypothesis's
+    simplest draws with (a) a periodic time event, an input event and a landing level event beside a
+    wall, (b) a wall, a floor and a guard on time with an offset — deterministic (no database)."""
+    from hypothesis import find, settings
+
+    s = settings(database=None, derandomize=True, max_examples=5000)
+    a = find(draws(), lambda d: d.tick and d.P > 0 and {"input", "level", "wall"} <= set(d.events)
+             and d.landing != "none" and d.a0 > 1.0 and d.U1 > 1.0 and abs(d.y0 - d.L) > 0.05, settings=s)
+    b = find(draws(), lambda d: {"floor", "clock", "wall"} <= set(d.events) and d.X0 > 1.0 and d.k > 0
+             and d.a0 < -1.0 and abs(d.v0) > 0.5, settings=s)
+    return a, b

@@ -7,15 +7,19 @@ Error naming the function, nothing is ever Fatal, and the instance stays usable 
 (the next legal call succeeds).  FMU states are taken, serialized, deserialized, damaged, restored
 and freed in every call state, and restoring one puts the model back where the state was taken.
 
-Both backends; derandomized and short in CI (``POGOFMU_STATEFUL_EXAMPLES=500`` for a long run),
+Both backends, on the project's PogoStick and HopController and on two user models drawn by the
+event semantics' generator (tests/hybrid_draws.py); derandomized and short in CI (``POGOFMU_STATEFUL_EXAMPLES=500`` for a long run),
 and the native FMUs once more with their sources compiled under AddressSanitizer and UBSan.
 """
 import ctypes
+import functools
 import os
 import shutil
 import subprocess
 import sys
+import tempfile
 import zipfile
+from pathlib import Path
 
 import pytest
 from hypothesis import HealthCheck, settings
@@ -111,6 +115,10 @@ class Machine(RuleBasedStateMachine):
         self.pending = False  # FMI 3.0 CS: the last step returned eventHandlingNeeded (Event Mode next)
         self.table = standard(self.FMI, self.INTERFACE, self.EVENT_MODE)
         self.fmu = self.make()
+
+    def dist(self):
+        """The folder the FMU comes from (laid out as dist/)."""
+        return DIST
 
     def raw(self, name, *args):
         return raw_call(self.fmu, name, *args)
@@ -209,7 +217,8 @@ class Machine(RuleBasedStateMachine):
             assert status == ERROR and "not a log category" in self.messages[-1][1]
 
     def input_vr(self):
-        name = "F_ext" if self.vars.get("F_ext") is not None and self.vars["F_ext"].causality == "input" else "ydot"
+        """A Real input's value reference: the first input of the FMU's."""
+        name = next(n for n, v in self.vars.items() if v.causality == "input" and v.type in ("Real", "Float64"))
         return (ctypes.c_uint32 * 1)(self.vars[name].valueReference)
 
     def teardown(self):
@@ -229,7 +238,7 @@ class Fmi2CoSimulation(Machine):
 
         from pogofmu.fmpy_raw import Fmi2Callbacks
 
-        path = DIST / f"{self.NAME}.fmu"
+        path = self.dist() / f"{self.NAME}.fmu"
         md = read_model_description(str(path))
         self.vars = {v.name: v for v in md.modelVariables}
         fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(str(path)), modelIdentifier=md.coSimulation.modelIdentifier,
@@ -268,7 +277,9 @@ class Fmi2CoSimulation(Machine):
 
     @rule()
     def get_output(self):
-        vr = (ctypes.c_uint32 * 1)(self.vars["y"].valueReference if "y" in self.vars else self.vars["F_ext"].valueReference)
+        name = "y" if "y" in self.vars else next(n for n, v in self.vars.items()
+                                                  if v.causality == "output" and v.type == "Real")
+        vr = (ctypes.c_uint32 * 1)(self.vars[name].valueReference)
         self.call("fmi2GetReal", vr, 1, (D * 1)())
 
     @rule(value=st.floats(-2.0, 2.0))
@@ -292,7 +303,7 @@ class Fmi3Machine(Machine):
         from fmpy import extract, read_model_description
         from fmpy.fmi3 import FMU3Model, FMU3Slave
 
-        path = DIST / self.FOLDER / f"{self.NAME}.fmu"
+        path = self.dist() / self.FOLDER / f"{self.NAME}.fmu"
         md = read_model_description(str(path))
         self.vars = {v.name: v for v in md.modelVariables}
         self.nx, self.nz = len(md.derivatives), len(md.eventIndicators)
@@ -442,8 +453,55 @@ class NativeFmi3ControllerME(Fmi3ControllerME):
     FOLDER = "native/fmi3"
 
 
+# ---- two user models drawn by the event semantics' generator (tests/hybrid_draws.py) ----------------
+DRAWN = ("DrawnA", "DrawnB")
+
+
+@functools.lru_cache(maxsize=None)
+def drawn_dist() -> Path:
+    """The native FMUs of two drawn models (their files written in a temporary folder and exported by
+    `pogofmu export`, as a user does); POGOFMU_DRAWN_DIST names an existing folder instead (the
+    sanitizer run's instrumented copies)."""
+    if os.environ.get("POGOFMU_DRAWN_DIST"):
+        return Path(os.environ["POGOFMU_DRAWN_DIST"])
+    from hybrid_draws import model_source, two_drawn_models
+    from support import run_pogofmu
+
+    folder = Path(tempfile.mkdtemp(prefix="pogofmu-drawn-machines-"))
+    files = []
+    for name, d in zip(DRAWN, two_drawn_models()):
+        files.append(f"{name.lower()}.py")
+        (folder / files[-1]).write_text(model_source(d, name))
+    proc = run_pogofmu("export", *files, "--out", "out", "--backend", "native", "--platforms", "x86_64-linux",
+                       cwd=folder, timeout=900)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    return folder / "out"
+
+
+class _Drawn:
+    def dist(self):
+        return drawn_dist()
+
+
+class DrawnAFmi2CoSimulation(_Drawn, Fmi2CoSimulation):
+    NAME = "native/DrawnA"
+
+
+class DrawnBFmi2CoSimulation(_Drawn, Fmi2CoSimulation):
+    NAME = "native/DrawnB"
+
+
+class DrawnAFmi3EventMode(_Drawn, Fmi3EventMode):
+    NAME, FOLDER = "DrawnA", "native/fmi3"
+
+
+class DrawnBFmi3ModelExchange(_Drawn, Fmi3ModelExchange):
+    NAME, FOLDER = "DrawnB", "native/fmi3"
+
+
+DRAWN_MACHINES = [DrawnAFmi2CoSimulation, DrawnBFmi2CoSimulation, DrawnAFmi3EventMode, DrawnBFmi3ModelExchange]
 NATIVE = [NativeFmi2CoSimulation, NativeFmi2Controller, NativeFmi3EventMode, NativeFmi3NoEventMode,
-          NativeFmi3ModelExchange, NativeFmi3ControllerME]
+          NativeFmi3ModelExchange, NativeFmi3ControllerME, *DRAWN_MACHINES]
 MACHINES = [Fmi2CoSimulation, Fmi2Controller, *NATIVE, Fmi3EventMode, Fmi3NoEventMode, Fmi3ModelExchange,
             Fmi3ControllerME]
 
@@ -506,10 +564,13 @@ def test_random_call_sequences_under_address_sanitizer(tmp_path):
     if libasan is None:
         pytest.skip(f"{cc or 'no C compiler'}: no -fsanitize=address,undefined")
     dist = tmp_path / "dist"
+    drawn = tmp_path / "drawn"
     for folder in ("native", "native/fmi3"):
         for name in ("PogoStick", "HopController"):
             _sanitized_copy(DIST / folder / f"{name}.fmu", dist / folder / f"{name}.fmu", cc)
-    env = dict(os.environ, POGOFMU_DIST=str(dist), LD_PRELOAD=libasan,
+        for name in DRAWN:
+            _sanitized_copy(drawn_dist() / folder / f"{name}.fmu", drawn / folder / f"{name}.fmu", cc)
+    env = dict(os.environ, POGOFMU_DIST=str(dist), POGOFMU_DRAWN_DIST=str(drawn), LD_PRELOAD=libasan,
                ASAN_OPTIONS="detect_leaks=0:abort_on_error=1:halt_on_error=1",  # (CPython's own leaks: not ours)
                UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1")
     code = ("import sys; sys.path[:0] = sys.argv[1:]; import test_call_states as t; "
