@@ -1,4 +1,5 @@
-"""Session setup: build every FMU into $POGOFMU_DIST (default dist/) once, from the current sources."""
+"""Session setup: build every FMU into $POGOFMU_DIST (default dist/) once, from the current sources, for
+the tests that use them (every module not marked ``own_fmus``)."""
 import os
 import sys
 from pathlib import Path
@@ -13,9 +14,19 @@ sys.path.insert(0, str(ROOT / "fmu_src"))  # this checkout's code, whichever pog
 
 def pytest_configure(config):
     os.environ.setdefault("MPLBACKEND", "Agg")
+    config.addinivalue_line("markers", "own_fmus: the module exports the FMUs it needs itself (or needs none): "
+                                       "the session's build of every project FMU is not run for it")
 
 
-@pytest.fixture(scope="session", autouse=True)
+def pytest_collection_modifyitems(config, items):
+    """Every test uses the session's build of the project's FMUs unless its module is marked
+    ``own_fmus``: a run of such modules alone does not pay for the full build."""
+    for item in items:
+        if item.get_closest_marker("own_fmus") is None and "built_fmus" not in item.fixturenames:
+            item.fixturenames.insert(0, "built_fmus")
+
+
+@pytest.fixture(scope="session")
 def built_fmus():
     from pogofmu.build import Exporter, build_project, load_model_file
     from support import DIST, example_files

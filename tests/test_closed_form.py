@@ -11,6 +11,8 @@ import pytest
 
 from pogofmu.references.closed_form import basic_events, events_as_floats
 
+pytestmark = pytest.mark.own_fmus  # (exports its own FMUs, or needs none)
+
 DATA = Path(__file__).resolve().parent / "data" / "pogo_basic_events.csv"
 
 

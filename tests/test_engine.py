@@ -10,6 +10,8 @@ import pytest
 from pogofmu.runtime.engine import Simulator
 from pogofmu.runtime.model import FALLING, RISING, Event, HybridModel, Parameter, Variable, ZenoError
 
+pytestmark = pytest.mark.own_fmus  # (exports its own FMUs, or needs none)
+
 G = 9.81
 
 

@@ -31,6 +31,8 @@ from hypothesis import HealthCheck, Phase, assume, event, given, note, settings
 from hybrid_draws import N_STEPS, STEP, Draw, Undecided, draws, load_model, model_source, reference
 from support import fmi2_callbacks, run_pogofmu
 
+pytestmark = pytest.mark.own_fmus  # (exports its own FMUs, or needs none)
+
 LONG = os.environ.get("POGOFMU_FUZZ") == "long"
 TOL = 1e-10
 T_TOL = 1e-6

@@ -14,6 +14,8 @@ import pytest
 
 from support import run_pogofmu
 
+pytestmark = pytest.mark.own_fmus  # (exports its own FMUs, or needs none)
+
 # A forced oscillator against a rigid wall at x = d: x'' = (-k x - c x' + F)/m, impact v -> -e v.
 # F > k d presses the mass against the wall: the impacts accumulate (Zeno) at a finite time.
 WALL = '''

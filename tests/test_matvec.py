@@ -20,6 +20,8 @@ from pogofmu.runtime.dual import Dual
 from pogofmu.codegen.trace import TraceError, explore, symbol
 from pogofmu.runtime.model import Params
 
+pytestmark = pytest.mark.own_fmus  # (exports its own FMUs, or needs none)
+
 D = C.POINTER(C.c_double)
 JVP = C.CFUNCTYPE(C.c_int, C.c_double, D, D, D, D, D, D, D, MSG)
 needs_cc = pytest.mark.skipif(c_compiler() is None, reason="needs a C compiler")

@@ -18,6 +18,8 @@ from support import ROOT, run_pogofmu
 
 from test_event_semantics import WALL  # the forced oscillator pressed against a wall (Zeno)
 
+pytestmark = pytest.mark.own_fmus  # (exports its own FMUs, or needs none)
+
 # a system of one component: the exported ball, its outputs h and v
 BALL_SSD = '''<?xml version="1.0" encoding="UTF-8"?>
 <ssd:SystemStructureDescription xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription"

@@ -23,12 +23,14 @@ from pogofmu.runtime.engine import SOLVER_PARAMETERS
 from pogofmu.runtime.models import all_models
 from parameter_sets import THRUST, penetrator_params, stick_params
 
+
 MODELS = sorted(all_models())
 SAME = settings(max_examples=25, deadline=None, derandomize=True, database=None,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much,
                                        HealthCheck.function_scoped_fixture])
 
-pytestmark = pytest.mark.skipif(c_compiler() is None, reason="needs a C compiler")
+pytestmark = [pytest.mark.own_fmus,  # (exports its own FMUs, or needs none)
+              pytest.mark.skipif(c_compiler() is None, reason="needs a C compiler")]
 
 
 @pytest.fixture(scope="module")

@@ -19,10 +19,12 @@ from pogofmu.runtime.engine.settings import check_solver_parameters, domain_slac
 from pogofmu.runtime.model import Params
 from pogofmu.runtime.models import all_models
 
+
 MODELS = sorted(all_models())
 N_CASES = 300
 
-pytestmark = pytest.mark.skipif(c_compiler() is None, reason="needs a C compiler")
+pytestmark = [pytest.mark.own_fmus,  # (exports its own FMUs, or needs none)
+              pytest.mark.skipif(c_compiler() is None, reason="needs a C compiler")]
 
 
 @pytest.fixture(scope="module")

@@ -11,6 +11,8 @@ import pytest
 
 from support import run_pogofmu
 
+pytestmark = pytest.mark.own_fmus  # (exports its own FMUs, or needs none)
+
 CUT = '''
 from pogofmu import RISING, Event, HybridModel, Parameter, TimeEvent, Variable
 

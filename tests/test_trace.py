@@ -10,6 +10,8 @@ from pogofmu.runtime.dual import Dual
 from pogofmu.codegen.trace import TraceError, explore, symbol
 from pogofmu.runtime import fmath
 
+pytestmark = pytest.mark.own_fmus  # (exports its own FMUs, or needs none)
+
 ORIGINAL = {name: getattr(fmath, name) for name in fmath.__all__}
 
 
