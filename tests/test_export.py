@@ -812,3 +812,88 @@ def test_export_help_tells_the_exit_statuses():
     text = " ".join(proc.stdout.split())
     assert "exit status: 0" in text and "2 a mistake in a model file or the command line" in text
     assert "1 the machine failed the export" in text
+
+
+# ---- a function of the model that fails during the run: one message naming it ----------------
+
+NAN_LINE = "NAN = float('nan')\n"
+FAILING = {  # (name, the line of BALL replaced, its replacement, the function the message names)
+    "flow returns NaN": ("BallNaN", "    flow=lambda t, x, q, u, p: [x[1], -p.g],",
+                         "    flow=lambda t, x, q, u, p: [x[1], -p.g if t < 0.3 else NAN],", "the flow"),
+    "flow raises": ("BallDiv", "    flow=lambda t, x, q, u, p: [x[1], -p.g],",
+                    "    flow=lambda t, x, q, u, p: [x[1], -p.g / (1.0 if t < 0.3 else 0.0)],", "the flow"),
+    "guard returns NaN": ("BallGuard", "guard=lambda x, q, u, p: x[0],",
+                          "guard=lambda x, q, u, p: x[0] if x[1] > -2.0 else NAN,", "the guard of event bounce"),
+    "output returns NaN": ("BallOut", 'output_fn=lambda t, x, q, u, p: {"h": x[0], "v": x[1]},',
+                           'output_fn=lambda t, x, q, u, p: {"h": x[0], "v": x[1] if t < 0.3 else NAN},',
+                           "the outputs"),
+    "jump raises": ("BallJump", "jump=lambda x, q, u, p: ([x[0], -p.e * x[1]], q)),),",
+                    "jump=lambda x, q, u, p: ([x[0], -p.e * x[1] / (1.0 if x[1] > -1.0 else 0.0)], q)),),", "the jump of event bounce"),
+}
+
+
+@pytest.fixture(scope="module")
+def failing(tmp_path_factory):
+    """The ball, five ways broken, exported by one command (every kind of FMU)."""
+    folder = tmp_path_factory.mktemp("failing_models")
+    files = []
+    for case, (name, old, new, _) in FAILING.items():
+        assert old in BALL, case
+        text = BALL.replace('name="Ball"', f'name="{name}"').replace(old, new).replace(
+            "from pogofmu import", NAN_LINE + "from pogofmu import", 1)
+        (folder / f"{name.lower()}.py").write_text(text)
+        files.append(f"{name.lower()}.py")
+    proc = pogofmu("export", *files, "--out", "out", cwd=folder)
+    assert proc.returncode == 0, proc.stderr
+    return folder
+
+
+def _failure_text(path, mode):
+    """fmpy's run of ``path`` (co-simulation) to 1 s: it must fail; the FMU's Error message."""
+    from fmpy import simulate_fmu
+    from fmpy.fmi1 import FMICallException
+
+    messages = []
+    kw = {CS2: {}, CS3: dict(fmi_type="CoSimulation", early_return_allowed=True, use_event_mode=True)}[mode]
+    with pytest.raises(FMICallException):
+        simulate_fmu(str(path), stop_time=1.0, output_interval=1e-2, debug_logging=True,
+                     logger=lambda *a: messages.append((a[-3], a[-1].decode())), **kw)
+    errors = [text for status, text in messages if status >= 3]
+    assert errors, messages[-5:]
+    return errors[0]
+
+
+@pytest.mark.parametrize("case", list(FAILING))
+def test_a_function_of_the_model_that_fails_is_named_with_time_state_and_cause(failing, case):
+    """A flow, guard, jump or output that returns NaN or raises ends the run of every kind of FMU with one
+    message naming the function, the time (the model's own threshold: NaN/division from t = 0.3 s,
+    the output's NaN from t = 0.3 s, the guard's NaN once v < -2 m/s, the jump at the first
+    bounce), the state, and the cause: NaN,
+    or the exception — in a Python-hosted FMU its type, the model file and the line; in a native
+    FMU (C, no exception) the failure's kind. Not a collapsed step, not "exceed floating-point
+    range"."""
+    import re
+
+    name, old, new, function = FAILING[case]
+    text = (failing / f"{name.lower()}.py").read_text()
+    line = next(k for k, row in enumerate(text.splitlines(), 1) if new.strip() in row)
+    t_bounce = math.sqrt(2 * 1.0 / 9.81)
+    for backend in ("python", "native"):
+        for mode in (CS2, CS3):
+            msg = _failure_text(fmus(failing, name)[(backend, mode)], mode)
+            where = (backend, mode, msg)
+            assert f"{function} failed at t = " in msg and "(state h = " in msg and ", v = " in msg, where
+            t = float(re.search(r"failed at t = ([0-9.eE+-]+) s", msg).group(1))
+            if case.startswith(("flow", "output")):
+                assert 0.3 <= t < 0.31, where
+            elif case.startswith("guard"):
+                assert 2.0 / 9.81 <= t < t_bounce, where
+            else:
+                assert t == pytest.approx(t_bounce, abs=1e-6), where
+            assert "stiff or singular" not in msg and "exceed floating-point range" not in msg, where
+            if "NaN" in case:
+                assert "it returned " in msg and " = nan" in msg or "returned nan" in msg, where
+            elif backend == "python":
+                assert f"ZeroDivisionError: float division by zero at {name.lower()}.py:{line}" in msg, where
+            else:
+                assert "floating-point division by zero (float division by zero)" in msg, where

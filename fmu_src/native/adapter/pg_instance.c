@@ -458,7 +458,7 @@ int pg_inst_exit_initialization(PgInstance *in)
     in->inputs_changed = any_slope(in); /* derivatives set before: the first step takes them */
     in->h_fast = fast_step_limit(in);
     notes_end(in, &nt);
-    update_outputs(in);
+    if (update_outputs(in)) return pg_inst_model_failed(in); /* an output that is not finite */
     if (in->fmu->fmi == 3) pg3_after_exit_initialization(in);
     return PG_ST_OK;
 }
@@ -633,8 +633,7 @@ int pg_inst_do_step(PgInstance *in, double t, double h)
     }
     if (!rc) rc = in->fmu->fmi == 3 ? pg3_advance_engine(in, end) : pg_engine_advance(e, end);
     notes_end(in, &nt);
-    if (rc) return pg_inst_model_failed(in);
-    update_outputs(in);
+    if (rc || update_outputs(in)) return pg_inst_model_failed(in); /* (an output that is not finite) */
     st->t_ok = e->t_out;
     return PG_ST_OK;
 }

@@ -150,6 +150,97 @@ static int at_time(PgEngine *e, int rc, const char *prefix, double t, const char
     return rc;
 }
 
+/* "the flow failed at t = 0.3 s (state h = 0.5, v = -2.9): " ("the guard of event bounce ...") */
+static void function_failed_at(const PgEngine *e, PgMsg *m, const char *function, int event, double t,
+                               const double *x)
+{
+    pg_msg_str(m, function);
+    if (event >= 0) {
+        pg_msg_str(m, " of event ");
+        pg_msg_str(m, event_name(e, event));
+    }
+    pg_msg_str(m, " failed at t = ");
+    pg_msg_value(m, t, 'f', "r");
+    pg_msg_str(m, " s");
+    for (int i = 0; i < e->nx; ++i) {
+        pg_msg_str(m, i ? ", " : " (state ");
+        pg_msg_str(m, e->model->state_names[i]);
+        pg_msg_str(m, " = ");
+        pg_msg_value(m, x[i], 'f', "r");
+    }
+    pg_msg_str(m, e->nx ? "): " : ": ");
+}
+
+/* One call of a function of the model during the run — `function` ("the flow", "the guard", "the
+ * jump", "the outputs") of `event` (or -1) at (t, x) — with its result code `rc` and the n values it
+ * returned (value i named by the format `label` of names[i]; names NULL: one unnamed value). PG_OK with finite
+ * values passes. A model error (the Python binding's text carries the exception's type, file and
+ * line), an arithmetic failure or a non-finite value at a finite state ends the run with one
+ * message (PG_RAISE, in m) naming the function, the time, the state and the cause. (A non-finite
+ * state is left to the engine's own checks: a trial stage that overflowed, a singular W.) */
+static int model_call(const PgEngine *e, PgMsg *m, int rc, const char *function, int event, double t,
+                      const double *x, const double *v, int n, const char *label, const char *const *names)
+{
+    if (rc == PG_NO_JVP) return rc;
+    int bad = -1;
+    if (rc == PG_OK) {
+        for (int i = 0; i < n && bad < 0; ++i)
+            if (!isfinite(v[i])) bad = i;
+        if (bad < 0) return PG_OK;
+        for (int i = 0; i < e->nx; ++i)
+            if (!isfinite(x[i])) return PG_OK;
+    }
+    char cause[PG_MSG_MAX];
+    snprintf(cause, sizeof cause, "%s", m->text);
+    int arith = m->arith;
+    pg_msg_clear(m);
+    function_failed_at(e, m, function, event, t, x);
+    if (rc == PG_OK) {
+        pg_msg_str(m, "it returned ");
+        if (names) {
+            pg_msg_printf(m, label, names[bad]);
+            pg_msg_str(m, " = ");
+        }
+        pg_msg_value(m, v[bad], 'f', "r");
+        pg_msg_str(m, " (a model function must return finite numbers)");
+    } else if (rc == PG_ARITH) {
+        pg_msg_printf(m, "floating-point %s (%s)", arith == PG_ZERO_DIVISION ? "division by zero"
+                                                   : arith == PG_OVERFLOW    ? "overflow"
+                                                                             : "domain error", cause);
+        if (arith == PG_OVERFLOW) {
+            pg_msg_str(m, "; ");
+            extreme_parameters(e, m);
+        }
+    } else {
+        pg_msg_str(m, cause);
+    }
+    m->arith = 0;
+    return PG_RAISE;
+}
+
+/* A flow that returns a non-finite rate at a finite state (a trial stage): the step is rejected as
+ * before (a wild trial may recover at a smaller step), and the failure is noted; if the step size
+ * then collapses, the note is the run's message: the flow named, with its time, state and value. */
+#define NOTE_NEAR 1e-3 /* a stage this near the step's start state (relative to 1 + its magnitude) */
+static void note_flow(PgEngine *e, double t, const double *y, const double *dy)
+{
+    int bad = -1;
+    for (int i = 0; i < e->nx && bad < 0; ++i)
+        if (!isfinite(dy[i])) bad = i;
+    if (bad < 0) return;
+    /* only at a state near the step's start: a wild trial of a stiff or singular step (a state far out,
+     * the rate overflowing) is the step size's problem, told by the collapse's own message */
+    for (int i = 0; i < e->nx; ++i)
+        if (!isfinite(y[i]) || fabs(y[i] - e->x[i]) > NOTE_NEAR * (1.0 + fabs(e->x[i]))) return;
+    PgMsg *m = &e->note;
+    pg_msg_clear(m);
+    function_failed_at(e, m, "the flow", -1, t, y);
+    pg_msg_printf(m, "it returned d%s/dt = ", e->model->state_names[bad]);
+    pg_msg_value(m, dy[bad], 'f', "r");
+    pg_msg_str(m, " (a model function must return finite numbers)");
+    e->has_note = 1;
+}
+
 /* ---- the model, in the current (q, u) ----------------------------------------------------- */
 /* the inputs at time t: held (e->u, today's arithmetic untouched) or on their line from t_u */
 static const double *u_at(PgEngine *e, double t)
@@ -163,13 +254,19 @@ static const double *u_at(PgEngine *e, double t)
 static int model_fun(void *ctx, double t, const double *y, double *dy, PgMsg *m)
 {
     PgEngine *e = ctx;
-    return e->model->flow(t, y, e->q, u_at(e, t), e->p, dy, m);
+    int rc = e->model->flow(t, y, e->q, u_at(e, t), e->p, dy, m);
+    if (rc == PG_OK) {
+        note_flow(e, t, y, dy);
+        return PG_OK;
+    }
+    return model_call(e, m, rc, "the flow", -1, t, y, dy, e->nx, "d%s/dt", e->model->state_names);
 }
 
 /* guard i at the state x of time t (with the inputs of t) */
 static int guard_at(PgEngine *e, int i, double t, const double *x, double *g)
 {
-    return e->model->guard(i, t, x, e->q, u_at(e, t), e->p, g, &e->msg);
+    int rc = e->model->guard(i, t, x, e->q, u_at(e, t), e->p, g, &e->msg);
+    return model_call(e, &e->msg, rc, "the guard", i, t, x, g, 1, "%s", NULL);
 }
 
 /* ---- the Jacobian (Rodas5P) ---------------------------------------------------------------- */
@@ -803,6 +900,15 @@ static int collapse_error(PgEngine *e, double t, double h)
 {
     PgMsg *m = &e->msg;
     pg_msg_clear(m);
+    if (e->has_note) { /* the cause: the flow returned a non-finite rate at a finite state */
+        pg_msg_str(m, e->note.text);
+        pg_msg_str(m, "; no step past it (the step size collapsed to ");
+        pg_msg_value(m, h, 'f', ".3g");
+        pg_msg_str(m, " s at t = ");
+        pg_msg_value(m, t, 'f', ".15g");
+        pg_msg_str(m, " s)");
+        return PG_RAISE;
+    }
     if (e->has_last && e->last.time == t) {
         int count = 0;
         double oldest = t;
@@ -1291,6 +1397,7 @@ static int step(PgEngine *e, double t_target)
         }
     }
     e->n_steps += 1;
+    e->has_note = 0; /* (a trial's non-finite rate that a smaller step avoided) */
     stiffness_test(e, K, h);
     PgSeg seg;
     make_seg(e, &seg, t, t_new, y, y_new, f, K);
@@ -1433,10 +1540,12 @@ static int apply_pending_event(PgEngine *e)
     int ne = e->model->ne;
     if (i < ne) {
         if (e->pending_located) TRY(guard_at(e, i, e->t, e->x, &own_g));
-        TRY(e->model->jump(i, e->t, e->x, e->q, u_at(e, e->t), e->p, x_new, q_new, &e->msg));
+        TRY(model_call(e, &e->msg, e->model->jump(i, e->t, e->x, e->q, u_at(e, e->t), e->p, x_new, q_new, &e->msg),
+                       "the jump", i, e->t, e->x, x_new, e->nx, "%s", e->model->state_names));
     } else {
         int k = i - ne;
-        TRY(e->model->time_jump(k, e->t, e->x, e->q, u_at(e, e->t), e->p, x_new, q_new, &e->msg));
+        TRY(model_call(e, &e->msg, e->model->time_jump(k, e->t, e->x, e->q, u_at(e, e->t), e->p, x_new, q_new, &e->msg),
+                       "the jump", i, e->t, e->x, x_new, e->nx, "%s", e->model->state_names));
         e->te_count[k] += 1; /* the next instant counted from the first: no drift over many periods */
         e->te_next[k] = e->te_every[k] > 0.0 ? e->te_at[k] + (double)e->te_count[k] * e->te_every[k] : INFINITY;
     }
@@ -1825,7 +1934,8 @@ int pg_engine_guard(PgEngine *e, int k, const double *x, double *g) { return gua
 
 int pg_engine_outputs(PgEngine *e, double t, const double *x, const double *q, double *y)
 {
-    return e->model->outputs(t, x, q, u_at(e, t), e->p, y, &e->msg);
+    int rc = e->model->outputs(t, x, q, u_at(e, t), e->p, y, &e->msg);
+    return model_call(e, &e->msg, rc, "the outputs", -1, t, x, y, e->model->ny, "%s", e->model->output_names);
 }
 
 size_t pg_engine_sizeof(void) { return sizeof(PgEngine); }

@@ -9,6 +9,7 @@ int pg_dopri5_step(PgFun fun, void *ctx, double t, const double *y, const double
                    double *y_new, double *f_new, double *K, PgMsg *m)
 {
     double tmp[PG_MAX_X] = {0};
+    int rc;
     double *k0 = K + 0 * PG_MAX_X;
     double *k1 = K + 1 * PG_MAX_X;
     double *k2 = K + 2 * PG_MAX_X;
@@ -18,17 +19,17 @@ int pg_dopri5_step(PgFun fun, void *ctx, double t, const double *y, const double
     double *k6 = K + 6 * PG_MAX_X;
     for (int i = 0; i < n; ++i) k0[i] = f[i];
     for (int i = 0; i < n; ++i) tmp[i] = y[i] + h*(0.2*k0[i]);
-    if (fun(ctx, t + 0.2*h, tmp, k1, m)) return PG_ARITH;
+    if ((rc = fun(ctx, t + 0.2*h, tmp, k1, m)) != PG_OK) return rc;
     for (int i = 0; i < n; ++i) tmp[i] = y[i] + h*(0.075*k0[i] + 0.225*k1[i]);
-    if (fun(ctx, t + 0.3*h, tmp, k2, m)) return PG_ARITH;
+    if ((rc = fun(ctx, t + 0.3*h, tmp, k2, m)) != PG_OK) return rc;
     for (int i = 0; i < n; ++i) tmp[i] = y[i] + h*(0.9777777777777777*k0[i] + (-3.7333333333333334)*k1[i] + 3.5555555555555554*k2[i]);
-    if (fun(ctx, t + 0.8*h, tmp, k3, m)) return PG_ARITH;
+    if ((rc = fun(ctx, t + 0.8*h, tmp, k3, m)) != PG_OK) return rc;
     for (int i = 0; i < n; ++i) tmp[i] = y[i] + h*(2.9525986892242035*k0[i] + (-11.595793324188385)*k1[i] + 9.822892851699436*k2[i] + (-0.2908093278463649)*k3[i]);
-    if (fun(ctx, t + 0.8888888888888888*h, tmp, k4, m)) return PG_ARITH;
+    if ((rc = fun(ctx, t + 0.8888888888888888*h, tmp, k4, m)) != PG_OK) return rc;
     for (int i = 0; i < n; ++i) tmp[i] = y[i] + h*(2.8462752525252526*k0[i] + (-10.757575757575758)*k1[i] + 8.906422717743473*k2[i] + 0.2784090909090909*k3[i] + (-0.2735313036020583)*k4[i]);
-    if (fun(ctx, t + 1.0*h, tmp, k5, m)) return PG_ARITH;
+    if ((rc = fun(ctx, t + 1.0*h, tmp, k5, m)) != PG_OK) return rc;
     for (int i = 0; i < n; ++i) y_new[i] = y[i] + h*(0.09114583333333333*k0[i] + 0.44923629829290207*k2[i] + 0.6510416666666666*k3[i] + (-0.322376179245283)*k4[i] + 0.13095238095238096*k5[i]);
-    if (fun(ctx, t + h, y_new, f_new, m)) return PG_ARITH;
+    if ((rc = fun(ctx, t + h, y_new, f_new, m)) != PG_OK) return rc;
     for (int i = 0; i < n; ++i) k6[i] = f_new[i];
     return PG_OK;
 }
@@ -82,6 +83,7 @@ int pg_dop853_step(PgFun fun, void *ctx, double t, const double *y, const double
                    double *y_new, double *f_new, double *K, PgMsg *m)
 {
     double tmp[PG_MAX_X] = {0};
+    int rc;
     double *k0 = K + 0 * PG_MAX_X;
     double *k1 = K + 1 * PG_MAX_X;
     double *k2 = K + 2 * PG_MAX_X;
@@ -97,29 +99,29 @@ int pg_dop853_step(PgFun fun, void *ctx, double t, const double *y, const double
     double *k12 = K + 12 * PG_MAX_X;
     for (int i = 0; i < n; ++i) k0[i] = f[i];
     for (int i = 0; i < n; ++i) tmp[i] = y[i] + h*(0.05260015195876773*k0[i]);
-    if (fun(ctx, t + 0.05260015195876773*h, tmp, k1, m)) return PG_ARITH;
+    if ((rc = fun(ctx, t + 0.05260015195876773*h, tmp, k1, m)) != PG_OK) return rc;
     for (int i = 0; i < n; ++i) tmp[i] = y[i] + h*(0.0197250569845379*k0[i] + 0.0591751709536137*k1[i]);
-    if (fun(ctx, t + 0.0789002279381516*h, tmp, k2, m)) return PG_ARITH;
+    if ((rc = fun(ctx, t + 0.0789002279381516*h, tmp, k2, m)) != PG_OK) return rc;
     for (int i = 0; i < n; ++i) tmp[i] = y[i] + h*(0.02958758547680685*k0[i] + 0.08876275643042054*k2[i]);
-    if (fun(ctx, t + 0.1183503419072274*h, tmp, k3, m)) return PG_ARITH;
+    if ((rc = fun(ctx, t + 0.1183503419072274*h, tmp, k3, m)) != PG_OK) return rc;
     for (int i = 0; i < n; ++i) tmp[i] = y[i] + h*(0.2413651341592667*k0[i] + (-0.8845494793282861)*k2[i] + 0.924834003261792*k3[i]);
-    if (fun(ctx, t + 0.2816496580927726*h, tmp, k4, m)) return PG_ARITH;
+    if ((rc = fun(ctx, t + 0.2816496580927726*h, tmp, k4, m)) != PG_OK) return rc;
     for (int i = 0; i < n; ++i) tmp[i] = y[i] + h*(0.037037037037037035*k0[i] + 0.17082860872947386*k3[i] + 0.12546768756682242*k4[i]);
-    if (fun(ctx, t + 0.3333333333333333*h, tmp, k5, m)) return PG_ARITH;
+    if ((rc = fun(ctx, t + 0.3333333333333333*h, tmp, k5, m)) != PG_OK) return rc;
     for (int i = 0; i < n; ++i) tmp[i] = y[i] + h*(0.037109375*k0[i] + 0.17025221101954405*k3[i] + 0.06021653898045596*k4[i] + (-0.017578125)*k5[i]);
-    if (fun(ctx, t + 0.25*h, tmp, k6, m)) return PG_ARITH;
+    if ((rc = fun(ctx, t + 0.25*h, tmp, k6, m)) != PG_OK) return rc;
     for (int i = 0; i < n; ++i) tmp[i] = y[i] + h*(0.03709200011850479*k0[i] + 0.17038392571223998*k3[i] + 0.10726203044637328*k4[i] + (-0.015319437748624402)*k5[i] + 0.008273789163814023*k6[i]);
-    if (fun(ctx, t + 0.3076923076923077*h, tmp, k7, m)) return PG_ARITH;
+    if ((rc = fun(ctx, t + 0.3076923076923077*h, tmp, k7, m)) != PG_OK) return rc;
     for (int i = 0; i < n; ++i) tmp[i] = y[i] + h*(0.6241109587160757*k0[i] + (-3.3608926294469414)*k3[i] + (-0.868219346841726)*k4[i] + 27.59209969944671*k5[i] + 20.154067550477894*k6[i] + (-43.48988418106996)*k7[i]);
-    if (fun(ctx, t + 0.6512820512820513*h, tmp, k8, m)) return PG_ARITH;
+    if ((rc = fun(ctx, t + 0.6512820512820513*h, tmp, k8, m)) != PG_OK) return rc;
     for (int i = 0; i < n; ++i) tmp[i] = y[i] + h*(0.47766253643826434*k0[i] + (-2.4881146199716677)*k3[i] + (-0.590290826836843)*k4[i] + 21.230051448181193*k5[i] + 15.279233632882423*k6[i] + (-33.28821096898486)*k7[i] + (-0.020331201708508627)*k8[i]);
-    if (fun(ctx, t + 0.6*h, tmp, k9, m)) return PG_ARITH;
+    if ((rc = fun(ctx, t + 0.6*h, tmp, k9, m)) != PG_OK) return rc;
     for (int i = 0; i < n; ++i) tmp[i] = y[i] + h*((-0.9371424300859873)*k0[i] + 5.186372428844064*k3[i] + 1.0914373489967295*k4[i] + (-8.149787010746927)*k5[i] + (-18.52006565999696)*k6[i] + 22.739487099350505*k7[i] + 2.4936055526796523*k8[i] + (-3.0467644718982196)*k9[i]);
-    if (fun(ctx, t + 0.8571428571428571*h, tmp, k10, m)) return PG_ARITH;
+    if ((rc = fun(ctx, t + 0.8571428571428571*h, tmp, k10, m)) != PG_OK) return rc;
     for (int i = 0; i < n; ++i) tmp[i] = y[i] + h*(2.273310147516538*k0[i] + (-10.53449546673725)*k3[i] + (-2.0008720582248625)*k4[i] + (-17.9589318631188)*k5[i] + 27.94888452941996*k6[i] + (-2.8589982771350235)*k7[i] + (-8.87285693353063)*k8[i] + 12.360567175794303*k9[i] + 0.6433927460157636*k10[i]);
-    if (fun(ctx, t + 1.0*h, tmp, k11, m)) return PG_ARITH;
+    if ((rc = fun(ctx, t + 1.0*h, tmp, k11, m)) != PG_OK) return rc;
     for (int i = 0; i < n; ++i) y_new[i] = y[i] + h*(0.054293734116568765*k0[i] + 4.450312892752409*k5[i] + 1.8915178993145003*k6[i] + (-5.801203960010585)*k7[i] + 0.3111643669578199*k8[i] + (-0.1521609496625161)*k9[i] + 0.20136540080403034*k10[i] + 0.04471061572777259*k11[i]);
-    if (fun(ctx, t + h, y_new, f_new, m)) return PG_ARITH;
+    if ((rc = fun(ctx, t + h, y_new, f_new, m)) != PG_OK) return rc;
     for (int i = 0; i < n; ++i) k12[i] = f_new[i];
     return PG_OK;
 }
@@ -154,6 +156,7 @@ int pg_dop853_dense(PgFun fun, void *ctx, double t0, const double *y0, const dou
                     const double *K, int n, double *Q, PgMsg *m)
 {
     double tmp[PG_MAX_X] = {0}, X[3][PG_MAX_X];
+    int rc;
     const double *k0 = K + 0 * PG_MAX_X;
     const double *k5 = K + 5 * PG_MAX_X;
     const double *k6 = K + 6 * PG_MAX_X;
@@ -167,11 +170,11 @@ int pg_dop853_dense(PgFun fun, void *ctx, double t0, const double *y0, const dou
     double *k14 = X[1];
     double *k15 = X[2];
     for (int i = 0; i < n; ++i) tmp[i] = y0[i] + h*(0.056167502283047954*k0[i] + 0.25350021021662483*k6[i] + (-0.2462390374708025)*k7[i] + (-0.12419142326381637)*k8[i] + 0.15329179827876568*k9[i] + 0.00820105229563469*k10[i] + 0.007567897660545699*k11[i] + (-0.008298)*k12[i]);
-    if (fun(ctx, t0 + 0.1*h, tmp, k13, m)) return PG_ARITH;
+    if ((rc = fun(ctx, t0 + 0.1*h, tmp, k13, m)) != PG_OK) return rc;
     for (int i = 0; i < n; ++i) tmp[i] = y0[i] + h*(0.03183464816350214*k0[i] + 0.028300909672366776*k5[i] + 0.053541988307438566*k6[i] + (-0.05492374857139099)*k7[i] + (-0.00010834732869724932)*k10[i] + 0.0003825710908356584*k11[i] + (-0.00034046500868740456)*k12[i] + 0.1413124436746325*k13[i]);
-    if (fun(ctx, t0 + 0.2*h, tmp, k14, m)) return PG_ARITH;
+    if ((rc = fun(ctx, t0 + 0.2*h, tmp, k14, m)) != PG_OK) return rc;
     for (int i = 0; i < n; ++i) tmp[i] = y0[i] + h*((-0.42889630158379194)*k0[i] + (-4.697621415361164)*k5[i] + 7.683421196062599*k6[i] + 4.06898981839711*k7[i] + 0.3567271874552811*k8[i] + (-0.0013990241651590145)*k12[i] + 2.9475147891527724*k13[i] + (-9.15095847217987)*k14[i]);
-    if (fun(ctx, t0 + 0.7777777777777778*h, tmp, k15, m)) return PG_ARITH;
+    if ((rc = fun(ctx, t0 + 0.7777777777777778*h, tmp, k15, m)) != PG_OK) return rc;
     for (int i = 0; i < n; ++i) {
         const double f0 = y1[i] - y0[i];
         Q[i] = f0;

@@ -20,11 +20,13 @@ def _sum(coefs, stage, i="i"):
 
 
 def _stage_lines(A, C, first, last, y, t, fail):
+    """The stages; a failed call of the model's function returns its own code (a model's error,
+    PG_RAISE with the engine's message naming the function, passes as it is, not as PG_ARITH)."""
     out = []
     for s in range(first, last):
         expr = _sum(A[s][:s], lambda j: f"k{j}")
         out += [f"    for (int i = 0; i < n; ++i) tmp[i] = {y}[i] + h*({expr});",
-                f"    if (fun(ctx, {t} + {literal(C[s])}*h, tmp, k{s}, m)) {fail}"]
+                f"    if ((rc = fun(ctx, {t} + {literal(C[s])}*h, tmp, k{s}, m)) != PG_OK) {fail}"]
     return out
 
 
@@ -50,11 +52,11 @@ def _step_function(title, name, A, B, C, ns):
     lines = [f"/* {title} */",
              f"int pg_{name}_step(PgFun fun, void *ctx, double t, const double *y, const double *f, double h, int n,",
              "                   double *y_new, double *f_new, double *K, PgMsg *m)", "{",
-             "    double tmp[PG_MAX_X] = {0};", *_stage_names(ns + 1),
+             "    double tmp[PG_MAX_X] = {0};", "    int rc;", *_stage_names(ns + 1),
              "    for (int i = 0; i < n; ++i) k0[i] = f[i];"]
-    lines += _stage_lines(A, C, 1, ns, "y", "t", "return PG_ARITH;")
+    lines += _stage_lines(A, C, 1, ns, "y", "t", "return rc;")
     lines += [f"    for (int i = 0; i < n; ++i) y_new[i] = y[i] + h*({_sum(B, lambda j: f'k{j}')});",
-              "    if (fun(ctx, t + h, y_new, f_new, m)) return PG_ARITH;",
+              "    if ((rc = fun(ctx, t + h, y_new, f_new, m)) != PG_OK) return rc;",
               f"    for (int i = 0; i < n; ++i) k{ns}[i] = f_new[i];", "    return PG_OK;", "}", ""]
     return lines
 
@@ -107,11 +109,11 @@ def dop853() -> str:
     lines += ["/* the seven coefficient vectors of the continuous extension (three more stages) */",
               "int pg_dop853_dense(PgFun fun, void *ctx, double t0, const double *y0, const double *y1, double h,",
               "                    const double *K, int n, double *Q, PgMsg *m)", "{",
-              "    double tmp[PG_MAX_X] = {0}, X[3][PG_MAX_X];",
+              "    double tmp[PG_MAX_X] = {0}, X[3][PG_MAX_X];", "    int rc;",
               *_const_stages(ns + 1, *(row[:ns + 1] for row in A[ns + 1:nx]), *(d[:ns + 1] for d in tab.DOP853_D),
                              always=(0, ns)),
               *[f"    double *k{j} = X[{j - ns - 1}];" for j in range(ns + 1, nx)]]
-    lines += _stage_lines(A, C, ns + 1, nx, "y0", "t0", "return PG_ARITH;")
+    lines += _stage_lines(A, C, ns + 1, nx, "y0", "t0", "return rc;")
     lines += ["    for (int i = 0; i < n; ++i) {",
               "        const double f0 = y1[i] - y0[i];",
               "        Q[i] = f0;",

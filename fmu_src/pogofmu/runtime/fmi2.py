@@ -56,7 +56,7 @@ from .engine import SOLVER_PARAMETERS, Simulator, snapshot_from_data, snapshot_t
     split_parameters
 from .engine.settings import REL_TOL_MAX, REL_TOL_MIN
 from .eventlog import CATEGORY as EVENT_CATEGORY, event_message
-from .model import HybridModel, ModelError, Params
+from .model import DomainError, HybridModel, ModelError, Params
 from .status import ERROR, FATAL, OK, WARNING, log_category
 
 __all__ = ["HybridSlave", "FMUError", "FmiVariable", "fmi2_variables", "LOG_CATEGORIES"]
@@ -166,6 +166,7 @@ class HybridSlave:
         variables, by_vr, real_out, int_out = self._variable_tables()
         self._vars = by_vr
         self._output_fn = model.output_fn
+        self._model_outputs = tuple(v.name for v in model.outputs)  # (checked finite after each step)
         # the hooks below, called only where a subclass (FMI 3.0) overrides them: the common step
         # then costs no extra call
         cls = type(self)
@@ -385,6 +386,8 @@ class HybridSlave:
         sim = self._sim
         t, x, q = (sim.t_out, sim.x_out, sim.q_out) if point is None else point
         out = self._output_fn(t, x, q, sim.inputs_at(t) if sim.sloped else sim.u, sim.p)
+        if point is None and not all(map(math.isfinite, [out[n] for n in self._model_outputs])):
+            raise self._model_failed(DomainError(self._output_failure(t, x, out)))
         last = sim.last_event
         if last is None:
             out["n_events"], out["t_last_event"], out["last_event"] = sim.n_events, self._t_start, 0
@@ -395,6 +398,15 @@ class HybridSlave:
         self._out = out
         self._pack_outputs(self._oview, 0, *self._out_values(out))
         self._ctl[0] = 1
+
+    def _output_failure(self, t, x, out) -> str:
+        """The engine's text (pg_engine.c, model_call) for an output function that returned a
+        non-finite value: the function, the time, the state, the first such output."""
+        model = type(self).model
+        name = next(n for n in self._model_outputs if not math.isfinite(out[n]))
+        state = ", ".join(f"{v.name} = {float(xi)!r}" for v, xi in zip(model.states, x))
+        return (f"the outputs failed at t = {float(t)!r} s{f' (state {state})' if state else ''}: it returned "
+                f"{name} = {float(out[name])!r} (a model function must return finite numbers)")
 
     def _complete_outputs(self, t, x, q, u, p, out):
         """Hook: add further variables to ``out`` (FMI 3.0: states, derivatives, event indicators)."""

@@ -34,6 +34,8 @@ from __future__ import annotations
 
 import ctypes as C
 import math
+import os
+import re
 import struct
 import threading
 import weakref
@@ -324,11 +326,30 @@ def _arith_kind(exc) -> int:
     return PG_DOMAIN
 
 
+# the engine's message for a function of the model that failed during the run (pg_engine.c, model_call)
+_FUNCTION_FAILED = re.compile(r"the (flow|guard of event .+|jump of event .+|outputs) failed at t = ")
+# the model's own code: outside this runtime's folder (host side), or in its user/ folder (in an FMU)
+_RUNTIME = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def _users_line(exc) -> str:
+    """The text " at ball.py:12": the innermost line of the model's own code in ``exc``'s traceback (a user's
+    model file or its local modules; not the runtime, nor the project's models), or ""."""
+    found, tb = "", exc.__traceback__
+    while tb is not None:
+        path = os.path.abspath(tb.tb_frame.f_code.co_filename)
+        if not path.startswith(_RUNTIME + os.sep) or path.startswith(os.path.join(_RUNTIME, "user") + os.sep):
+            found = f" at {os.path.basename(path)}:{tb.tb_lineno}"
+        tb = tb.tb_next
+    return found
+
+
 def _error_class(text: str):
     """The ModelError subclass an engine refusal belongs to (the engine's texts, pg_engine.c)."""
     if text.startswith("event storm"):
         return ZenoError
-    if text.startswith(("the trajectory left", "floating-point", "the state became non-finite", "the rate d")):
+    if text.startswith(("the trajectory left", "floating-point", "the state became non-finite", "the rate d")) or \
+            _FUNCTION_FAILED.match(text):
         return DomainError
     if text.startswith("cannot go back in time"):
         return ValueError
@@ -482,16 +503,19 @@ class Simulator:
         return PG_RAISE
 
     def _fail(self, exc, m) -> int:
-        """A Python exception inside a callback: kept, to be raised again as itself."""
+        """A Python exception inside a callback: kept, to be raised again as itself (unless the engine
+        names the function of the model it came from: then the engine's message, from it). An
+        exception of the model's own code carries its type, file and line into the message."""
         msg = PgMsg.from_address(m)
+        where = "" if isinstance(exc, ModelError) else _users_line(exc)
         if isinstance(exc, (ArithmeticError, ValueError)) and not isinstance(exc, ModelError):
             self._exc = None
             msg.arith = _arith_kind(exc)
             detail = exc.args[-1] if exc.args and isinstance(exc.args[-1], str) else str(exc)
-            _write_text(msg, detail)
+            _write_text(msg, f"{type(exc).__name__}: {detail}{where}" if where else detail)
             return PG_ARITH
         self._exc = exc
-        _write_text(msg, str(exc) if isinstance(exc, ModelError) else f"{type(exc).__name__}: {exc}")
+        _write_text(msg, str(exc) if isinstance(exc, ModelError) else f"{type(exc).__name__}: {exc}{where}")
         return PG_RAISE
 
     def _q(self, q, u=None):
@@ -697,6 +721,8 @@ class Simulator:
             return
         text = self._lib.pgb_message(self._engine).decode("utf-8", "replace")
         exc, self._exc = self._exc, None
+        if isinstance(exc, Exception) and _FUNCTION_FAILED.match(text):
+            raise DomainError(text) from exc
         if exc is not None and (not isinstance(exc, ModelError) or str(exc) == text):
             raise exc
         raise _error_class(text)(text)
