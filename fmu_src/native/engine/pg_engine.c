@@ -1765,7 +1765,13 @@ int pg_engine_set_inputs(PgEngine *e, const double *u, const double *du)
     double h0 = 0;
     if (!rc) rc = initial_step(e, &h0);
     if (rc) return at_time(e, rc, "the input change at t = ", e->t, " s");
-    e->h = pmin(e->h, h0);
+    if (e->n_steps == 0 && e->n_rejected == 0 && e->n_events == 0) {
+        /* nothing integrated yet (an input set after the initialization, before the first step): the
+         * start's own first step, as if the value had been set in Initialization Mode — the same bits */
+        if (!(e->s[PG_S_INITIAL_STEP] > 0)) e->h = h0;
+    } else {
+        e->h = pmin(e->h, h0);
+    }
     if (crossed >= 0) {
         e->has_pending = 1, e->pending_located = 0, e->pending_index = crossed, e->zero_hit = 0;
         memcpy(e->pending_x, e->x, sizeof e->x);
