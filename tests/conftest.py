@@ -14,8 +14,18 @@ sys.path.insert(0, str(ROOT / "fmu_src"))  # this checkout's code, whichever pog
 
 def pytest_configure(config):
     os.environ.setdefault("MPLBACKEND", "Agg")
+    config.addinivalue_line("markers", "needs(available, what): a prerequisite a registry supplies (support.needs_mark)")
     config.addinivalue_line("markers", "own_fmus: the module exports the FMUs it needs itself (or needs none): "
                                        "the session's build of every project FMU is not run for it")
+
+
+def pytest_runtest_setup(item):
+    """The ``needs`` marks (support.needs_mark): a missing prerequisite that a registry supplies is
+    skipped on a developer's machine and fails under CI=true."""
+    from support import require
+
+    for mark in item.iter_markers("needs"):
+        require(*mark.args)
 
 
 def pytest_collection_modifyitems(config, items):

@@ -44,6 +44,25 @@ def needs(available: bool, what: str):
     return deco
 
 
+def require(available: bool, what: str):
+    """Inside a test or a fixture: :func:`needs`' rule (skipped naming ``what`` where it is missing,
+    failed under ``CI=true``)."""
+    import pytest
+
+    if not available:
+        if IN_CI:
+            pytest.fail(f"missing under CI=true: {what} (.ci/run installs it)")
+        pytest.skip(f"no {what}")
+
+
+def needs_mark(available: bool, what: str):
+    """:func:`needs` as a mark, for a module (``pytestmark``) or a parametrized test: the conftest
+    applies the rule before each test it marks."""
+    import pytest
+
+    return pytest.mark.needs(bool(available), what)
+
+
 EXAMPLES = ROOT / "examples"
 
 

@@ -27,7 +27,7 @@ from hypothesis import strategies as st
 from hypothesis.stateful import RuleBasedStateMachine, precondition, rule
 
 from pogofmu.fmpy_raw import raw_call
-from support import BACKENDS, DIST, ROOT, RawInstance
+from support import BACKENDS, DIST, RawInstance, require, ROOT
 
 EXAMPLES = int(os.environ.get("POGOFMU_STATEFUL_EXAMPLES", "10"))
 SETTINGS = settings(max_examples=EXAMPLES, stateful_step_count=30, derandomize=True, deadline=None,
@@ -561,8 +561,7 @@ def test_random_call_sequences_under_address_sanitizer(tmp_path):
     where the compiler cannot build with the sanitizers)."""
     cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
     libasan = _sanitizer_runtime(cc, tmp_path) if cc else None
-    if libasan is None:
-        pytest.skip(f"{cc or 'no C compiler'}: no -fsanitize=address,undefined")
+    require(libasan is not None, f"-fsanitize=address,undefined from {cc or 'a C compiler'} (Debian gcc)")
     dist = tmp_path / "dist"
     drawn = tmp_path / "drawn"
     for folder in ("native", "native/fmi3"):

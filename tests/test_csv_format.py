@@ -17,9 +17,10 @@ import pytest
 
 from pogofmu.ssp import record
 from pogofmu.ssp.package import SSPError
+from support import needs_mark, require
 
 LIB = record.csv_library()
-need_c = pytest.mark.skipif(LIB is None, reason="no C compiler: the csv module writes the rows")
+need_c = needs_mark(LIB is not None, "the csv module's C library (a C compiler: Debian gcc, or PyPI ziglang)")
 
 
 def python_text(block, is_int):
@@ -185,8 +186,8 @@ class FullDisk:
 
 @pytest.mark.parametrize("threads,native", [(1, True), (2, True), (1, False), (2, False)])
 def test_a_failed_write_is_the_masters_error_and_the_rows_so_far_are_kept(tmp_path, threads, native):
-    if native and LIB is None:
-        pytest.skip("no C compiler")
+    if native:
+        require(LIB is not None, "the csv module's C library (a C compiler: Debian gcc, or PyPI ziglang)")
     s = record.CSVStream(tmp_path / "r.csv", NAMES, TYPES, [None] * 4, (0.0, 100.0), threads=threads)
     s._out = FullDisk(s._out, 3_000_000)
     values = np.zeros(6)
@@ -243,7 +244,7 @@ def test_a_runs_csv_is_the_csv_modules_file(mirror):
 
 
 @need_c
-@pytest.mark.skipif(os.name != "posix", reason="RLIMIT_FSIZE")
+@needs_mark(os.name == "posix", "RLIMIT_FSIZE (a POSIX system)")
 def test_a_run_whose_file_cannot_grow_ends_in_one_line_with_the_rows_kept(mirror):
     """The file size limit (EFBIG, as a full disk's ENOSPC) reached on the writer thread: the
     master's one line, its rows so far in default.incomplete.csv."""

@@ -764,7 +764,7 @@ def test_an_export_into_a_full_file_system_leaves_nothing_and_blames_the_output(
     mnt = tmp_path / "mnt"
     mnt.mkdir()
     if subprocess.run(["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", str(mnt)], capture_output=True).returncode:
-        pytest.skip("cannot mount a tmpfs here")
+        pytest.skip("cannot mount a tmpfs here")  # (a privilege, not a package: RLIMIT_FSIZE tests cover the rest)
     try:
         (tmp_path / "ball.py").write_text(BALL)
         proc = pogofmu("export", "ball.py", "--out", "mnt", "--backend", "python", "--fmi", "2", cwd=tmp_path)

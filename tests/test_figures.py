@@ -16,7 +16,8 @@ from support import DIST, all_fmus
 from pogofmu import experiments
 from pogofmu import ssp
 
-matplotlib = pytest.importorskip("matplotlib")
+import matplotlib  # noqa: E402  (a dependency of the project, pyproject.toml)
+
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 

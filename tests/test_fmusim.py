@@ -46,6 +46,7 @@ def _fmusim():
 
 
 FMUSIM, WHY = _fmusim()
+# the one skip not routed through support.needs_mark: no registry (Debian, PyPI) has fmusim
 pytestmark = pytest.mark.skipif(FMUSIM is None, reason=WHY)
 
 ME_TOL = 1e-10  # model exchange: the importer's CVODE locates the events, to its tolerance

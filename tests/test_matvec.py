@@ -19,12 +19,13 @@ from pogofmu.codegen.cmodel import generate
 from pogofmu.runtime.dual import Dual
 from pogofmu.codegen.trace import TraceError, explore, symbol
 from pogofmu.runtime.model import Params
+from support import needs_mark
 
 pytestmark = pytest.mark.own_fmus  # (exports its own FMUs, or needs none)
 
 D = C.POINTER(C.c_double)
 JVP = C.CFUNCTYPE(C.c_int, C.c_double, D, D, D, D, D, D, D, MSG)
-needs_cc = pytest.mark.skipif(c_compiler() is None, reason="needs a C compiler")
+needs_cc = needs_mark(c_compiler() is not None, "a C compiler (Debian gcc, or the ziglang PyPI package of pyproject.toml)")
 
 # the reference: each row's products added left to right from 0.0, written here
 def left_to_right(rows, v):

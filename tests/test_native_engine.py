@@ -22,6 +22,7 @@ from pogofmu.codegen.build import CompileError, c_compiler, engine_library
 from pogofmu.runtime.engine import SOLVER_PARAMETERS
 from pogofmu.runtime.models import all_models
 from parameter_sets import THRUST, penetrator_params, stick_params
+from support import needs_mark
 
 
 MODELS = sorted(all_models())
@@ -30,7 +31,7 @@ SAME = settings(max_examples=25, deadline=None, derandomize=True, database=None,
                                        HealthCheck.function_scoped_fixture])
 
 pytestmark = [pytest.mark.own_fmus,  # (exports its own FMUs, or needs none)
-              pytest.mark.skipif(c_compiler() is None, reason="needs a C compiler")]
+              needs_mark(c_compiler() is not None, "a C compiler (Debian gcc, or the ziglang PyPI package of pyproject.toml)")]
 
 
 @pytest.fixture(scope="module")

@@ -18,13 +18,14 @@ from pogofmu.runtime.engine import SOLVER_PARAMETERS
 from pogofmu.runtime.engine.settings import check_solver_parameters, domain_slack
 from pogofmu.runtime.model import Params
 from pogofmu.runtime.models import all_models
+from support import needs_mark
 
 
 MODELS = sorted(all_models())
 N_CASES = 300
 
 pytestmark = [pytest.mark.own_fmus,  # (exports its own FMUs, or needs none)
-              pytest.mark.skipif(c_compiler() is None, reason="needs a C compiler")]
+              needs_mark(c_compiler() is not None, "a C compiler (Debian gcc, or the ziglang PyPI package of pyproject.toml)")]
 
 
 @pytest.fixture(scope="module")

@@ -21,9 +21,9 @@ from pogofmu.runtime.engine import SOLVER_PARAMETERS
 from pogofmu.runtime.engine.cengine import FN, PgMsg
 from pogofmu.runtime.models import all_models
 from references import hard_stop_reference, penetrator_contacts
-from support import example_models, fmu_path
+from support import example_models, fmu_path, needs_mark
 
-pytestmark = pytest.mark.skipif(c_compiler() is None, reason="needs a C compiler")
+pytestmark = needs_mark(c_compiler() is not None, "a C compiler (Debian gcc, or the ziglang PyPI package of pyproject.toml)")
 
 T_END = 3.0  # the Penetrator: three contacts (the references cost ~10 s a case in Python)
 SOILS = [(1e6, 1.0), (1e8, 1.5)]
