@@ -576,7 +576,7 @@ NATIVE_REFUSALS = {
         "a loop whose trip count depends on a state", "a loop of a fixed count"),
     "a call into math outside fmath": (
         "flow=lambda t, x, q, u, p: [x[1], -p.g]", "flow=lambda t, x, q, u, p: [x[1], -math.sqrt(p.g * p.g)]",
-        "math.sqrt", "a call into math or numpy", "fmath.sqrt(v)"),
+        "math.sqrt", "math.sqrt(...) of a traced value", "fmath.sqrt(...)"),
     "an unsupported builtin": (
         "flow=lambda t, x, q, u, p: [x[1], -p.g]", "flow=lambda t, x, q, u, p: [x[1], -round(p.g)]",
         "round(p.g)", "__round__", "math.trunc(v + 0.5)"),

@@ -58,5 +58,5 @@ def test_the_standard_librarys_function_on_a_traced_value_names_the_rewrite():
     def traced():
         return math.sqrt(symbol("x", 0))
 
-    with pytest.raises(TraceError, match=r"fmath\.sqrt\(v\)"):
+    with pytest.raises(TraceError, match=r"math\.sqrt\(\.\.\.\) of a traced value.*Rewrite: fmath\.sqrt\(\.\.\.\)"):
         explore(traced, "test")

@@ -249,6 +249,73 @@ int pg_hypot(double a, double b, double *out, PgMsg *m)
     return PG_OK;
 }
 
+int pg_copysign(double a, double b, double *out, PgMsg *m)
+{
+    (void)m;
+    *out = copysign(a, b);
+    return PG_OK;
+}
+
+/* the functions of CPython's math module with its errors: ValueError (a domain error) for an
+ * argument outside the domain, OverflowError for a finite argument with an infinite result */
+int pg_tan(double a, double *out, PgMsg *m)
+{
+    if (isinf(a)) return arith_text(m, PG_DOMAIN, "math domain error");
+    *out = tan(a);
+    return PG_OK;
+}
+
+int pg_asin(double a, double *out, PgMsg *m)
+{
+    if (a < -1.0 || a > 1.0) return arith_text(m, PG_DOMAIN, "math domain error");
+    *out = asin(a);
+    return PG_OK;
+}
+
+int pg_acos(double a, double *out, PgMsg *m)
+{
+    if (a < -1.0 || a > 1.0) return arith_text(m, PG_DOMAIN, "math domain error");
+    *out = acos(a);
+    return PG_OK;
+}
+
+int pg_atan(double a, double *out, PgMsg *m)
+{
+    (void)m;
+    *out = atan(a);
+    return PG_OK;
+}
+
+int pg_sinh(double a, double *out, PgMsg *m)
+{
+    double r = sinh(a);
+    if (isinf(r) && isfinite(a)) return arith_text(m, PG_OVERFLOW, "math range error");
+    *out = r;
+    return PG_OK;
+}
+
+int pg_cosh(double a, double *out, PgMsg *m)
+{
+    double r = cosh(a);
+    if (isinf(r) && isfinite(a)) return arith_text(m, PG_OVERFLOW, "math range error");
+    *out = r;
+    return PG_OK;
+}
+
+int pg_tanh(double a, double *out, PgMsg *m)
+{
+    (void)m;
+    *out = tanh(a);
+    return PG_OK;
+}
+
+int pg_log10(double a, double *out, PgMsg *m)
+{
+    if (!(a > 0.0) && !isnan(a)) return arith_text(m, PG_DOMAIN, "math domain error");
+    *out = log10(a);
+    return PG_OK;
+}
+
 /* math.trunc of a float: an int in Python; NaN and infinities raise */
 int pg_trunc(double a, double *out, PgMsg *m)
 {

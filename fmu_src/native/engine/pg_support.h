@@ -24,6 +24,15 @@ int pg_cos(double a, double *out, PgMsg *m);
 int pg_sin(double a, double *out, PgMsg *m);
 int pg_atan2(double a, double b, double *out, PgMsg *m);
 int pg_hypot(double a, double b, double *out, PgMsg *m);
+int pg_copysign(double a, double b, double *out, PgMsg *m);
+int pg_tan(double a, double *out, PgMsg *m);
+int pg_asin(double a, double *out, PgMsg *m);
+int pg_acos(double a, double *out, PgMsg *m);
+int pg_atan(double a, double *out, PgMsg *m);
+int pg_sinh(double a, double *out, PgMsg *m);
+int pg_cosh(double a, double *out, PgMsg *m);
+int pg_tanh(double a, double *out, PgMsg *m);
+int pg_log10(double a, double *out, PgMsg *m);
 int pg_trunc(double a, double *out, PgMsg *m);
 
 #endif

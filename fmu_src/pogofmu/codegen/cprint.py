@@ -21,7 +21,8 @@ from typing import Callable, Dict, List, Optional, Sequence, Set
 
 from .trace import BOOL, INT, Node, Path, Sym, split_message  # noqa: F401
 
-FALLIBLE = {"truediv", "pow", "sqrt", "exp", "log", "cos", "sin", "trunc"}
+FALLIBLE = {"truediv", "pow", "sqrt", "exp", "log", "cos", "sin", "trunc", "tan", "asin", "acos", "sinh", "cosh",
+            "log10"}
 INFIX = {"add": "+", "sub": "-", "mul": "*", "lt": "<", "le": "<=", "gt": ">", "ge": ">=", "eq": "==", "ne": "!="}
 
 
@@ -147,10 +148,11 @@ class Printer:
         if op == "truediv":
             return [f"if ({num(1)} == 0.0) return pg_arith(m, PG_ZERO_DIVISION);",
                     f"const double {name} = {num(0)} / {num(1)};"]
-        if op in ("pow", "atan2", "hypot"):
-            fn = {"pow": "pg_pow", "atan2": "pg_atan2", "hypot": "pg_hypot"}[op]
+        if op in ("pow", "atan2", "hypot", "copysign"):
+            fn = {"pow": "pg_pow", "atan2": "pg_atan2", "hypot": "pg_hypot", "copysign": "pg_copysign"}[op]
             return [f"double {name};", f"if ({fn}({num(0)}, {num(1)}, &{name}, m)) return PG_ARITH;"]
-        if op in ("sqrt", "exp", "log", "cos", "sin", "trunc"):
+        if op in ("sqrt", "exp", "log", "cos", "sin", "trunc", "tan", "asin", "acos", "atan", "sinh", "cosh", "tanh",
+                  "log10"):
             return [f"double {name};", f"if (pg_{op}({num(0)}, &{name}, m)) return PG_ARITH;"]
         if op == "neg":
             return [f"const double {name} = -{num(0)};"]

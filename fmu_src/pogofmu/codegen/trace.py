@@ -236,9 +236,16 @@ class Sym:
 
     # ---- what cannot be traced ----
     def __float__(self):
-        raise TraceError("float() of a traced value, or a call into math or numpy that converts it (math.sqrt(v)): "
-                         "the generator follows pogofmu.fmath only. Rewrite: fmath.sqrt(v) (exp, log, sin, cos, "
-                         "atan2, hypot, isfinite) for math.*, and v (or v * 1.0 for an int) for float(v)")
+        called = _call_in_caller()
+        fm = called.split(".", 1)[1] if called and called.startswith("math.") else None
+        if fm in FMATH_NAMES:
+            raise TraceError(f"{called}(...) of a traced value: the generator follows pogofmu.fmath only. "
+                             f"Rewrite: fmath.{fm}(...) (from pogofmu import fmath)")
+        what = f"{called}(...)" if called else "float() of a traced value, or a call into math or numpy that converts it"
+        raise TraceError(f"{what}: the generator follows pogofmu.fmath only. Rewrite: fmath.<name>(v) for "
+                         "math.<name>(v) (" + ", ".join(sorted(FMATH_NAMES)) + "), and v (or v * 1.0 for an int) "
+                         "for float(v)" + ("; fmath has no such function: write it with these, or keep it out of "
+                                           "the native FMU (--backend python)" if called else ""))
 
     def __int__(self):
         raise TraceError("int() of a traced value. Rewrite: math.trunc(v)")
@@ -262,6 +269,28 @@ def logical_not(v):
     if isinstance(v, Sym):
         return Sym(_rec().node("not", (_arg(v),), BOOL), BOOL)
     return not v
+
+
+# the functions of pogofmu.fmath a model may call on a traced value
+FMATH_NAMES = ("sqrt", "exp", "log", "log10", "sin", "cos", "tan", "asin", "acos", "atan", "atan2", "sinh", "cosh",
+               "tanh", "hypot", "pow", "copysign", "isfinite", "trunc")
+
+
+def _call_in_caller():
+    """The ``module.function`` (``math.copysign``, ``np.tanh``) called on the line of the model's code
+    that converted a traced value to a float, or None: the first frame outside this module."""
+    import linecache
+    import re
+    import sys
+
+    frame = sys._getframe(2)
+    while frame is not None and frame.f_code.co_filename == __file__:
+        frame = frame.f_back
+    if frame is None:
+        return None
+    line = linecache.getline(frame.f_code.co_filename, frame.f_lineno)
+    m = re.search(r"\b(math|np|numpy|cmath)\.(\w+)\s*\(", line)
+    return f"{'math' if m.group(1) in ('math', 'cmath') else m.group(1)}.{m.group(2)}" if m else None
 
 
 # ---- placeholders: a formatted value inside a message -------------------------------------------
@@ -334,6 +363,15 @@ TRACED_MATH = {
     "sin": _unary_fn("sin", math.sin),
     "atan2": _binary_fn("atan2", math.atan2),
     "hypot": _binary_fn("hypot", math.hypot),
+    "tan": _unary_fn("tan", math.tan),
+    "asin": _unary_fn("asin", math.asin),
+    "acos": _unary_fn("acos", math.acos),
+    "atan": _unary_fn("atan", math.atan),
+    "sinh": _unary_fn("sinh", math.sinh),
+    "cosh": _unary_fn("cosh", math.cosh),
+    "tanh": _unary_fn("tanh", math.tanh),
+    "log10": _unary_fn("log10", math.log10),
+    "copysign": _binary_fn("copysign", math.copysign),
     "trunc": math.trunc,  # on a traced value: Sym.__trunc__, an operation of the generated C
     "isfinite": _isfinite,
     "is_number": _is_number,

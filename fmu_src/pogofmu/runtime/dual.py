@@ -145,8 +145,9 @@ class Dual:
 
     def __float__(self):
         raise NotDifferentiable("float() of a dual number, or a call into math that converts it (math.sqrt(v)): "
-                                "a derivative follows pogofmu.fmath only. Rewrite: fmath.sqrt(v) (exp, log, sin, cos, "
-                                "atan2, hypot) for math.*, and v (or v * 1.0 for an int) for float(v)")
+                                "a derivative follows pogofmu.fmath only. Rewrite: fmath.<name>(v) for math.<name>(v) "
+                                "(sqrt, exp, log, log10, sin, cos, tan, asin, acos, atan, atan2, sinh, cosh, tanh, "
+                                "hypot, pow, copysign), and v (or v * 1.0 for an int) for float(v)")
 
     def __format__(self, spec):
         return format(self.v, spec)
@@ -203,6 +204,20 @@ def _hypot(a, b):
     return Dual(value, _tangent_div(_add(_mul(av, ad), _mul(bv, bd)), 0.0, 0.0, value))
 
 
+LN10 = 2.302585092994046  # log(10)
+
+
+def _copysign(a, b):
+    """|a| with the sign of b: the tangent of a times the signs of a and of the result (b's
+    tangent does not move it)."""
+    (av, ad), (bv, _) = _parts(a), _parts(b)
+    value = fmath.copysign(av, bv)
+    if _zero(ad):
+        return value
+    same = (av < 0) == (value < 0)  # (a value of a traced a: a decision, as abs() takes one)
+    return Dual(value, ad if same else _mul(-1.0, ad))
+
+
 def _matvec(M, v):
     """``M v`` for a constant ``M``: the values' product and, the map being linear, the same map on
     the tangents (none where every tangent is zero)."""
@@ -221,6 +236,15 @@ DUAL_MATH = {
     "sin": _unary("sin", lambda v, r: fmath.cos(v)),
     "atan2": _atan2,
     "hypot": _hypot,
+    "tan": _unary("tan", lambda v, r: 1.0 + r * r),
+    "asin": _unary("asin", lambda v, r: 1.0 / fmath.sqrt(1.0 - v * v)),
+    "acos": _unary("acos", lambda v, r: -1.0 / fmath.sqrt(1.0 - v * v)),
+    "atan": _unary("atan", lambda v, r: 1.0 / (1.0 + v * v)),
+    "sinh": _unary("sinh", lambda v, r: fmath.cosh(v)),
+    "cosh": _unary("cosh", lambda v, r: fmath.sinh(v)),
+    "tanh": _unary("tanh", lambda v, r: 1.0 - r * r),
+    "log10": _unary("log10", lambda v, r: 1.0 / (v * LN10)),
+    "copysign": _copysign,
     "isfinite": lambda x: fmath.isfinite(_parts(x)[0]),
     "is_number": lambda x: fmath.is_number(_parts(x)[0]),
     "matvec": _matvec,

@@ -19,12 +19,14 @@ multiplications and additions in the same order, and its derivative is the same 
 """
 import math
 
-__all__ = ["sqrt", "exp", "log", "cos", "sin", "atan2", "hypot", "trunc", "isfinite", "is_number", "matvec",
+__all__ = ["sqrt", "exp", "log", "cos", "sin", "atan2", "hypot", "tan", "asin", "acos", "atan", "sinh", "cosh",
+           "tanh", "log10", "pow", "copysign", "trunc", "isfinite", "is_number", "matvec",
            "Matrix", "NotConstantError"]
 
 # the functions a traced value's table must provide (``trunc`` is Python's own protocol,
 # ``__trunc__``, and needs no table)
-HOOKED = ("sqrt", "exp", "log", "cos", "sin", "atan2", "hypot", "isfinite", "is_number", "matvec")
+HOOKED = ("sqrt", "exp", "log", "cos", "sin", "atan2", "hypot", "tan", "asin", "acos", "atan", "sinh", "cosh",
+          "tanh", "log10", "copysign", "isfinite", "is_number", "matvec")
 
 
 def _table(args):
@@ -59,6 +61,31 @@ cos = _numeric("cos", math.cos)
 sin = _numeric("sin", math.sin)
 atan2 = _numeric("atan2", math.atan2)
 hypot = _numeric("hypot", math.hypot)
+tan = _numeric("tan", math.tan)
+asin = _numeric("asin", math.asin)
+acos = _numeric("acos", math.acos)
+atan = _numeric("atan", math.atan)
+sinh = _numeric("sinh", math.sinh)
+cosh = _numeric("cosh", math.cosh)
+tanh = _numeric("tanh", math.tanh)
+log10 = _numeric("log10", math.log10)
+copysign = _numeric("copysign", math.copysign)
+
+
+def pow(a, b):  # noqa: A001 (the name users know from math)
+    """``a ** b`` as Python's float power computes it, one operation of the generated C: 0.0 to a
+    negative power raises ZeroDivisionError; a negative base to a non-integer power, which Python
+    answers with a complex number, raises ValueError (math domain error); an overflow raises
+    OverflowError. (``math.pow`` differs only in the first: ValueError.)"""
+    r = a ** b
+    if isinstance(r, complex):
+        raise ValueError("math domain error")
+    if isinstance(r, float) and math.isinf(r) and isinstance(a, (int, float)) and isinstance(b, (int, float)) \
+            and math.isfinite(a) and math.isfinite(b):
+        raise OverflowError("Numerical result out of range")
+    return r
+
+
 trunc = math.trunc  # (an int: the generated C truncates toward zero the same way; a traced value's __trunc__)
 
 

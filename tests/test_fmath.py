@@ -1,0 +1,132 @@
+"""The functions of ``pogofmu.fmath`` that aerospace models use (tan, asin, acos, atan, sinh, cosh,
+tanh, log10, pow, copysign), on every path a model's code takes:
+
+* numbers: the standard library's value and errors (ValueError for a domain error, OverflowError
+  for a finite argument with an infinite result), ``pow`` as Python's float power;
+* dual numbers (the exact Jacobian-vector products of the Python-hosted Rosenbrock method and of
+  the native FMUs' generated flow_jvp): the derivative against a central difference;
+* the native generator: a user's model file using all of them, exported by ``pogofmu export``, gives
+  the Python-hosted FMU's outputs to the bit; ``math.copysign`` on a state is refused naming the
+  call and its fmath replacement.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from pogofmu.runtime import fmath
+from pogofmu.runtime.dual import Dual
+from support import run_pogofmu
+
+pytestmark = pytest.mark.own_fmus  # (exports its own FMUs)
+
+NEW = ("tan", "asin", "acos", "atan", "sinh", "cosh", "tanh", "log10")
+DOMAIN = {"asin": (-0.95, 0.95), "acos": (-0.95, 0.95), "log10": (0.05, 50.0), "tan": (-1.4, 1.4)}
+
+
+@pytest.mark.parametrize("name", NEW)
+@settings(max_examples=50, deadline=None, derandomize=True)
+@given(u=st.floats(0.0, 1.0))
+def test_on_numbers_the_standard_librarys_value_and_on_duals_its_derivative(name, u):
+    lo, hi = DOMAIN.get(name, (-5.0, 5.0))
+    v = lo + (hi - lo) * u
+    f = getattr(fmath, name)
+    assert f(v) == getattr(math, name)(v)
+    d = f(Dual(v, 1.0))
+    h = 1e-6 * max(1.0, abs(v))
+    fd = (getattr(math, name)(v + h) - getattr(math, name)(v - h)) / (2 * h)
+    assert d.d == pytest.approx(fd, rel=1e-6, abs=1e-8), (name, v)
+
+
+def test_the_errors_are_the_standard_librarys():
+    for f, arg, exc in ((fmath.asin, 1.5, ValueError), (fmath.acos, -2.0, ValueError), (fmath.log10, 0.0, ValueError),
+                        (fmath.log10, -1.0, ValueError), (fmath.tan, math.inf, ValueError),
+                        (fmath.sinh, 1e3, OverflowError), (fmath.cosh, -1e3, OverflowError)):
+        with pytest.raises(exc):
+            f(arg)
+    with pytest.raises(ValueError, match="math domain error"):
+        fmath.pow(-8.0, 1.0 / 3.0)  # (Python's ** answers with a complex number)
+    with pytest.raises(ZeroDivisionError):
+        fmath.pow(0.0, -1.0)
+    with pytest.raises(OverflowError):
+        fmath.pow(10.0, 400.0)
+    assert fmath.pow(-2.0, 3.0) == -8.0 and fmath.pow(2.0, 0.5) == math.sqrt(2.0)
+
+
+@settings(max_examples=50, deadline=None, derandomize=True)
+@given(a=st.floats(-10, 10), b=st.floats(-10, 10), e=st.floats(-2, 2))
+def test_pow_and_copysign_derivatives(a, b, e):
+    assert fmath.copysign(a, b) == math.copysign(a, b)
+    d = fmath.copysign(Dual(a, 1.0), b)
+    if a != 0.0:  # d|a| sign(b) / da = sign(a) sign(b)
+        assert d.d == math.copysign(1.0, a) * math.copysign(1.0, b)
+    base = abs(a) + 0.5
+    p = fmath.pow(Dual(base, 1.0), e)
+    assert p.d == pytest.approx(e * base ** (e - 1), rel=1e-12)
+
+
+FUNCS = '''
+import math
+from pogofmu import HybridModel, Parameter, Variable, fmath
+
+
+def flow(t, x, q, u, p):
+    s = fmath.tanh(x[0]) + fmath.atan(x[1]) + {copysign}(0.5, x[1])
+    r = fmath.log10(1.0 + x[0] * x[0]) + fmath.pow(1.0 + x[0] * x[0], 0.25)
+    w = fmath.sinh(0.1 * x[1]) - fmath.cosh(0.1 * x[0]) + fmath.tan(0.2 * x[0])
+    a = fmath.asin(0.5 * fmath.sin(x[0])) + fmath.acos(0.5 * fmath.cos(x[1]))
+    return [x[1], -p.k * x[0] - 0.1 * s + 0.01 * (r + w + a)]
+
+
+MODEL = HybridModel(
+    name="{name}", description="an oscillator whose force uses the functions of fmath",
+    states=(Variable("x", "m", "position"), Variable("v", "m/s", "velocity")),
+    parameters=(Parameter("k", 4.0, "1/s2", "stiffness"),),
+    inputs=(),
+    outputs=(Variable("x", "m", "position"), Variable("v", "m/s", "velocity"), Variable("f", "", "a function")),
+    flow=flow, events=(),
+    initial=lambda p: ([1.0, 0.0], {{}}),
+    output_fn=lambda t, x, q, u, p: {{"x": x[0], "v": x[1], "f": fmath.tanh(x[0]) * fmath.pow(2.0, x[1])}},
+    default_stop_time=5.0,
+)
+'''
+
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("fmath")
+    (folder / "funcs.py").write_text(FUNCS.format(name="Funcs", copysign="fmath.copysign"))
+    (folder / "bad.py").write_text(FUNCS.format(name="Bad", copysign="math.copysign"))
+    proc = run_pogofmu("export", "funcs.py", "bad.py", "--out", "out", "--platforms", "x86_64-linux", cwd=folder,
+                       timeout=600)
+    return folder, proc
+
+
+def test_a_model_using_the_functions_gives_the_same_bits_in_both_backends(exported):
+    from fmpy import simulate_fmu
+
+    folder, proc = exported
+    out = folder / "out"
+    runs = {}
+    for kind in ("Funcs.fmu", "native/Funcs.fmu", "fmi3/Funcs.fmu", "native/fmi3/Funcs.fmu"):
+        kw = {} if "fmi3" not in kind else dict(fmi_type="CoSimulation")
+        runs[kind] = simulate_fmu(str(out / kind), stop_time=5.0, output_interval=1e-2, **kw)
+    first = runs["Funcs.fmu"]
+    for kind, res in runs.items():
+        for col in ("x", "v", "f"):
+            assert np.array_equal(res[col], first[col]), (kind, col)
+    # and the functions are the ones named: the output f against numpy on the states served
+    assert np.allclose(first["f"], np.tanh(first["x"]) * 2.0 ** first["v"], rtol=1e-15, atol=0)
+
+
+def test_math_copysign_on_a_state_is_refused_naming_the_call_and_its_replacement(exported):
+    folder, proc = exported
+    assert proc.returncode == 1, proc.stdout + proc.stderr  # the Python-hosted FMUs are written
+    text = proc.stderr
+    assert "bad.py:7:" in text and "math.copysign(...) of a traced value" in text, text
+    assert "Rewrite: fmath.copysign(...)" in text and "math.sqrt" not in text, text
+    assert (folder / "out" / "Bad.fmu").exists() and not (folder / "out" / "native" / "Bad.fmu").exists()
