@@ -12,6 +12,7 @@ tanh, log10, pow, copysign), on every path a model's code takes:
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -130,3 +131,91 @@ def test_math_copysign_on_a_state_is_refused_naming_the_call_and_its_replacement
     assert "bad.py:7:" in text and "math.copysign(...) of a traced value" in text, text
     assert "Rewrite: fmath.copysign(...)" in text and "math.sqrt" not in text, text
     assert (folder / "out" / "Bad.fmu").exists() and not (folder / "out" / "native" / "Bad.fmu").exists()
+
+
+# ---- fmath.interp: a 1-D table ---------------------------------------------------------------------
+ROCKET = '''
+from pogofmu import HybridModel, Parameter, Variable, fmath
+
+T_S = {t_s}
+F_N = (0.0, 900.0, 800.0, 760.0, 600.0, 100.0, 0.0)
+THRUST = fmath.Table(T_S, F_N)
+DRAG = fmath.Table((0.0, 50.0, 150.0, 300.0), (0.0, 1.0, 12.0, 60.0))
+
+
+def flow(t, x, q, u, p):
+    return [x[1], (fmath.interp(t, THRUST) - fmath.interp(x[1], DRAG)) / p.m - p.g]
+
+
+MODEL = HybridModel(
+    name="{name}", description="a vertical rocket with a tabulated thrust curve and drag",
+    states=(Variable("h", "m", "altitude"), Variable("v", "m/s", "vertical speed")),
+    parameters=(Parameter("m", 20.0, "kg", "mass"), Parameter("g", 9.81, "m/s2", "gravity")),
+    inputs=(),
+    outputs=(Variable("h", "m", "altitude"), Variable("v", "m/s", "vertical speed"), Variable("F", "N", "thrust")),
+    flow=flow, events=(),
+    initial=lambda p: ([0.0, 0.0], {{}}),
+    output_fn=lambda t, x, q, u, p: {{"h": x[0], "v": x[1], "F": fmath.interp(t, THRUST)}},
+    default_stop_time=4.0, default_step=1e-2,
+)
+'''
+T_S = (0.0, 0.1, 0.5, 1.5, 2.5, 2.8, 3.0)
+F_N = (0.0, 900.0, 800.0, 760.0, 600.0, 100.0, 0.0)
+
+
+@settings(max_examples=100, deadline=None, derandomize=True)
+@given(x=st.floats(-1.0, 4.0))
+def test_interp_is_numpys_and_its_derivative_the_segments_slope(x):
+    T = fmath.Table(T_S, F_N)
+    assert fmath.interp(x, T) == pytest.approx(float(np.interp(x, T_S, F_N)), rel=1e-15, abs=1e-12)
+    assert fmath.interp(x, list(T_S), list(F_N)) == fmath.interp(x, T)
+    d = fmath.interp(Dual(x, 1.0), T)
+    k = int(np.searchsorted(T_S, x, side="right"))  # the segment [k-1, k] holding x (the right one at a breakpoint)
+    slope = 0.0 if x <= T_S[0] or x >= T_S[-1] else (F_N[k] - F_N[k - 1]) / (T_S[k] - T_S[k - 1])
+    assert (d.d if isinstance(d, Dual) else 0.0) == slope
+
+
+@pytest.mark.parametrize("xs, ys, rule", [
+    ((0.0, 1.0, 1.0), (1.0, 2.0, 3.0), "strictly increasing"),
+    ((0.0, 1.0), (1.0, 2.0, 3.0), "len(xs) == len(ys)"),
+    ((0.0,), (1.0,), "at least two"),
+    ((0.0, 1.0), (1.0, math.nan), "finite"),
+])
+def test_a_table_that_breaks_a_rule_is_refused_naming_it(xs, ys, rule):
+    with pytest.raises(ValueError, match=re.escape(rule)):
+        fmath.Table(xs, ys)
+
+
+@pytest.fixture(scope="module")
+def rockets(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("rocket")
+    (folder / "rocket.py").write_text(ROCKET.format(name="Rocket", t_s=repr(T_S)))
+    (folder / "bad_rocket.py").write_text(ROCKET.format(name="BadRocket", t_s="(0.0, 0.1, 0.5, 0.4, 2.5, 2.8, 3.0)"))
+    good = run_pogofmu("export", "rocket.py", "--out", "out", "--platforms", "x86_64-linux", cwd=folder, timeout=600)
+    bad = run_pogofmu("export", "bad_rocket.py", "--out", "out", "--platforms", "x86_64-linux", cwd=folder, timeout=600)
+    return folder, good, bad
+
+
+def test_a_thrust_curve_gives_the_same_bits_in_every_kind_and_numpys_interp(rockets):
+    from fmpy import simulate_fmu
+
+    folder, good, _ = rockets
+    assert good.returncode == 0, good.stdout + good.stderr
+    runs = {}
+    for kind in ("Rocket.fmu", "native/Rocket.fmu", "fmi3/Rocket.fmu", "native/fmi3/Rocket.fmu"):
+        kw = {} if "fmi3" not in kind else dict(fmi_type="CoSimulation")
+        runs[kind] = simulate_fmu(str(folder / "out" / kind), stop_time=4.0, output_interval=1e-2, **kw)
+    first = runs["Rocket.fmu"]
+    for kind, res in runs.items():
+        assert all(np.array_equal(res[c], first[c]) for c in ("h", "v", "F")), kind
+    assert np.allclose(first["F"], np.interp(first["time"], T_S, F_N), rtol=1e-14, atol=1e-12)
+    # burnout at 3 s: from then on a ballistic arc with drag, so the speed falls faster than g alone
+    late = first["time"] > 3.0 + 1e-9
+    assert np.all(np.diff(first["v"][late]) < -9.81 * 1e-2 * (1 - 1e-9))
+
+
+def test_a_table_with_decreasing_breakpoints_is_refused_at_export_with_its_line(rockets):
+    folder, _, bad = rockets
+    assert bad.returncode == 2, bad.stdout + bad.stderr
+    assert "bad_rocket.py:6:" in bad.stderr and "xs[3] = 0.4 after xs[2] = 0.5" in bad.stderr, bad.stderr
+    assert "strictly increasing" in bad.stderr and not (folder / "out" / "BadRocket.fmu").exists()

@@ -164,6 +164,24 @@ class Printer:
             return [f"const int {name} = isfinite({num(0)}) ? 1 : 0;"]
         if op == "isnumber":
             return [f"const int {name} = isnan({num(0)}) ? 0 : 1;"]
+        if op in ("interp", "interp_slope"):
+            T = n.args[0]
+            if self.matrix_name is None:
+                raise ValueError("a table (fmath.interp) with no C table to print it from")
+            tb, last = self.matrix_name(T), T.n_cols - 1
+            inside = (f"{name} = {tb}[1][lo] + ({tb}[1][hi] - {tb}[1][lo]) / ({tb}[0][hi] - {tb}[0][lo]) * "
+                      f"(xq - {tb}[0][lo]);" if op == "interp" else
+                      f"{name} = ({tb}[1][hi] - {tb}[1][lo]) / ({tb}[0][hi] - {tb}[0][lo]);")
+            end = (f"{tb}[1][0]", f"{tb}[1][{last}]") if op == "interp" else ("0.0", "0.0")
+            return [f"double {name};", "{",
+                    f"    const double xq = {num(1)};",
+                    f"    if (xq <= {tb}[0][0]) {name} = {end[0]};",
+                    f"    else if (xq >= {tb}[0][{last}]) {name} = {end[1]};",
+                    "    else {",
+                    f"        int lo = 0, hi = {last};",
+                    f"        while (hi - lo > 1) {{ const int mid = (lo + hi) / 2; if ({tb}[0][mid] <= xq) lo = mid; else hi = mid; }}",
+                    f"        {inside}",
+                    "    }", "}"]
         if op == "matvec":
             M = n.args[0]
             if self.matrix_name is None:

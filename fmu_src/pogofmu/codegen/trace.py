@@ -273,7 +273,7 @@ def logical_not(v):
 
 # the functions of pogofmu.fmath a model may call on a traced value
 FMATH_NAMES = ("sqrt", "exp", "log", "log10", "sin", "cos", "tan", "asin", "acos", "atan", "atan2", "sinh", "cosh",
-               "tanh", "hypot", "pow", "copysign", "isfinite", "trunc")
+               "tanh", "hypot", "pow", "copysign", "isfinite", "trunc", "interp")
 
 
 def _call_in_caller():
@@ -372,6 +372,9 @@ TRACED_MATH = {
     "tanh": _unary_fn("tanh", math.tanh),
     "log10": _unary_fn("log10", math.log10),
     "copysign": _binary_fn("copysign", math.copysign),
+    "interp": lambda x, T: Sym(_rec().node("interp", (T, _arg(x)), FLOAT), FLOAT) if isinstance(x, Sym) else T.at(x),
+    "interp_slope": lambda x, T: (Sym(_rec().node("interp_slope", (T, _arg(x)), FLOAT), FLOAT) if isinstance(x, Sym)
+                                  else T.slope_at(x)),
     "trunc": math.trunc,  # on a traced value: Sym.__trunc__, an operation of the generated C
     "isfinite": _isfinite,
     "is_number": _is_number,

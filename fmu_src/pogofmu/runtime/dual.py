@@ -218,6 +218,15 @@ def _copysign(a, b):
     return Dual(value, ad if same else _mul(-1.0, ad))
 
 
+def _interp(x, T):
+    """A table at x: the value, and the tangent times the segment's slope."""
+    xv, xd = _parts(x)
+    value = fmath.interp(xv, T)
+    if _zero(xd):
+        return value
+    return Dual(value, _mul(fmath.interp_slope(xv, T), xd))
+
+
 def _matvec(M, v):
     """``M v`` for a constant ``M``: the values' product and, the map being linear, the same map on
     the tangents (none where every tangent is zero)."""
@@ -245,6 +254,8 @@ DUAL_MATH = {
     "tanh": _unary("tanh", lambda v, r: 1.0 - r * r),
     "log10": _unary("log10", lambda v, r: 1.0 / (v * LN10)),
     "copysign": _copysign,
+    "interp": _interp,
+    "interp_slope": lambda x, T: fmath.interp_slope(_parts(x)[0], T),
     "isfinite": lambda x: fmath.isfinite(_parts(x)[0]),
     "is_number": lambda x: fmath.is_number(_parts(x)[0]),
     "matvec": _matvec,

@@ -20,13 +20,13 @@ multiplications and additions in the same order, and its derivative is the same 
 import math
 
 __all__ = ["sqrt", "exp", "log", "cos", "sin", "atan2", "hypot", "tan", "asin", "acos", "atan", "sinh", "cosh",
-           "tanh", "log10", "pow", "copysign", "trunc", "isfinite", "is_number", "matvec",
+           "tanh", "log10", "pow", "copysign", "trunc", "isfinite", "is_number", "matvec", "interp", "Table",
            "Matrix", "NotConstantError"]
 
 # the functions a traced value's table must provide (``trunc`` is Python's own protocol,
 # ``__trunc__``, and needs no table)
 HOOKED = ("sqrt", "exp", "log", "cos", "sin", "atan2", "hypot", "tan", "asin", "acos", "atan", "sinh", "cosh",
-          "tanh", "log10", "copysign", "isfinite", "is_number", "matvec")
+          "tanh", "log10", "copysign", "isfinite", "is_number", "matvec", "interp", "interp_slope")
 
 
 def _table(args):
@@ -189,3 +189,93 @@ def matvec(M, v) -> list:
     if table is not None:
         return table["matvec"](M, v)
     return M.product(v)
+
+
+class Table(Matrix):
+    """A 1-D lookup table for :func:`interp`: breakpoints ``xs`` (strictly increasing, at least two)
+    and values ``ys`` of the same length, finite numbers, checked once. Build it once, at module
+    level (``THRUST = fmath.Table(T_S, F_N)``): the native generator prints it as a ``static const``
+    array, and a model that passes lists to :func:`interp` has them checked at every call."""
+
+    __slots__ = ()
+
+    def __init__(self, xs, ys=None):
+        if isinstance(xs, Matrix) and ys is None:
+            super().__init__(xs.rows)
+            return
+        try:
+            xs, ys = list(xs), list(ys)
+        except TypeError:
+            raise TypeError("fmath.Table(xs, ys): xs and ys are sequences of numbers") from None
+        if len(xs) != len(ys):
+            raise ValueError(f"fmath.Table: {len(xs)} breakpoints and {len(ys)} values; rule: len(xs) == len(ys)")
+        if len(xs) < 2:
+            raise ValueError(f"fmath.Table: {len(xs)} breakpoint(s); rule: at least two")
+        try:
+            super().__init__([xs, ys])
+        except NotConstantError:
+            raise NotConstantError("fmath.interp: a table entry is a computed value; rule: the table of "
+                                   "fmath.interp is a constant known when the model is built; build it once with "
+                                   "fmath.Table(xs, ys) at module level") from None
+        except (TypeError, ValueError) as exc:
+            raise type(exc)(str(exc).replace("fmath.Matrix: entry [0]", "fmath.Table: xs").replace(
+                "fmath.Matrix: entry [1]", "fmath.Table: ys")) from None
+        xs = self.rows[0]
+        for k in range(1, len(xs)):
+            if not xs[k] > xs[k - 1]:
+                raise ValueError(f"fmath.Table: xs[{k}] = {xs[k]!r} after xs[{k - 1}] = {xs[k - 1]!r}; rule: the "
+                                 f"breakpoints are strictly increasing")
+
+    def __repr__(self):
+        return f"fmath.Table({self.n_cols} points)"
+
+    def _segment(self, x):
+        """(lo, hi) of the segment holding x, by bisection (the generated C does the same)."""
+        xs = self.rows[0]
+        lo, hi = 0, len(xs) - 1
+        while hi - lo > 1:
+            mid = (lo + hi) // 2
+            if xs[mid] <= x:
+                lo = mid
+            else:
+                hi = mid
+        return lo, hi
+
+    def at(self, x):
+        """The table at ``x``: linear between breakpoints, held at the ends."""
+        xs, ys = self.rows
+        if x <= xs[0]:
+            return ys[0]
+        if x >= xs[-1]:
+            return ys[-1]
+        lo, hi = self._segment(x)
+        return ys[lo] + (ys[hi] - ys[lo]) / (xs[hi] - xs[lo]) * (x - xs[lo])
+
+    def slope_at(self, x):
+        """The derivative of :meth:`at`: the segment's slope (the right segment's at a breakpoint),
+        0.0 where the table is held."""
+        xs, ys = self.rows
+        if x <= xs[0] or x >= xs[-1]:
+            return 0.0
+        lo, hi = self._segment(x)
+        return (ys[hi] - ys[lo]) / (xs[hi] - xs[lo])
+
+
+def interp(x, xs, ys=None):
+    """The 1-D table (``xs``, ``ys``) at ``x``, as ``numpy.interp``: linear between the breakpoints,
+    held at the ends. ``xs`` may be a :class:`Table` (then ``ys`` is omitted). One operation of the
+    generated C: a ``static const`` table searched by bisection, the same arithmetic as here (the
+    same bits); its derivative is the segment's slope, exact."""
+    T = xs if isinstance(xs, Table) and ys is None else Table(xs, ys)
+    table = _table((x,))
+    if table is not None:
+        return table["interp"](x, T)
+    return T.at(x)
+
+
+def interp_slope(x, T):
+    """The slope of :func:`interp` at ``x`` (for the derivatives)."""
+    table = _table((x,))
+    if table is not None:
+        return table["interp_slope"](x, T)
+    return T.slope_at(x)
