@@ -219,3 +219,86 @@ def test_a_table_with_decreasing_breakpoints_is_refused_at_export_with_its_line(
     assert bad.returncode == 2, bad.stdout + bad.stderr
     assert "bad_rocket.py:6:" in bad.stderr and "xs[3] = 0.4 after xs[2] = 0.5" in bad.stderr, bad.stderr
     assert "strictly increasing" in bad.stderr and not (folder / "out" / "BadRocket.fmu").exists()
+
+
+# ---- fmath.interp2: a 2-D table --------------------------------------------------------------------
+MACH = (0.0, 0.5, 0.9, 1.2, 2.0)
+ALPHA = (-0.2, 0.0, 0.1, 0.3)
+CL = ((-0.8, 0.0, 0.45, 1.2), (-0.85, 0.0, 0.5, 1.3), (-1.0, 0.0, 0.6, 1.5), (-0.9, 0.0, 0.55, 1.35),
+      (-0.6, 0.0, 0.35, 0.9))
+
+
+@settings(max_examples=100, deadline=None, derandomize=True)
+@given(x=st.floats(-0.5, 2.5), y=st.floats(-0.4, 0.5))
+def test_interp2_is_bilinear_held_at_the_edges_and_its_partials_are_the_cells(x, y):
+    from scipy.interpolate import RegularGridInterpolator
+
+    T = fmath.Table2(MACH, ALPHA, CL)
+    ref = RegularGridInterpolator((MACH, ALPHA), np.array(CL), method="linear")
+    xc, yc = min(max(x, MACH[0]), MACH[-1]), min(max(y, ALPHA[0]), ALPHA[-1])  # held at the edges
+    assert fmath.interp2(x, y, T) == pytest.approx(float(ref([[xc, yc]])[0]), rel=1e-13, abs=1e-14)
+    assert fmath.interp2(x, y, MACH, ALPHA, CL) == fmath.interp2(x, y, T)
+    # the partials: central differences inside one cell (away from the breakpoints), 0 where held
+    h = 1e-7
+    near = lambda v, bs: min(abs(v - b) for b in bs) < 2 * h  # noqa: E731
+    if not near(x, MACH) and not near(y, ALPHA):
+        dx = fmath.interp2(Dual(x, 1.0), y, T)
+        dy = fmath.interp2(x, Dual(y, 1.0), T)
+        fx = (fmath.interp2(x + h, y, T) - fmath.interp2(x - h, y, T)) / (2 * h)
+        fy = (fmath.interp2(x, y + h, T) - fmath.interp2(x, y - h, T)) / (2 * h)
+        assert (dx.d if isinstance(dx, Dual) else 0.0) == pytest.approx(fx, abs=1e-6)
+        assert (dy.d if isinstance(dy, Dual) else 0.0) == pytest.approx(fy, abs=1e-6)
+
+
+def test_a_2d_table_that_breaks_a_rule_is_refused_naming_it():
+    with pytest.raises(ValueError, match="strictly increasing"):
+        fmath.Table2((0.0, 1.0, 0.5), ALPHA, CL[:3])
+    with pytest.raises(ValueError, match=r"len\(table\) == len\(xs\)"):
+        fmath.Table2(MACH, ALPHA, CL[:4])
+    with pytest.raises(ValueError, match="finite"):
+        fmath.Table2(MACH, ALPHA, CL[:4] + ((math.inf, 0.0, 0.0, 0.0),))
+
+
+AERO = '''
+from pogofmu import HybridModel, Parameter, Variable, fmath
+
+TABLE = fmath.Table2({mach!r}, {alpha!r}, {cl!r})
+
+
+def flow(t, x, q, u, p):
+    return [x[1], p.c * fmath.interp2(0.3 + 0.2 * x[1], x[0], TABLE) - p.k * x[0]]
+
+
+MODEL = HybridModel(
+    name="Aero", description="a pitch oscillator with a lift table in Mach and angle of attack",
+    states=(Variable("a", "rad", "angle of attack"), Variable("w", "rad/s", "pitch rate")),
+    parameters=(Parameter("k", 9.0, "1/s2", "stiffness"), Parameter("c", 2.0, "rad/s2", "lift gain")),
+    inputs=(),
+    outputs=(Variable("a", "rad", "angle"), Variable("L", "", "lift coefficient")),
+    flow=flow, events=(),
+    initial=lambda p: ([0.25, 0.0], {{}}),
+    output_fn=lambda t, x, q, u, p: {{"a": x[0], "L": fmath.interp2(0.3 + 0.2 * x[1], x[0], TABLE)}},
+    default_stop_time=5.0, default_step=1e-2,
+)
+'''
+
+
+def test_a_2d_table_gives_the_same_bits_in_every_kind(tmp_path):
+    from fmpy import simulate_fmu
+
+    (tmp_path / "aero.py").write_text(AERO.format(mach=MACH, alpha=ALPHA, cl=CL))
+    proc = run_pogofmu("export", "aero.py", "--out", "out", "--platforms", "x86_64-linux", cwd=tmp_path, timeout=600)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    runs = {}
+    for kind in ("Aero.fmu", "native/Aero.fmu", "fmi3/Aero.fmu", "native/fmi3/Aero.fmu"):
+        for method in (5, 1):  # Dormand-Prince; Rodas5P, whose Jacobian takes the table's partials
+            kw = {} if "fmi3" not in kind else dict(fmi_type="CoSimulation")
+            runs[kind, method] = simulate_fmu(str(tmp_path / "out" / kind), stop_time=5.0, output_interval=1e-2,
+                                              start_values={"method": method}, **kw)
+    for method in (5, 1):
+        first = runs["Aero.fmu", method]
+        for (kind, m), res in runs.items():
+            if m == method:
+                assert all(np.array_equal(res[c], first[c]) for c in ("a", "L")), (kind, method)
+    # the two methods solve the same problem
+    assert np.allclose(runs["Aero.fmu", 5]["a"], runs["Aero.fmu", 1]["a"], atol=1e-4)

@@ -164,6 +164,42 @@ class Printer:
             return [f"const int {name} = isfinite({num(0)}) ? 1 : 0;"]
         if op == "isnumber":
             return [f"const int {name} = isnan({num(0)}) ? 0 : 1;"]
+        if op in ("interp2", "interp2_d0", "interp2_d1"):
+            T = n.args[0]
+            tb, nx, ny = self.matrix_name(T), T.nx, T.ny
+
+            def cell(axis, nb, v, lo, hi, w):
+                return [f"    int {lo} = 0, {hi} = 1; double {w} = 0.0;",
+                        f"    if ({v} <= {tb}[{axis}][0]) {{ {lo} = 0; {hi} = 1; {w} = 0.0; }}",
+                        f"    else if ({v} >= {tb}[{axis}][{nb - 1}]) {{ {lo} = {nb - 2}; {hi} = {nb - 1}; {w} = 1.0; }}",
+                        "    else {",
+                        f"        {lo} = 0; {hi} = {nb - 1};",
+                        f"        while ({hi} - {lo} > 1) {{ const int mid = ({lo} + {hi}) / 2; "
+                        f"if ({tb}[{axis}][mid] <= {v}) {lo} = mid; else {hi} = mid; }}",
+                        f"        {w} = ({v} - {tb}[{axis}][{lo}]) / ({tb}[{axis}][{hi}] - {tb}[{axis}][{lo}]);",
+                        "    }"]
+            out = [f"double {name};", "{", f"    const double xq = {num(1)}, yq = {num(2)};",
+                   *cell(0, nx, "xq", "i0", "i1", "wx"), *cell(1, ny, "yq", "j0", "j1", "wy"),
+                   f"    const double *r0 = {tb}[2 + i0], *r1 = {tb}[2 + i1];"]
+            if op == "interp2":
+                out += ["    const double a = r0[j0] + (r0[j1] - r0[j0]) * wy;",
+                        "    const double b = r1[j0] + (r1[j1] - r1[j0]) * wy;",
+                        f"    {name} = a + (b - a) * wx;"]
+            elif op == "interp2_d0":
+                out += [f"    if (xq <= {tb}[0][0] || xq >= {tb}[0][{nx - 1}]) {name} = 0.0;",
+                        "    else {",
+                        "        const double a = r0[j0] + (r0[j1] - r0[j0]) * wy;",
+                        "        const double b = r1[j0] + (r1[j1] - r1[j0]) * wy;",
+                        f"        {name} = (b - a) / ({tb}[0][i1] - {tb}[0][i0]);",
+                        "    }"]
+            else:
+                out += [f"    if (yq <= {tb}[1][0] || yq >= {tb}[1][{ny - 1}]) {name} = 0.0;",
+                        "    else {",
+                        "        const double da = r0[j1] - r0[j0];",
+                        "        const double db = r1[j1] - r1[j0];",
+                        f"        {name} = (da + (db - da) * wx) / ({tb}[1][j1] - {tb}[1][j0]);",
+                        "    }"]
+            return out + ["}"]
         if op in ("interp", "interp_slope"):
             T = n.args[0]
             if self.matrix_name is None:

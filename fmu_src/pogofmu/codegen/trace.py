@@ -273,7 +273,7 @@ def logical_not(v):
 
 # the functions of pogofmu.fmath a model may call on a traced value
 FMATH_NAMES = ("sqrt", "exp", "log", "log10", "sin", "cos", "tan", "asin", "acos", "atan", "atan2", "sinh", "cosh",
-               "tanh", "hypot", "pow", "copysign", "isfinite", "trunc", "interp")
+               "tanh", "hypot", "pow", "copysign", "isfinite", "trunc", "interp", "interp2")
 
 
 def _call_in_caller():
@@ -372,6 +372,10 @@ TRACED_MATH = {
     "tanh": _unary_fn("tanh", math.tanh),
     "log10": _unary_fn("log10", math.log10),
     "copysign": _binary_fn("copysign", math.copysign),
+    "interp2": lambda x, y, T: (Sym(_rec().node("interp2", (T, _arg(x), _arg(y)), FLOAT), FLOAT)
+                                if isinstance(x, Sym) or isinstance(y, Sym) else T.at(x, y)),
+    "interp2_d": lambda x, y, T, which: (Sym(_rec().node(f"interp2_d{which}", (T, _arg(x), _arg(y)), FLOAT), FLOAT)
+                                         if isinstance(x, Sym) or isinstance(y, Sym) else T.d_at(x, y, which)),
     "interp": lambda x, T: Sym(_rec().node("interp", (T, _arg(x)), FLOAT), FLOAT) if isinstance(x, Sym) else T.at(x),
     "interp_slope": lambda x, T: (Sym(_rec().node("interp_slope", (T, _arg(x)), FLOAT), FLOAT) if isinstance(x, Sym)
                                   else T.slope_at(x)),

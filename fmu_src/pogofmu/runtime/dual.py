@@ -227,6 +227,20 @@ def _interp(x, T):
     return Dual(value, _mul(fmath.interp_slope(xv, T), xd))
 
 
+def _interp2(x, y, T):
+    """A 2-D table at (x, y): the value, and the tangents times the cell's partial derivatives."""
+    (xv, xd), (yv, yd) = _parts(x), _parts(y)
+    value = fmath.interp2(xv, yv, T)
+    if _zero(xd) and _zero(yd):
+        return value
+    d = 0.0
+    if not _zero(xd):
+        d = _mul(fmath.interp2_d(xv, yv, T, 0), xd)
+    if not _zero(yd):
+        d = _add(d, _mul(fmath.interp2_d(xv, yv, T, 1), yd))
+    return Dual(value, d)
+
+
 def _matvec(M, v):
     """``M v`` for a constant ``M``: the values' product and, the map being linear, the same map on
     the tangents (none where every tangent is zero)."""
@@ -255,6 +269,8 @@ DUAL_MATH = {
     "log10": _unary("log10", lambda v, r: 1.0 / (v * LN10)),
     "copysign": _copysign,
     "interp": _interp,
+    "interp2": _interp2,
+    "interp2_d": lambda x, y, T, which: fmath.interp2_d(_parts(x)[0], _parts(y)[0], T, which),
     "interp_slope": lambda x, T: fmath.interp_slope(_parts(x)[0], T),
     "isfinite": lambda x: fmath.isfinite(_parts(x)[0]),
     "is_number": lambda x: fmath.is_number(_parts(x)[0]),

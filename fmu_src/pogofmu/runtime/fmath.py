@@ -20,13 +20,13 @@ multiplications and additions in the same order, and its derivative is the same 
 import math
 
 __all__ = ["sqrt", "exp", "log", "cos", "sin", "atan2", "hypot", "tan", "asin", "acos", "atan", "sinh", "cosh",
-           "tanh", "log10", "pow", "copysign", "trunc", "isfinite", "is_number", "matvec", "interp", "Table",
+           "tanh", "log10", "pow", "copysign", "trunc", "isfinite", "is_number", "matvec", "interp", "interp2", "Table", "Table2",
            "Matrix", "NotConstantError"]
 
 # the functions a traced value's table must provide (``trunc`` is Python's own protocol,
 # ``__trunc__``, and needs no table)
 HOOKED = ("sqrt", "exp", "log", "cos", "sin", "atan2", "hypot", "tan", "asin", "acos", "atan", "sinh", "cosh",
-          "tanh", "log10", "copysign", "isfinite", "is_number", "matvec", "interp", "interp_slope")
+          "tanh", "log10", "copysign", "isfinite", "is_number", "matvec", "interp", "interp_slope", "interp2", "interp2_d")
 
 
 def _table(args):
@@ -279,3 +279,96 @@ def interp_slope(x, T):
     if table is not None:
         return table["interp_slope"](x, T)
     return T.slope_at(x)
+
+
+class Table2(Matrix):
+    """A 2-D lookup table for :func:`interp2`: breakpoints ``xs`` (``n``) and ``ys`` (``m``), each
+    strictly increasing with at least two, and ``table`` of ``n`` rows of ``m`` values
+    (``table[i][j]`` at ``(xs[i], ys[j])``), finite numbers, checked once. Kept as one matrix of
+    ``n + 2`` rows: ``xs`` and ``ys`` padded with zeros to a common length, then the table."""
+
+    __slots__ = ("nx", "ny")
+
+    def __init__(self, xs, ys, table):
+        xs, ys = Table(xs, [0.0] * len(list(xs))).rows[0], Table(ys, [0.0] * len(list(ys))).rows[0]
+        rows = [list(r) for r in table]
+        if len(rows) != len(xs) or any(len(r) != len(ys) for r in rows):
+            raise ValueError(f"fmath.Table2: a table of {len(rows)} rows of "
+                             f"{sorted({len(r) for r in rows})} values for {len(xs)} xs and {len(ys)} ys; rule: "
+                             f"len(table) == len(xs) and every row has len(ys) values")
+        width = max(len(xs), len(ys))
+        pad = lambda v: list(v) + [0.0] * (width - len(v))  # noqa: E731
+        try:
+            super().__init__([pad(xs), pad(ys)] + [pad(r) for r in rows])
+        except NotConstantError:
+            raise NotConstantError("fmath.interp2: a table entry is a computed value; rule: the table is a constant "
+                                   "known when the model is built; build it once with fmath.Table2 at module "
+                                   "level") from None
+        except (TypeError, ValueError) as exc:
+            raise type(exc)(str(exc).replace("fmath.Matrix", "fmath.Table2")) from None
+        self.nx, self.ny = len(xs), len(ys)
+
+    def __repr__(self):
+        return f"fmath.Table2({self.nx} x {self.ny})"
+
+    @staticmethod
+    def _cell(bs, n, v):
+        """(lo, hi, w): the segment of breakpoints bs[:n] holding v and v's weight in it, held at the
+        ends (bisection, as the generated C)."""
+        if v <= bs[0]:
+            return 0, 1, 0.0
+        if v >= bs[n - 1]:
+            return n - 2, n - 1, 1.0
+        lo, hi = 0, n - 1
+        while hi - lo > 1:
+            mid = (lo + hi) // 2
+            if bs[mid] <= v:
+                lo = mid
+            else:
+                hi = mid
+        return lo, hi, (v - bs[lo]) / (bs[hi] - bs[lo])
+
+    def at(self, x, y):
+        """Bilinear between the four corners of the cell holding (x, y), held at the edges."""
+        r = self.rows
+        i0, i1, wx = self._cell(r[0], self.nx, x)
+        j0, j1, wy = self._cell(r[1], self.ny, y)
+        a = r[2 + i0][j0] + (r[2 + i0][j1] - r[2 + i0][j0]) * wy
+        b = r[2 + i1][j0] + (r[2 + i1][j1] - r[2 + i1][j0]) * wy
+        return a + (b - a) * wx
+
+    def d_at(self, x, y, which):
+        """The partial derivative of :meth:`at` in x (``which`` 0) or y (1): the cell's, 0.0 where held."""
+        r = self.rows
+        i0, i1, wx = self._cell(r[0], self.nx, x)
+        j0, j1, wy = self._cell(r[1], self.ny, y)
+        if which == 0:
+            if x <= r[0][0] or x >= r[0][self.nx - 1]:
+                return 0.0
+            a = r[2 + i0][j0] + (r[2 + i0][j1] - r[2 + i0][j0]) * wy
+            b = r[2 + i1][j0] + (r[2 + i1][j1] - r[2 + i1][j0]) * wy
+            return (b - a) / (r[0][i1] - r[0][i0])
+        if y <= r[1][0] or y >= r[1][self.ny - 1]:
+            return 0.0
+        da = r[2 + i0][j1] - r[2 + i0][j0]
+        db = r[2 + i1][j1] - r[2 + i1][j0]
+        return (da + (db - da) * wx) / (r[1][j1] - r[1][j0])
+
+
+def interp2(x, y, xs, ys=None, table=None):
+    """The 2-D table at ``(x, y)``: bilinear in the cell holding it, held at the edges. ``xs`` may be a
+    :class:`Table2` (then ``ys`` and ``table`` are omitted). One operation of the generated C, with the
+    same arithmetic (the same bits); its partial derivatives are the cell's, exact."""
+    T = xs if isinstance(xs, Table2) and ys is None else Table2(xs, ys, table)
+    tb = _table((x, y))
+    if tb is not None:
+        return tb["interp2"](x, y, T)
+    return T.at(x, y)
+
+
+def interp2_d(x, y, T, which):
+    """A partial derivative of :func:`interp2` (``which`` 0: in x, 1: in y), for the derivatives."""
+    tb = _table((x, y))
+    if tb is not None:
+        return tb["interp2_d"](x, y, T, which)
+    return T.d_at(x, y, which)
