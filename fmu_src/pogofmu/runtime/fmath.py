@@ -191,6 +191,19 @@ def matvec(M, v) -> list:
     return M.product(v)
 
 
+def _bisect(bs, n, v):
+    """(lo, hi): the segment of the increasing breakpoints bs[:n] holding v, by bisection (the
+    generated C's loop; v outside or NaN ends in the first or last segment)."""
+    lo, hi = 0, n - 1
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if bs[mid] <= v:
+            lo = mid
+        else:
+            hi = mid
+    return lo, hi
+
+
 class Table(Matrix):
     """A 1-D lookup table for :func:`interp`: breakpoints ``xs`` (strictly increasing, at least two)
     and values ``ys`` of the same length, finite numbers, checked once. Build it once, at module
@@ -231,15 +244,7 @@ class Table(Matrix):
 
     def _segment(self, x):
         """(lo, hi) of the segment holding x, by bisection (the generated C does the same)."""
-        xs = self.rows[0]
-        lo, hi = 0, len(xs) - 1
-        while hi - lo > 1:
-            mid = (lo + hi) // 2
-            if xs[mid] <= x:
-                lo = mid
-            else:
-                hi = mid
-        return lo, hi
+        return _bisect(self.rows[0], len(self.rows[0]), x)
 
     def at(self, x):
         """The table at ``x``: linear between breakpoints, held at the ends."""
@@ -319,13 +324,7 @@ class Table2(Matrix):
             return 0, 1, 0.0
         if v >= bs[n - 1]:
             return n - 2, n - 1, 1.0
-        lo, hi = 0, n - 1
-        while hi - lo > 1:
-            mid = (lo + hi) // 2
-            if bs[mid] <= v:
-                lo = mid
-            else:
-                hi = mid
+        lo, hi = _bisect(bs, n, v)
         return lo, hi, (v - bs[lo]) / (bs[hi] - bs[lo])
 
     def at(self, x, y):
