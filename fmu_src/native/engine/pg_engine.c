@@ -5,6 +5,7 @@
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <stdint.h>
 #include <string.h>
 
 #include "pg_support.h"
@@ -178,8 +179,31 @@ static void function_failed_at(const PgEngine *e, PgMsg *m, const char *function
  * line), an arithmetic failure or a non-finite value at a finite state ends the run with one
  * message (PG_RAISE, in m) naming the function, the time, the state and the cause. (A non-finite
  * state is left to the engine's own checks: a trial stage that overflowed, a singular W.) */
-static int model_call(const PgEngine *e, PgMsg *m, int rc, const char *function, int event, double t,
-                      const double *x, const double *v, int n, const char *label, const char *const *names)
+/* every v[i] finite: the plain sum is finite if they all are (a non-finite value makes it inf or NaN),
+ * one addition a value; a sum that overflows from finite values is rare and checked value by value */
+static inline int all_finite(const double *v, int n)
+{
+    double acc = 0.0;
+    for (int i = 0; i < n; ++i) acc += v[i];
+    if (isfinite(acc)) return 1;
+    for (int i = 0; i < n; ++i)
+        if (!isfinite(v[i])) return 0;
+    return 1;
+}
+
+static int model_failed(const PgEngine *e, PgMsg *m, int rc, const char *function, int event, double t,
+                        const double *x, const double *v, int n, const char *label, const char *const *names);
+
+/* the fast path of model_failed, inline: a call that returned finite values passes */
+static inline int model_call(const PgEngine *e, PgMsg *m, int rc, const char *function, int event, double t,
+                             const double *x, const double *v, int n, const char *label, const char *const *names)
+{
+    if (rc == PG_OK && all_finite(v, n)) return PG_OK;
+    return model_failed(e, m, rc, function, event, t, x, v, n, label, names);
+}
+
+static int model_failed(const PgEngine *e, PgMsg *m, int rc, const char *function, int event, double t,
+                        const double *x, const double *v, int n, const char *label, const char *const *names)
 {
     if (rc == PG_NO_JVP) return rc;
     int bad = -1;
@@ -254,12 +278,14 @@ static const double *u_at(PgEngine *e, double t)
 static int model_fun(void *ctx, double t, const double *y, double *dy, PgMsg *m)
 {
     PgEngine *e = ctx;
+    if (!e->probe) return e->model->flow(t, y, e->q, u_at(e, t), e->p, dy, m); /* the steps: as it is */
+    /* probe_step: the same step again, each value of the flow checked, a failure named */
     int rc = e->model->flow(t, y, e->q, u_at(e, t), e->p, dy, m);
     if (rc == PG_OK) {
-        note_flow(e, t, y, dy);
+        if (!all_finite(dy, e->nx)) note_flow(e, t, y, dy);
         return PG_OK;
     }
-    return model_call(e, m, rc, "the flow", -1, t, y, dy, e->nx, "d%s/dt", e->model->state_names);
+    return model_failed(e, m, rc, "the flow", -1, t, y, dy, e->nx, "d%s/dt", e->model->state_names);
 }
 
 /* guard i at the state x of time t (with the inputs of t) */
@@ -1346,6 +1372,21 @@ static int end_step(PgEngine *e, PgSeg *seg, double t_target, int *cut)
     return domain_error(e, t_v);
 }
 
+/* The step just rejected with a non-finite error, once more with the flow's values checked: a rate
+ * that is not finite at a stage near the step's start is noted (note_flow), the message if the step
+ * size then collapses. Only on such a rejection: the steps that succeed pay nothing for it. */
+static int pair_step(PgEngine *e, double t, const double *y, const double *f, double h, double *y_new,
+                     double *f_new, double *K);
+static void probe_step(PgEngine *e, double t, const double *y, const double *f, double h)
+{
+    double y_new[PG_MAX_X], f_new[PG_MAX_X], K[PG_MAX_STAGES * PG_MAX_X];
+    PgMsg keep = e->msg;
+    e->probe = 1;
+    (void)pair_step(e, t, y, f, h, y_new, f_new, K);
+    e->probe = 0;
+    e->msg = keep;
+}
+
 /* _step */
 static int step(PgEngine *e, double t_target)
 {
@@ -1367,7 +1408,15 @@ static int step(PgEngine *e, double t_target)
         if (on_time) t_new = t_time;
         h = t_new - t;
         if (h <= MIN_STEP_ULPS * EPS * pmax(fabs(t), 1.0) && !(on_time && h > 0.0)) return collapse_error(e, t, h);
-        TRY(pair_step(e, t, y, f, h, y_new, f_new, K));
+        int rc = pair_step(e, t, y, f, h, y_new, f_new, K);
+        if (rc) { /* the flow failed (raised, or an arithmetic error): the same step again, to name it */
+            if (rc == PG_ARITH || rc == PG_RAISE) {
+                e->probe = 1;
+                rc = pair_step(e, t, y, f, h, y_new, f_new, K);
+                e->probe = 0;
+            }
+            return rc;
+        }
         long n = e->win_n = e->win_n + 1;
         if (n >= e->warn_n || t - e->win_t0 >= BUDGET_WINDOW) TRY(spend(e, t, h));
         double err = error_norm(e, K, h, y, y_new);
@@ -1389,6 +1438,7 @@ static int step(PgEngine *e, double t_target)
         e->n_rejected += 1;
         rejected = 1;
         if (!isfinite(err)) {
+            probe_step(e, t, y, f, h); /* a flow that returned a non-finite rate: noted, for the message */
             h *= MIN_FACTOR;
         } else {
             double pw;

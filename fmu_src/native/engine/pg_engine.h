@@ -116,6 +116,7 @@ struct PgEngine {
     int own_same; /* (during a re-arming) the jump just applied left x and q as they were */
     PgMsg note; /* a trial stage's non-finite rate since the last accepted step (the flow named): the cause, if the step collapses */
     int has_note;
+    int probe; /* (during probe_step) the flow's values are checked */
     int pending_located; /* the pending event's guard was located at its crossing (a step's root, the importer's):
                           * its value there is its zero; an event an input change or a jump fired is beyond it */
     /* time events: each one's next instant (INFINITY: no more), first instant, period and count */
