@@ -31,26 +31,48 @@ class CompileError(Exception):
     """The C compiler is missing or failed (the message holds its first lines of output)."""
 
 
-def c_compiler(cc: Optional[str] = None) -> Optional[str]:
+NO_COMPILER = "no C compiler found (cc, gcc or clang on the PATH, CC, or the ziglang package: pip install ziglang)"
+
+
+def c_compiler(cc=None) -> Optional[list]:
+    """The command that compiles C for this machine: ``cc`` if given (a name or path, or a command
+    as a list), else ``CC``, ``cc``, ``gcc`` or ``clang`` on the PATH, else the ziglang package's
+    ``zig cc`` for the host (so a machine with Python and nothing else compiles the host-side
+    libraries too); None without any of them."""
+    if isinstance(cc, (list, tuple)):
+        return list(cc)
     for name in ([cc] if cc else [os.environ.get("CC"), "cc", "gcc", "clang"]):
         if name and shutil.which(name):
-            return shutil.which(name)
-    return None
+            return [shutil.which(name)]
+    if cc:
+        return None
+    return zig_cc(None)
+
+
+def _run_cc(command: Sequence[str], args: Sequence[str]) -> subprocess.CompletedProcess:
+    """Run a compiler command; zig is run from its own folder (see :func:`zig_cc`)."""
+    cwd = Path(command[0]).parent if len(command) > 1 else None
+    return subprocess.run([*command, *args], capture_output=True, text=True, cwd=cwd)
+
+
+def _shown(command: Sequence[str]) -> str:
+    return Path(command[0]).name if len(command) == 1 else " ".join([Path(command[0]).name, *command[1:]])
 
 
 def compile_c(sources: Sequence[Path], out: Path, *, shared: bool = True, include: Iterable[Path] = (),
-              defines: Iterable[str] = (), cc: Optional[str] = None, extra: Sequence[str] = (),
+              defines: Iterable[str] = (), cc=None, extra: Sequence[str] = (),
               libs: Sequence[str] = ("-lm",), pic: bool = True) -> Path:
-    compiler = c_compiler(cc)
-    if compiler is None:
-        raise CompileError("no C compiler found (cc, gcc or clang; or set CC)")
-    cmd = [compiler, *CFLAGS, *(["-shared"] if shared else []), *(["-fPIC"] if shared and pic else []), *extra,
-           *(f"-I{p}" for p in include), *(f"-D{d}" for d in defines),
-           *(str(s) for s in sources), "-o", str(out), *libs]
-    proc = subprocess.run(cmd, capture_output=True, text=True)
+    command = c_compiler(cc)
+    if command is None:
+        raise CompileError(NO_COMPILER)
+    # absolute paths: zig runs from its own folder
+    args = [*CFLAGS, *(["-shared"] if shared else []), *(["-fPIC"] if shared and pic else []), *extra,
+            *(f"-I{Path(p).resolve()}" for p in include), *(f"-D{d}" for d in defines),
+            *(str(Path(s).resolve()) for s in sources), "-o", str(Path(out).resolve()), *libs]
+    proc = _run_cc(command, args)
     if proc.returncode != 0:
         lines = (proc.stderr or proc.stdout).strip().splitlines()
-        raise CompileError(f"{Path(compiler).name} failed ({proc.returncode}): " + " | ".join(lines[:6]))
+        raise CompileError(f"{_shown(command)} failed ({proc.returncode}): " + " | ".join(lines[:6]))
     return out
 
 
@@ -76,7 +98,7 @@ def write_model_source(model, folder: Path) -> Path:
     return path
 
 
-def model_library(model, folder: Path, cc: Optional[str] = None) -> Path:
+def model_library(model, folder: Path, cc=None) -> Path:
     """A shared library of the model's generated C and the engine's support code (``PG_MODEL``
     exported), for tests that call the generated functions directly."""
     model = _model(model)
@@ -111,9 +133,10 @@ def _host_library(stem: str, sources: Sequence[Path], headers: Iterable[Path], i
 
     compiler = c_compiler(cc)
     if compiler is None:
-        raise CompileError(f"no C compiler found (cc, gcc or clang; or set CC){why}")
+        raise CompileError(f"{NO_COMPILER}{why}")
     flags = [*CFLAGS, "-shared", "-fPIC", *extra]
-    digest = hashlib.sha256(" ".join([compiler, *flags, sys.platform]).encode())
+    zig = [f"zig {zig_version()}"] if len(compiler) > 1 else []
+    digest = hashlib.sha256(" ".join([*compiler, *zig, *flags, sys.platform]).encode())
     for path in sorted({*sources, *headers}):
         digest.update(path.name.encode() + b"\0" + path.read_bytes())
     folder = cache_dir()
@@ -185,8 +208,9 @@ PLATFORMS = {
 NO_FAST_MATH = ("-fno-fast-math",)
 
 
-def zig_cc(target: str) -> Optional[list]:
-    """The command that compiles C for ``target`` with the ziglang package's zig, or None without it.
+def zig_cc(target: Optional[str]) -> Optional[list]:
+    """The command that compiles C for ``target`` (None: this machine) with the ziglang package's
+    zig, or None without it.
     The zig executable by its absolute path, run from its own folder (:func:`compile_units`): zig
     keys its cache of the targets' C libraries (minutes of work for Windows' mingw-w64 CRT) by its
     lib folder's path relative to the current folder, which must not change between callers."""
@@ -197,7 +221,9 @@ def zig_cc(target: str) -> Optional[list]:
         return None
     folder = Path(list(spec.submodule_search_locations)[0]).resolve()
     exe = folder / ("zig.exe" if os.name == "nt" else "zig")
-    return [str(exe), "cc", "-target", target] if exe.is_file() else None
+    if not exe.is_file():
+        return None
+    return [str(exe), "cc", *(["-target", target] if target else [])]
 
 
 def zig_version() -> str:
@@ -319,9 +345,9 @@ def compile_units(units: Sequence[Path], out: Path, include: Sequence[Path], cc=
     import hashlib
     from concurrent.futures import ThreadPoolExecutor
 
-    command = list(cc) if isinstance(cc, (list, tuple)) else [c_compiler(cc)]
-    if command[0] is None:
-        raise CompileError("no C compiler found (cc, gcc or clang; or set CC)")
+    command = c_compiler(cc)
+    if command is None:
+        raise CompileError(NO_COMPILER)
     compiler = " ".join(command) + (f" zig {zig_version()}" if len(command) > 1 else "")
     # zig names its lib folder relative to the current folder and keys its cache of the targets' C
     # libraries by that name: run it from its own folder, so that one cache serves every caller
