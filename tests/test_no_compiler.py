@@ -91,3 +91,50 @@ def test_export_and_run_without_a_c_compiler(tmp_path):
     for kind in ("python", "native"):
         for t, h in got[kind]:
             assert h == pytest.approx(ball_height(t), abs=1e-8), (kind, t)
+
+
+INSTALLED = r'''
+import json, sys
+from pathlib import Path
+import pogofmu
+from pogofmu.codegen.build import host_engine_library, host_level_library
+from pogofmu.ssp import native_level
+from pogofmu.runtime.engine.cengine import Simulator
+from pogofmu.runtime.models import get
+
+sim = Simulator(get("PogoStick"), {}, keep_history=True)
+sim.advance(0.5)
+print(json.dumps({"package": pogofmu.__file__, "engine": str(host_engine_library()),
+                  "level": str(host_level_library()), "level_loaded": native_level.library() is not None}))
+'''
+
+
+def test_the_wheel_carries_the_compiled_host_libraries(tmp_path):
+    """``pip wheel`` compiles the engine and the SSP level library into pogofmu/_lib; installed (no
+    index, no dependencies: the project's venv supplies them), the package uses them on a machine
+    with no C compiler and compiles nothing into its cache."""
+    pytest.importorskip("ziglang")
+    wheels = tmp_path / "wheels"
+    proc = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(wheels), str(ROOT)],
+                          capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    (wheel,) = wheels.glob("pogofmu-*.whl")
+    import zipfile
+
+    names = zipfile.ZipFile(wheel).namelist()
+    libs = sorted(Path(n).name.split("_")[1] for n in names if n.startswith("pogofmu/_lib/"))
+    assert libs == ["engine", "level"], names
+    site = tmp_path / "site"
+    proc = subprocess.run([sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--no-index", "--target",
+                           str(site), str(wheel)], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    env = {k: v for k, v in os.environ.items() if k not in ("CC", "PATH", "PYTHONPATH")}
+    env.update(PATH=bare_path(tmp_path / "bin"), POGOFMU_CACHE=str(tmp_path / "cache"), PYTHONPATH=str(site))
+    proc = subprocess.run([sys.executable, "-c", INSTALLED], env=env, capture_output=True, text=True, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    got = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert Path(got["package"]).is_relative_to(site)
+    for key in ("engine", "level"):
+        assert Path(got[key]).parent == site / "pogofmu" / "_lib", got
+    assert got["level_loaded"]
+    assert not (tmp_path / "cache").exists()

@@ -124,23 +124,58 @@ def cache_dir() -> Path:
     return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "pogofmu"
 
 
-def _host_library(stem: str, sources: Sequence[Path], headers: Iterable[Path], include: Sequence[Path],
-                  extra: Sequence[str] = (), cc: Optional[str] = None, why: str = "") -> Path:
-    """A shared library of ``sources`` for this machine, compiled once per version of its sources,
-    headers, flags and compiler into :func:`cache_dir` as ``<stem>_<digest>.so``."""
+def prebuilt_dir() -> Path:
+    """Where an installed package carries its host libraries, compiled when the package was built
+    (setup.py's build_py step): ``pogofmu/_lib``."""
+    return Path(__file__).resolve().parents[1] / "_lib"
+
+
+def _host_key(sources: Sequence[Path], headers: Iterable[Path], extra: Sequence[str]) -> str:
+    """The digest of a host library's sources, headers, flags and platform (not the compiler):
+    the name of the package's prebuilt copy."""
     import hashlib
     import sys
 
+    digest = hashlib.sha256(" ".join([*CFLAGS, "-shared", "-fPIC", *extra, sys.platform]).encode())
+    for path in sorted({*sources, *headers}):
+        digest.update(path.name.encode() + b"\0" + path.read_bytes())
+    return digest.hexdigest()[:16]
+
+
+def _suffix() -> str:
+    import sys
+
+    return ".dll" if os.name == "nt" else ".dylib" if sys.platform == "darwin" else ".so"
+
+
+def _host_library(stem: str, sources: Sequence[Path], headers: Iterable[Path], include: Sequence[Path],
+                  extra: Sequence[str] = (), cc: Optional[str] = None, why: str = "",
+                  into: Optional[Path] = None) -> Path:
+    """A shared library of ``sources`` for this machine: the package's prebuilt copy
+    (:func:`prebuilt_dir`, same sources and flags) if it has one, else compiled once per version of
+    its sources, headers, flags and compiler into :func:`cache_dir` as ``<stem>_<digest>.so``.
+    ``into``: compile into that folder under the prebuilt name (the package build)."""
+    import hashlib
+    import sys
+
+    headers = list(headers)
+    suffix = _suffix()
+    key = _host_key(sources, headers, extra)
+    prebuilt = prebuilt_dir() / f"{stem}_{key}{suffix}"
+    if into is None and cc is None and prebuilt.is_file():
+        return prebuilt
     compiler = c_compiler(cc)
     if compiler is None:
         raise CompileError(f"{NO_COMPILER}{why}")
+    if into is not None:
+        into.mkdir(parents=True, exist_ok=True)
+        return compile_c(sources, into / prebuilt.name, include=include, cc=compiler, extra=list(extra))
     flags = [*CFLAGS, "-shared", "-fPIC", *extra]
     zig = [f"zig {zig_version()}"] if len(compiler) > 1 else []
     digest = hashlib.sha256(" ".join([*compiler, *zig, *flags, sys.platform]).encode())
     for path in sorted({*sources, *headers}):
         digest.update(path.name.encode() + b"\0" + path.read_bytes())
     folder = cache_dir()
-    suffix = ".dll" if os.name == "nt" else ".dylib" if sys.platform == "darwin" else ".so"
     out = folder / f"{stem}_{digest.hexdigest()[:16]}{suffix}"
     if not out.exists():
         folder.mkdir(parents=True, exist_ok=True)
@@ -150,23 +185,23 @@ def _host_library(stem: str, sources: Sequence[Path], headers: Iterable[Path], i
     return out
 
 
-def host_engine_library(cc: Optional[str] = None) -> Path:
+def host_engine_library(cc: Optional[str] = None, into: Optional[Path] = None) -> Path:
     """The engine as a shared library for this machine (its ``pgb_*`` functions exported), compiled
     once per version of its sources, flags and compiler into :func:`cache_dir`: what the host-side
     tools run a Python model's simulation with (:mod:`pogofmu.runtime.engine.cengine`)."""
     return _host_library("pogofmu_engine", [ENGINE / s for s in BINDING_SOURCES], ENGINE.glob("*.h"), [ENGINE],
-                         ["-fvisibility=hidden"], cc, ": the engine is C and is compiled once on first use")
+                         ["-fvisibility=hidden"], cc, ": the engine is C", into)
 
 
 MASTER = NATIVE / "master"
 
 
-def host_level_library(cc: Optional[str] = None) -> Path:
+def host_level_library(cc: Optional[str] = None, into: Optional[Path] = None) -> Path:
     """The SSP master's C stepping of a level of components (``fmu_src/native/master/pg_level.c``,
     :mod:`pogofmu.ssp.native_level`) and its CSV rows (``pg_csv.c``, :mod:`pogofmu.ssp.record`),
     compiled once per version like :func:`host_engine_library`."""
     return _host_library("pogofmu_level", [MASTER / "pg_level.c", MASTER / "pg_csv.c"], (), [MASTER],
-                         ["-fvisibility=hidden", "-pthread"], cc)
+                         ["-fvisibility=hidden", "-pthread"], cc, "", into)
 
 
 def engine_library(model, folder: Path, cc: Optional[str] = None) -> Path:
