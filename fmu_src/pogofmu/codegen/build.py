@@ -186,8 +186,9 @@ def _host_library(stem: str, sources: Sequence[Path], headers: Iterable[Path], i
 
 
 def host_engine_library(cc: Optional[str] = None, into: Optional[Path] = None) -> Path:
-    """The engine as a shared library for this machine (its ``pgb_*`` functions exported), compiled
-    once per version of its sources, flags and compiler into :func:`cache_dir`: what the host-side
+    """The engine as a shared library for this machine (its ``pgb_*`` functions exported): the
+    installed package's prebuilt copy, else compiled once per version of its sources, flags and
+    compiler into :func:`cache_dir` (:func:`_host_library`): what the host-side
     tools run a Python model's simulation with (:mod:`pogofmu.runtime.engine.cengine`)."""
     return _host_library("pogofmu_engine", [ENGINE / s for s in BINDING_SOURCES], ENGINE.glob("*.h"), [ENGINE],
                          ["-fvisibility=hidden"], cc, ": the engine is C", into)
