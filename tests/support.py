@@ -275,14 +275,13 @@ def run_libcosim(name, stop_time, step, outputs, initial=None, timeout=120):
 
 
 def compile_c_host(source, exe):
-    """Compile a C importer of tests/c_host/ with the system compiler against fmpy's FMI headers;
+    """Compile a C importer of tests/c_host/ with the resolved C compiler against fmpy's FMI headers;
     assert it links no libpython (it must bring nothing but dlopen)."""
-    import shutil
-
     from pogofmu import build
+    from pogofmu.codegen.build import c_compiler
 
-    cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
-    subprocess.run([cc, "-O1", "-Wall", f"-I{build.fmi_headers()}", str(source), "-o", str(exe), "-ldl"],
+    cc = c_compiler()  # the system's, else zig cc (the ziglang package): never missing
+    subprocess.run([*cc, "-O1", "-Wall", f"-I{build.fmi_headers()}", str(source), "-o", str(exe), "-ldl"],
                    check=True)
     needed = subprocess.run(["readelf", "-d", str(exe)], capture_output=True, text=True, check=True).stdout
     assert "libpython" not in needed

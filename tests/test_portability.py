@@ -191,15 +191,15 @@ def test_c_host_with_a_cpython_older_than_3_10_is_told_which_it_found(c_host, un
     """A CPython 3.9 (a stand-in compiled here: every symbol the launcher resolves, version
     3.9.18; and the real one too where pyenv has it): instantiation fails naming the library, its
     version and the need, before calling anything in it."""
-    import shutil
 
     from pogofmu import build
 
     source = tmp_path / "fake_python.c"
     source.write_text(FAKE_PYTHON)
     fake = tmp_path / "libpython3.9.so.1.0"
-    cc = shutil.which("cc") or shutil.which("gcc")
-    subprocess.run([cc, "-shared", "-fPIC", f"-I{build.NATIVE / 'python'}", str(source), "-o", str(fake)],
+    from pogofmu.codegen.build import c_compiler
+
+    subprocess.run([*c_compiler(), "-shared", "-fPIC", f"-I{build.NATIVE / 'python'}", str(source), "-o", str(fake)],
                    check=True, capture_output=True)
     real = sorted((Path.home() / ".pyenv/versions").glob("3.9*/lib/libpython3.9.so.1.0"))
     for lib in [fake, *real[:1]]:

@@ -284,11 +284,10 @@ def test_instantiations_while_another_thread_calls_py_getversion(tmp_path):
     the host's CPython) instantiates in each of 3 fresh processes. Before, about a third of them
     failed here ("this process runs CPython 3.11.7 ... needs 3.10 to 3.13"), and about 1 in 250 of
     the fmpy-threads starts above under load."""
-    import shutil
+    from pogofmu.codegen.build import c_compiler
 
-    cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
     hammer = tmp_path / "py_version_hammer.so"
-    subprocess.run([cc, "-O2", "-shared", "-fPIC", "-pthread", str(ROOT / "tests" / "c_host" / "py_version_hammer.c"),
+    subprocess.run([*c_compiler(), "-O2", "-shared", "-fPIC", "-pthread", str(ROOT / "tests" / "c_host" / "py_version_hammer.c"),
                     "-o", str(hammer)], check=True)
     for _ in range(3):
         proc = subprocess.run([sys.executable, str(ROOT / "tests" / "_version_race.py"), str(DIST), ",".join(MIXED),

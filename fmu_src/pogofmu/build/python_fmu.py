@@ -32,7 +32,7 @@ from .errors import BuildError
 
 PACKAGE = Path(__file__).resolve().parents[1]  # fmu_src/pogofmu
 RUNTIME = PACKAGE / "runtime"  # the code that goes into every FMU, staged as a whole
-from pogofmu.codegen.build import BINDING_SOURCES, CFLAGS, ENGINE, NATIVE, c_compiler  # noqa: E402,F401 (the C layer, in a clone or a wheel; the
+from pogofmu.codegen.build import BINDING_SOURCES, CFLAGS, ENGINE, NATIVE, NO_COMPILER, _run_cc, c_compiler, zig_version  # noqa: E402,F401 (the C layer, in a clone or a wheel; the
 #                                                       system compiler, one lookup for both kinds of FMU)
 
 
@@ -65,28 +65,29 @@ def compile_launcher(fmi_version: int, cache: Path):
     ``cache``, keyed by the hash of sources, headers and flags.  Returns the library's path.  The
     launcher carries the engine (the engine's C files with ``pg_binding.c``, compiled with the
     engine's own flags: no fused multiply-add), so a C compiler is needed."""
-    cc = c_compiler()
+    cc = c_compiler()  # the system's cc, gcc or clang, else the ziglang package's zig cc
     sources = launcher_sources(fmi_version)
+    # absolute paths: zig runs from its own folder
     flags = ["-std=c11", "-O2", "-ffp-contract=off", "-fno-strict-aliasing", "-fPIC", "-shared",
-             "-fvisibility=hidden", "-Wall", "-Wextra", "-Wno-unused-parameter", f"-I{fmi_headers()}",
+             "-fvisibility=hidden", "-Wall", "-Wextra", "-Wno-unused-parameter", f"-I{fmi_headers().resolve()}",
              f"-I{NATIVE}", f"-I{NATIVE / 'python'}", f"-I{ENGINE}"]
     libs = ["-ldl", "-lpthread", "-lm"]
     if cc is None:
-        raise BuildError("no C compiler found (cc, gcc or clang; or set CC): the Python-hosted FMUs' launcher "
-                         "carries the engine, which is C")
-    digest = hashlib.sha256(" ".join([cc] + flags + libs).encode())
+        raise BuildError(f"{NO_COMPILER}: the Python-hosted FMUs' launcher carries the engine, which is C")
+    zig = [f"zig {zig_version()}"] if len(cc) > 1 else []
+    digest = hashlib.sha256(" ".join([*cc, *zig] + flags + libs).encode())
     for part in sorted({*sources, *NATIVE.glob("*.[ch]"), *(NATIVE / "python").glob("*.[ch]"),
                         *ENGINE.glob("*.[ch]")}):  # sources, headers
         digest.update(part.name.encode() + b"\0" + part.read_bytes())
     for header in sorted(fmi_headers().glob(f"fmi{fmi_version}*.h")):
         digest.update(header.read_bytes())
     cache.mkdir(parents=True, exist_ok=True)
-    out = cache / f"pogofmu_fmi{fmi_version}_{digest.hexdigest()[:16]}.so"
+    out = (cache / f"pogofmu_fmi{fmi_version}_{digest.hexdigest()[:16]}.so").resolve()
     if not out.exists():
         tmp = out.with_suffix(f".{os.getpid()}.tmp")
-        proc = subprocess.run([cc, *flags, *map(str, sources), "-o", str(tmp), *libs], capture_output=True, text=True)
+        proc = _run_cc(cc, [*flags, *(str(Path(s).resolve()) for s in sources), "-o", str(tmp), *libs])
         if proc.returncode:
-            raise BuildError(f"compiling the FMUs' launcher failed ({cc}):\n{proc.stderr}")
+            raise BuildError(f"compiling the FMUs' launcher failed ({' '.join(cc)}):\n{proc.stderr}")
         os.replace(tmp, out)
     return out
 

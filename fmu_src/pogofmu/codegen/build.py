@@ -31,26 +31,48 @@ class CompileError(Exception):
     """The C compiler is missing or failed (the message holds its first lines of output)."""
 
 
-def c_compiler(cc: Optional[str] = None) -> Optional[str]:
+NO_COMPILER = "no C compiler found (cc, gcc or clang on the PATH, CC, or the ziglang package: pip install ziglang)"
+
+
+def c_compiler(cc=None) -> Optional[list]:
+    """The command that compiles C for this machine: ``cc`` if given (a name or path, or a command
+    as a list), else ``CC``, ``cc``, ``gcc`` or ``clang`` on the PATH, else the ziglang package's
+    ``zig cc`` for the host (so a machine with Python and nothing else compiles the host-side
+    libraries too); None without any of them."""
+    if isinstance(cc, (list, tuple)):
+        return list(cc)
     for name in ([cc] if cc else [os.environ.get("CC"), "cc", "gcc", "clang"]):
         if name and shutil.which(name):
-            return shutil.which(name)
-    return None
+            return [shutil.which(name)]
+    if cc:
+        return None
+    return zig_cc(None)
+
+
+def _run_cc(command: Sequence[str], args: Sequence[str]) -> subprocess.CompletedProcess:
+    """Run a compiler command; zig is run from its own folder (see :func:`zig_cc`)."""
+    cwd = Path(command[0]).parent if len(command) > 1 else None
+    return subprocess.run([*command, *args], capture_output=True, text=True, cwd=cwd)
+
+
+def _shown(command: Sequence[str]) -> str:
+    return Path(command[0]).name if len(command) == 1 else " ".join([Path(command[0]).name, *command[1:]])
 
 
 def compile_c(sources: Sequence[Path], out: Path, *, shared: bool = True, include: Iterable[Path] = (),
-              defines: Iterable[str] = (), cc: Optional[str] = None, extra: Sequence[str] = (),
+              defines: Iterable[str] = (), cc=None, extra: Sequence[str] = (),
               libs: Sequence[str] = ("-lm",), pic: bool = True) -> Path:
-    compiler = c_compiler(cc)
-    if compiler is None:
-        raise CompileError("no C compiler found (cc, gcc or clang; or set CC)")
-    cmd = [compiler, *CFLAGS, *(["-shared"] if shared else []), *(["-fPIC"] if shared and pic else []), *extra,
-           *(f"-I{p}" for p in include), *(f"-D{d}" for d in defines),
-           *(str(s) for s in sources), "-o", str(out), *libs]
-    proc = subprocess.run(cmd, capture_output=True, text=True)
+    command = c_compiler(cc)
+    if command is None:
+        raise CompileError(NO_COMPILER)
+    # absolute paths: zig runs from its own folder
+    args = [*CFLAGS, *(["-shared"] if shared else []), *(["-fPIC"] if shared and pic else []), *extra,
+            *(f"-I{Path(p).resolve()}" for p in include), *(f"-D{d}" for d in defines),
+            *(str(Path(s).resolve()) for s in sources), "-o", str(Path(out).resolve()), *libs]
+    proc = _run_cc(command, args)
     if proc.returncode != 0:
         lines = (proc.stderr or proc.stdout).strip().splitlines()
-        raise CompileError(f"{Path(compiler).name} failed ({proc.returncode}): " + " | ".join(lines[:6]))
+        raise CompileError(f"{_shown(command)} failed ({proc.returncode}): " + " | ".join(lines[:6]))
     return out
 
 
@@ -76,7 +98,7 @@ def write_model_source(model, folder: Path) -> Path:
     return path
 
 
-def model_library(model, folder: Path, cc: Optional[str] = None) -> Path:
+def model_library(model, folder: Path, cc=None) -> Path:
     """A shared library of the model's generated C and the engine's support code (``PG_MODEL``
     exported), for tests that call the generated functions directly."""
     model = _model(model)
@@ -102,22 +124,58 @@ def cache_dir() -> Path:
     return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "pogofmu"
 
 
-def _host_library(stem: str, sources: Sequence[Path], headers: Iterable[Path], include: Sequence[Path],
-                  extra: Sequence[str] = (), cc: Optional[str] = None, why: str = "") -> Path:
-    """A shared library of ``sources`` for this machine, compiled once per version of its sources,
-    headers, flags and compiler into :func:`cache_dir` as ``<stem>_<digest>.so``."""
+def prebuilt_dir() -> Path:
+    """Where an installed package carries its host libraries, compiled when the package was built
+    (setup.py's build_py step): ``pogofmu/_lib``."""
+    return Path(__file__).resolve().parents[1] / "_lib"
+
+
+def _host_key(sources: Sequence[Path], headers: Iterable[Path], extra: Sequence[str]) -> str:
+    """The digest of a host library's sources, headers, flags and platform (not the compiler):
+    the name of the package's prebuilt copy."""
     import hashlib
     import sys
 
+    digest = hashlib.sha256(" ".join([*CFLAGS, "-shared", "-fPIC", *extra, sys.platform]).encode())
+    for path in sorted({*sources, *headers}):
+        digest.update(path.name.encode() + b"\0" + path.read_bytes())
+    return digest.hexdigest()[:16]
+
+
+def _suffix() -> str:
+    import sys
+
+    return ".dll" if os.name == "nt" else ".dylib" if sys.platform == "darwin" else ".so"
+
+
+def _host_library(stem: str, sources: Sequence[Path], headers: Iterable[Path], include: Sequence[Path],
+                  extra: Sequence[str] = (), cc: Optional[str] = None, why: str = "",
+                  into: Optional[Path] = None) -> Path:
+    """A shared library of ``sources`` for this machine: the package's prebuilt copy
+    (:func:`prebuilt_dir`, same sources and flags) if it has one, else compiled once per version of
+    its sources, headers, flags and compiler into :func:`cache_dir` as ``<stem>_<digest>.so``.
+    ``into``: compile into that folder under the prebuilt name (the package build)."""
+    import hashlib
+    import sys
+
+    headers = list(headers)
+    suffix = _suffix()
+    key = _host_key(sources, headers, extra)
+    prebuilt = prebuilt_dir() / f"{stem}_{key}{suffix}"
+    if into is None and cc is None and prebuilt.is_file():
+        return prebuilt
     compiler = c_compiler(cc)
     if compiler is None:
-        raise CompileError(f"no C compiler found (cc, gcc or clang; or set CC){why}")
+        raise CompileError(f"{NO_COMPILER}{why}")
+    if into is not None:
+        into.mkdir(parents=True, exist_ok=True)
+        return compile_c(sources, into / prebuilt.name, include=include, cc=compiler, extra=list(extra))
     flags = [*CFLAGS, "-shared", "-fPIC", *extra]
-    digest = hashlib.sha256(" ".join([compiler, *flags, sys.platform]).encode())
+    zig = [f"zig {zig_version()}"] if len(compiler) > 1 else []
+    digest = hashlib.sha256(" ".join([*compiler, *zig, *flags, sys.platform]).encode())
     for path in sorted({*sources, *headers}):
         digest.update(path.name.encode() + b"\0" + path.read_bytes())
     folder = cache_dir()
-    suffix = ".dll" if os.name == "nt" else ".dylib" if sys.platform == "darwin" else ".so"
     out = folder / f"{stem}_{digest.hexdigest()[:16]}{suffix}"
     if not out.exists():
         folder.mkdir(parents=True, exist_ok=True)
@@ -127,23 +185,24 @@ def _host_library(stem: str, sources: Sequence[Path], headers: Iterable[Path], i
     return out
 
 
-def host_engine_library(cc: Optional[str] = None) -> Path:
-    """The engine as a shared library for this machine (its ``pgb_*`` functions exported), compiled
-    once per version of its sources, flags and compiler into :func:`cache_dir`: what the host-side
+def host_engine_library(cc: Optional[str] = None, into: Optional[Path] = None) -> Path:
+    """The engine as a shared library for this machine (its ``pgb_*`` functions exported): the
+    installed package's prebuilt copy, else compiled once per version of its sources, flags and
+    compiler into :func:`cache_dir` (:func:`_host_library`): what the host-side
     tools run a Python model's simulation with (:mod:`pogofmu.runtime.engine.cengine`)."""
     return _host_library("pogofmu_engine", [ENGINE / s for s in BINDING_SOURCES], ENGINE.glob("*.h"), [ENGINE],
-                         ["-fvisibility=hidden"], cc, ": the engine is C and is compiled once on first use")
+                         ["-fvisibility=hidden"], cc, ": the engine is C", into)
 
 
 MASTER = NATIVE / "master"
 
 
-def host_level_library(cc: Optional[str] = None) -> Path:
+def host_level_library(cc: Optional[str] = None, into: Optional[Path] = None) -> Path:
     """The SSP master's C stepping of a level of components (``fmu_src/native/master/pg_level.c``,
     :mod:`pogofmu.ssp.native_level`) and its CSV rows (``pg_csv.c``, :mod:`pogofmu.ssp.record`),
     compiled once per version like :func:`host_engine_library`."""
     return _host_library("pogofmu_level", [MASTER / "pg_level.c", MASTER / "pg_csv.c"], (), [MASTER],
-                         ["-fvisibility=hidden", "-pthread"], cc)
+                         ["-fvisibility=hidden", "-pthread"], cc, "", into)
 
 
 def engine_library(model, folder: Path, cc: Optional[str] = None) -> Path:
@@ -185,8 +244,9 @@ PLATFORMS = {
 NO_FAST_MATH = ("-fno-fast-math",)
 
 
-def zig_cc(target: str) -> Optional[list]:
-    """The command that compiles C for ``target`` with the ziglang package's zig, or None without it.
+def zig_cc(target: Optional[str]) -> Optional[list]:
+    """The command that compiles C for ``target`` (None: this machine) with the ziglang package's
+    zig, or None without it.
     The zig executable by its absolute path, run from its own folder (:func:`compile_units`): zig
     keys its cache of the targets' C libraries (minutes of work for Windows' mingw-w64 CRT) by its
     lib folder's path relative to the current folder, which must not change between callers."""
@@ -197,7 +257,9 @@ def zig_cc(target: str) -> Optional[list]:
         return None
     folder = Path(list(spec.submodule_search_locations)[0]).resolve()
     exe = folder / ("zig.exe" if os.name == "nt" else "zig")
-    return [str(exe), "cc", "-target", target] if exe.is_file() else None
+    if not exe.is_file():
+        return None
+    return [str(exe), "cc", *(["-target", target] if target else [])]
 
 
 def zig_version() -> str:
@@ -319,9 +381,9 @@ def compile_units(units: Sequence[Path], out: Path, include: Sequence[Path], cc=
     import hashlib
     from concurrent.futures import ThreadPoolExecutor
 
-    command = list(cc) if isinstance(cc, (list, tuple)) else [c_compiler(cc)]
-    if command[0] is None:
-        raise CompileError("no C compiler found (cc, gcc or clang; or set CC)")
+    command = c_compiler(cc)
+    if command is None:
+        raise CompileError(NO_COMPILER)
     compiler = " ".join(command) + (f" zig {zig_version()}" if len(command) > 1 else "")
     # zig names its lib folder relative to the current folder and keys its cache of the targets' C
     # libraries by that name: run it from its own folder, so that one cache serves every caller

@@ -19,8 +19,9 @@ Where the library comes from:
 
 * inside a Python-hosted FMU, the FMU's launcher carries the engine (its ``pgb_*`` functions); the
   bootstrap names the launcher (:func:`use_library`);
-* on the host, ``pogofmu.codegen.build.host_engine_library`` compiles it once per version of its
-  sources into the user's cache folder (``POGOFMU_CACHE``, else the platform's cache folder).
+* on the host, ``pogofmu.codegen.build.host_engine_library``: an installed package's copy, compiled
+  when the package was built (``pogofmu/_lib``), else compiled once per version of its sources into
+  the user's cache folder (``POGOFMU_CACHE``, else the platform's cache folder).
 
 The library is loaded with the GIL kept (``ctypes.PyDLL``): the callbacks run Python anyway, and a
 run is one thread's.

@@ -1,0 +1,34 @@
+"""The package build compiles the host-side libraries (the engine the host tools run, the SSP
+master's C level) into pogofmu/_lib, so an installed package carries them; the compiler is the
+system's cc, gcc or clang, else the ziglang package's zig cc (a build requirement).  Everything
+else is in pyproject.toml."""
+import sys
+from pathlib import Path
+
+from setuptools import Distribution, setup
+from setuptools.command.build_py import build_py
+
+HERE = Path(__file__).resolve().parent
+
+
+class BuildPyWithHostLibraries(build_py):
+    def run(self):
+        super().run()
+        if self.editable_mode:  # an editable checkout compiles them on first use (the cache)
+            return
+        sys.path.insert(0, str(HERE / "fmu_src"))
+        try:
+            from pogofmu.codegen import build
+        finally:
+            sys.path.pop(0)
+        into = Path(self.build_lib) / "pogofmu" / "_lib"
+        build.host_engine_library(into=into)
+        build.host_level_library(into=into)
+
+
+class BinaryDistribution(Distribution):
+    def has_ext_modules(self):  # a wheel for this platform: it carries compiled libraries
+        return True
+
+
+setup(cmdclass={"build_py": BuildPyWithHostLibraries}, distclass=BinaryDistribution)
