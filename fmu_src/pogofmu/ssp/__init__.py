@@ -9,7 +9,15 @@ One module per job:
 * :mod:`.validate` — the system checked against itself and its FMUs before anything is loaded;
 * :mod:`.master` — instantiating, initializing and stepping the components;
 * :mod:`.record` — every connector at every communication point, in memory or streamed to CSV;
-* :mod:`.plot` — the run's figure; :mod:`.cli` — the command line.
+* :mod:`.components` — one FMU instance behind one interface, whatever its FMI version and type;
+* :mod:`.graph` — the update order and the algebraic loops, from the FMUs' declared dependencies;
+* :mod:`.algorithms` — Gauss–Seidel and Jacobi with a fixed step, with events;
+  :mod:`.native_level` — their hot path in C (``native/master/pg_level.c``, the GIL released);
+* :mod:`.coupled` — the strongly coupled algorithm (``--algorithm model-exchange``, CVODE);
+* :mod:`.plot` — the run's figure; :mod:`.cli` — the command line; :mod:`.__main__` — ``python -m``;
+* :mod:`.libcosim_runner` — a package run under libcosim in a process of its own (studies, tests);
+* :mod:`.mirror` — ``pogofmu ssp mirror``: the segmented mirror's system (an application, not the
+  generic master: issue 47 moves it out).
 
 Host-side code (fmpy, numpy, matplotlib); never imported inside an FMU.
 """
