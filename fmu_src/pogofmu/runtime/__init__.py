@@ -6,7 +6,10 @@ that build of that model).
   :mod:`.models` — the model variants (the registry);
 * :mod:`.engine` — one integrator with exact state-event location for any model;
 * :mod:`.fmi2`, :mod:`.fmi3` — one adapter per FMI version from any model to an FMU;
-  :mod:`.status` — the FMI status table; :mod:`.units` — the unit definitions.
+  :mod:`.status` — the FMI status table; :mod:`.units` — the unit definitions;
+* :mod:`.fmath` — the mathematical functions and tables a model may call (followed by the native
+  generator); :mod:`.dual` — dual numbers, the exact derivatives of a model's functions;
+  :mod:`.eventlog` — the event log's record (``log_events = 1``), written and read in one place.
 
 Nothing here imports anything outside this folder: the build stages the folder as it is, under a
 name private to each build (``_pogofmu_<Model>_<hash>``), and rewrites a user's model file's
