@@ -1477,6 +1477,9 @@ static int step(PgEngine *e, double t_target)
             TRY(hidden_crossing(e, &seg, i, sgn, g0, g1, f_new, &te, &found));
             if (!found) continue;
         } else if (sgn * g0 < 0.0) {
+            /* disarmed within its band: the crossing its own jump continued (located a rounding short of
+             * zero), not a new one */
+            if (!e->armed[i] && sgn * g0 >= -e->zband[i]) continue;
             TRY(locate(e, &seg, i, t, g0, g1, NULL, &te));
         } else if (g0 == 0.0) {
             TRY(locate_from_zero(e, &seg, i, g1, 0, &te, &found));
