@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, Phase, assume, event, given, note, settings
+from hypothesis import HealthCheck, Phase, assume, event, example, given, note, settings
 
 from hybrid_draws import N_STEPS, STEP, Draw, Undecided, draws, load_model, model_source, reference
 from support import fmi2_callbacks, run_pogofmu
@@ -152,6 +152,10 @@ def compare(d, ref, rows, events, errors):
           phases=(Phase.explicit, Phase.reuse, Phase.generate) + ((Phase.shrink,) if LONG else ()),
           suppress_health_check=list(HealthCheck))
 @given(d=draws())
+# a draw that found a bug (a9ffde9): the level event's mode toggle fired twice, 1e-16 s apart
+@example(d=Draw(X0=0.05, a0=-5.960464477539063e-08, k=13.148709379239, bu=-1.4253352641610046, y0=0.28999929747921155,
+                v0=-0.9207480976935387, m0=1, U0=0.0, U1=4.4184382348551905, fu=1.2983583735754114, events=("level",),
+                L=0.05, level_rising=False, Lu=5.713044395406264, input_rising=False))
 def test_a_drawn_model_keeps_the_event_semantics_in_both_backends(d):
     note(repr(d))
     folder = Path(tempfile.mkdtemp(prefix="pogofmu-draw-"))
