@@ -2,6 +2,7 @@
 master's C level) into pogofmu/_lib, so an installed package carries them; the compiler is the
 system's cc, gcc or clang, else the ziglang package's zig cc (a build requirement).  Everything
 else is in pyproject.toml."""
+import shutil
 import sys
 from pathlib import Path
 
@@ -22,6 +23,7 @@ class BuildPyWithHostLibraries(build_py):
         finally:
             sys.path.pop(0)
         into = Path(self.build_lib) / "pogofmu" / "_lib"
+        shutil.rmtree(into, ignore_errors=True)  # (setuptools keeps build/ between builds: no stale library)
         build.host_engine_library(into=into)
         build.host_level_library(into=into)
 

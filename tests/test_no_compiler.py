@@ -4,6 +4,7 @@ Python-hosted and a native FMU run in fmpy, and the host-side engine and the SSP
 are compiled and run; the results are checked against the bouncing ball's closed form."""
 from __future__ import annotations
 
+import importlib.util
 import json
 import math
 import os
@@ -13,6 +14,8 @@ import sys
 from pathlib import Path
 
 import pytest
+
+from support import require
 
 ROOT = Path(__file__).resolve().parents[1]
 BALL = ROOT / "examples" / "ball" / "ball.py"
@@ -68,7 +71,7 @@ print(json.dumps(out))
 
 
 def test_export_and_run_without_a_c_compiler(tmp_path):
-    pytest.importorskip("ziglang")
+    require(importlib.util.find_spec("ziglang") is not None, "the ziglang package (PyPI, pyproject.toml)")
     env = {k: v for k, v in os.environ.items() if k not in ("CC", "PATH")}
     env.update(PATH=bare_path(tmp_path / "bin"), POGOFMU_CACHE=str(tmp_path / "cache"),
                PYTHONPATH=str(ROOT / "fmu_src"))
@@ -113,7 +116,7 @@ def test_the_wheel_carries_the_compiled_host_libraries(tmp_path):
     """``pip wheel`` compiles the engine and the SSP level library into pogofmu/_lib; installed (no
     index, no dependencies: the project's venv supplies them), the package uses them on a machine
     with no C compiler and compiles nothing into its cache."""
-    pytest.importorskip("ziglang")
+    require(importlib.util.find_spec("ziglang") is not None, "the ziglang package (PyPI, pyproject.toml)")
     wheels = tmp_path / "wheels"
     proc = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(wheels), str(ROOT)],
                           capture_output=True, text=True)
