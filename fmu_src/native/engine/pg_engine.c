@@ -5,7 +5,6 @@
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
-#include <stdint.h>
 #include <string.h>
 
 #include "pg_support.h"
@@ -172,13 +171,6 @@ static void function_failed_at(const PgEngine *e, PgMsg *m, const char *function
     pg_msg_str(m, e->nx ? "): " : ": ");
 }
 
-/* One call of a function of the model during the run — `function` ("the flow", "the guard", "the
- * jump", "the outputs") of `event` (or -1) at (t, x) — with its result code `rc` and the n values it
- * returned (value i named by the format `label` of names[i]; names NULL: one unnamed value). PG_OK with finite
- * values passes. A model error (the Python binding's text carries the exception's type, file and
- * line), an arithmetic failure or a non-finite value at a finite state ends the run with one
- * message (PG_RAISE, in m) naming the function, the time, the state and the cause. (A non-finite
- * state is left to the engine's own checks: a trial stage that overflowed, a singular W.) */
 /* every v[i] finite: the plain sum is finite if they all are (a non-finite value makes it inf or NaN),
  * one addition a value; a sum that overflows from finite values is rare and checked value by value */
 static inline int all_finite(const double *v, int n)
@@ -191,6 +183,13 @@ static inline int all_finite(const double *v, int n)
     return 1;
 }
 
+/* One call of a function of the model during the run — `function` ("the flow", "the guard", "the
+ * jump", "the outputs") of `event` (or -1) at (t, x) — with its result code `rc` and the n values it
+ * returned (value i named by the format `label` of names[i]; names NULL: one unnamed value). PG_OK with finite
+ * values passes. A model error (the Python binding's text carries the exception's type, file and
+ * line), an arithmetic failure or a non-finite value at a finite state ends the run with one
+ * message (PG_RAISE, in m) naming the function, the time, the state and the cause. (A non-finite
+ * state is left to the engine's own checks: a trial stage that overflowed, a singular W.) */
 static int model_failed(const PgEngine *e, PgMsg *m, int rc, const char *function, int event, double t,
                         const double *x, const double *v, int n, const char *label, const char *const *names);
 
@@ -202,14 +201,21 @@ static inline int model_call(const PgEngine *e, PgMsg *m, int rc, const char *fu
     return model_failed(e, m, rc, function, event, t, x, v, n, label, names);
 }
 
+/* the index of the first value that is not finite, or -1 */
+static int first_non_finite(const double *v, int n)
+{
+    for (int i = 0; i < n; ++i)
+        if (!isfinite(v[i])) return i;
+    return -1;
+}
+
 static int model_failed(const PgEngine *e, PgMsg *m, int rc, const char *function, int event, double t,
                         const double *x, const double *v, int n, const char *label, const char *const *names)
 {
     if (rc == PG_NO_JVP) return rc;
     int bad = -1;
     if (rc == PG_OK) {
-        for (int i = 0; i < n && bad < 0; ++i)
-            if (!isfinite(v[i])) bad = i;
+        bad = first_non_finite(v, n);
         if (bad < 0) return PG_OK;
         for (int i = 0; i < e->nx; ++i)
             if (!isfinite(x[i])) return PG_OK;
@@ -248,9 +254,7 @@ static int model_failed(const PgEngine *e, PgMsg *m, int rc, const char *functio
 #define NOTE_NEAR 1e-3 /* a stage this near the step's start state (relative to 1 + its magnitude) */
 static void note_flow(PgEngine *e, double t, const double *y, const double *dy)
 {
-    int bad = -1;
-    for (int i = 0; i < e->nx && bad < 0; ++i)
-        if (!isfinite(dy[i])) bad = i;
+    int bad = first_non_finite(dy, e->nx);
     if (bad < 0) return;
     /* only at a state near the step's start: a wild trial of a stiff or singular step (a state far out,
      * the rate overflowing) is the step size's problem, told by the collapse's own message */
@@ -1372,19 +1376,19 @@ static int end_step(PgEngine *e, PgSeg *seg, double t_target, int *cut)
     return domain_error(e, t_v);
 }
 
-/* The step just rejected with a non-finite error, once more with the flow's values checked: a rate
- * that is not finite at a stage near the step's start is noted (note_flow), the message if the step
- * size then collapses. Only on such a rejection: the steps that succeed pay nothing for it. */
+/* A step once more with the flow's values checked (model_fun's probe path): a raise or an arithmetic
+ * error of the flow is named; a rate that is not finite at a stage near the step's start is noted
+ * (note_flow), the message if the step size then collapses. Only after a step failed or was
+ * rejected with a non-finite error: the steps that succeed pay nothing for it. */
 static int pair_step(PgEngine *e, double t, const double *y, const double *f, double h, double *y_new,
                      double *f_new, double *K);
-static void probe_step(PgEngine *e, double t, const double *y, const double *f, double h)
+static int probe_step(PgEngine *e, double t, const double *y, const double *f, double h, double *y_new,
+                      double *f_new, double *K)
 {
-    double y_new[PG_MAX_X], f_new[PG_MAX_X], K[PG_MAX_STAGES * PG_MAX_X];
-    PgMsg keep = e->msg;
     e->probe = 1;
-    (void)pair_step(e, t, y, f, h, y_new, f_new, K);
+    int rc = pair_step(e, t, y, f, h, y_new, f_new, K);
     e->probe = 0;
-    e->msg = keep;
+    return rc;
 }
 
 /* _step */
@@ -1410,11 +1414,7 @@ static int step(PgEngine *e, double t_target)
         if (h <= MIN_STEP_ULPS * EPS * pmax(fabs(t), 1.0) && !(on_time && h > 0.0)) return collapse_error(e, t, h);
         int rc = pair_step(e, t, y, f, h, y_new, f_new, K);
         if (rc) { /* the flow failed (raised, or an arithmetic error): the same step again, to name it */
-            if (rc == PG_ARITH || rc == PG_RAISE) {
-                e->probe = 1;
-                rc = pair_step(e, t, y, f, h, y_new, f_new, K);
-                e->probe = 0;
-            }
+            if (rc == PG_ARITH || rc == PG_RAISE) rc = probe_step(e, t, y, f, h, y_new, f_new, K);
             return rc;
         }
         long n = e->win_n = e->win_n + 1;
@@ -1438,7 +1438,9 @@ static int step(PgEngine *e, double t_target)
         e->n_rejected += 1;
         rejected = 1;
         if (!isfinite(err)) {
-            probe_step(e, t, y, f, h); /* a flow that returned a non-finite rate: noted, for the message */
+            PgMsg keep = e->msg; /* (the rejected step's buffers are free for the probe) */
+            (void)probe_step(e, t, y, f, h, y_new, f_new, K); /* a non-finite rate: noted, for the message */
+            e->msg = keep;
             h *= MIN_FACTOR;
         } else {
             double pw;

@@ -199,122 +199,45 @@ int pg_pow(double iv, double iw, double *out, PgMsg *m)
     return PG_OK;
 }
 
-int pg_sqrt(double a, double *out, PgMsg *m)
-{
-    if (a < 0.0 || (isinf(a) && a < 0)) return arith_text(m, PG_DOMAIN, "math domain error");
-    *out = sqrt(a);
-    return PG_OK;
-}
+/* The functions of CPython's math module with its errors, one line each: ValueError (math domain
+ * error) where the argument is outside the domain; OverflowError (math range error) for a finite
+ * argument with an infinite result; none for the functions defined everywhere. */
+#define PG_MATH_TOTAL(fn)                                                                                       \
+    int pg_##fn(double a, double *out, PgMsg *m) { (void)m; *out = fn(a); return PG_OK; }
+#define PG_MATH_TOTAL2(fn)                                                                                      \
+    int pg_##fn(double a, double b, double *out, PgMsg *m) { (void)m; *out = fn(a, b); return PG_OK; }
+#define PG_MATH_DOMAIN(fn, outside)                                                                             \
+    int pg_##fn(double a, double *out, PgMsg *m)                                                                \
+    {                                                                                                           \
+        if (outside) return arith_text(m, PG_DOMAIN, "math domain error");                                      \
+        *out = fn(a);                                                                                           \
+        return PG_OK;                                                                                           \
+    }
+#define PG_MATH_RANGE(fn)                                                                                       \
+    int pg_##fn(double a, double *out, PgMsg *m)                                                                \
+    {                                                                                                           \
+        double r = fn(a);                                                                                       \
+        if (isinf(r) && isfinite(a)) return arith_text(m, PG_OVERFLOW, "math range error");                     \
+        *out = r;                                                                                               \
+        return PG_OK;                                                                                           \
+    }
 
-int pg_exp(double a, double *out, PgMsg *m)
-{
-    double r = exp(a);
-    if (isinf(r) && isfinite(a)) return arith_text(m, PG_OVERFLOW, "math range error");
-    *out = r;
-    return PG_OK;
-}
-
-int pg_log(double a, double *out, PgMsg *m)
-{
-    if (!(a > 0.0) && !isnan(a)) return arith_text(m, PG_DOMAIN, "math domain error");
-    *out = log(a);
-    return PG_OK;
-}
-
-int pg_cos(double a, double *out, PgMsg *m)
-{
-    if (isinf(a)) return arith_text(m, PG_DOMAIN, "math domain error");
-    *out = cos(a);
-    return PG_OK;
-}
-
-int pg_sin(double a, double *out, PgMsg *m)
-{
-    if (isinf(a)) return arith_text(m, PG_DOMAIN, "math domain error");
-    *out = sin(a);
-    return PG_OK;
-}
-
-int pg_atan2(double a, double b, double *out, PgMsg *m)
-{
-    (void)m;
-    *out = atan2(a, b);
-    return PG_OK;
-}
-
-int pg_hypot(double a, double b, double *out, PgMsg *m)
-{
-    (void)m;
-    *out = hypot(a, b);
-    return PG_OK;
-}
-
-int pg_copysign(double a, double b, double *out, PgMsg *m)
-{
-    (void)m;
-    *out = copysign(a, b);
-    return PG_OK;
-}
-
-/* the functions of CPython's math module with its errors: ValueError (a domain error) for an
- * argument outside the domain, OverflowError for a finite argument with an infinite result */
-int pg_tan(double a, double *out, PgMsg *m)
-{
-    if (isinf(a)) return arith_text(m, PG_DOMAIN, "math domain error");
-    *out = tan(a);
-    return PG_OK;
-}
-
-int pg_asin(double a, double *out, PgMsg *m)
-{
-    if (a < -1.0 || a > 1.0) return arith_text(m, PG_DOMAIN, "math domain error");
-    *out = asin(a);
-    return PG_OK;
-}
-
-int pg_acos(double a, double *out, PgMsg *m)
-{
-    if (a < -1.0 || a > 1.0) return arith_text(m, PG_DOMAIN, "math domain error");
-    *out = acos(a);
-    return PG_OK;
-}
-
-int pg_atan(double a, double *out, PgMsg *m)
-{
-    (void)m;
-    *out = atan(a);
-    return PG_OK;
-}
-
-int pg_sinh(double a, double *out, PgMsg *m)
-{
-    double r = sinh(a);
-    if (isinf(r) && isfinite(a)) return arith_text(m, PG_OVERFLOW, "math range error");
-    *out = r;
-    return PG_OK;
-}
-
-int pg_cosh(double a, double *out, PgMsg *m)
-{
-    double r = cosh(a);
-    if (isinf(r) && isfinite(a)) return arith_text(m, PG_OVERFLOW, "math range error");
-    *out = r;
-    return PG_OK;
-}
-
-int pg_tanh(double a, double *out, PgMsg *m)
-{
-    (void)m;
-    *out = tanh(a);
-    return PG_OK;
-}
-
-int pg_log10(double a, double *out, PgMsg *m)
-{
-    if (!(a > 0.0) && !isnan(a)) return arith_text(m, PG_DOMAIN, "math domain error");
-    *out = log10(a);
-    return PG_OK;
-}
+PG_MATH_DOMAIN(sqrt, a < 0.0)
+PG_MATH_DOMAIN(log, !(a > 0.0) && !isnan(a))
+PG_MATH_DOMAIN(log10, !(a > 0.0) && !isnan(a))
+PG_MATH_DOMAIN(cos, isinf(a))
+PG_MATH_DOMAIN(sin, isinf(a))
+PG_MATH_DOMAIN(tan, isinf(a))
+PG_MATH_DOMAIN(asin, a < -1.0 || a > 1.0)
+PG_MATH_DOMAIN(acos, a < -1.0 || a > 1.0)
+PG_MATH_RANGE(exp)
+PG_MATH_RANGE(sinh)
+PG_MATH_RANGE(cosh)
+PG_MATH_TOTAL(atan)
+PG_MATH_TOTAL(tanh)
+PG_MATH_TOTAL2(atan2)
+PG_MATH_TOTAL2(hypot)
+PG_MATH_TOTAL2(copysign)
 
 /* math.trunc of a float: an int in Python; NaN and infinities raise */
 int pg_trunc(double a, double *out, PgMsg *m)

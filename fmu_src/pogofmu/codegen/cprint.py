@@ -58,6 +58,12 @@ def c_string(text: str) -> str:
     return '"' + "".join(out) + '"'
 
 
+def _bisect_c(tb: str, axis: int, v: str, lo: str, hi: str) -> str:
+    """The C of fmath._bisect: the segment [lo, hi] of the breakpoints tb[axis] holding v."""
+    return (f"while ({hi} - {lo} > 1) {{ const int mid = ({lo} + {hi}) / 2; "
+            f"if ({tb}[{axis}][mid] <= {v}) {lo} = mid; else {hi} = mid; }}")
+
+
 class Printer:
     """Prints one traced function. ``inputs`` maps an input group (``t``, ``x``, ``q`` ...) to the
     C expression of its element ``{i}``; ``leaf(path, ref) -> lines`` prints what a path does at
@@ -174,24 +180,21 @@ class Printer:
                         f"    else if ({v} >= {tb}[{axis}][{nb - 1}]) {{ {lo} = {nb - 2}; {hi} = {nb - 1}; {w} = 1.0; }}",
                         "    else {",
                         f"        {lo} = 0; {hi} = {nb - 1};",
-                        f"        while ({hi} - {lo} > 1) {{ const int mid = ({lo} + {hi}) / 2; "
-                        f"if ({tb}[{axis}][mid] <= {v}) {lo} = mid; else {hi} = mid; }}",
+                        f"        {_bisect_c(tb, axis, v, lo, hi)}",
                         f"        {w} = ({v} - {tb}[{axis}][{lo}]) / ({tb}[{axis}][{hi}] - {tb}[{axis}][{lo}]);",
                         "    }"]
             out = [f"double {name};", "{", f"    const double xq = {num(1)}, yq = {num(2)};",
                    *cell(0, nx, "xq", "i0", "i1", "wx"), *cell(1, ny, "yq", "j0", "j1", "wy"),
                    f"    const double *r0 = {tb}[2 + i0], *r1 = {tb}[2 + i1];"]
+            # the table along y on the cell's two x edges (fmath.Table2._corners)
+            edges = ["    const double a = r0[j0] + (r0[j1] - r0[j0]) * wy;",
+                     "    const double b = r1[j0] + (r1[j1] - r1[j0]) * wy;"]
             if op == "interp2":
-                out += ["    const double a = r0[j0] + (r0[j1] - r0[j0]) * wy;",
-                        "    const double b = r1[j0] + (r1[j1] - r1[j0]) * wy;",
-                        f"    {name} = a + (b - a) * wx;"]
+                out += [*edges, f"    {name} = a + (b - a) * wx;"]
             elif op == "interp2_d0":
-                out += [f"    if (xq <= {tb}[0][0] || xq >= {tb}[0][{nx - 1}]) {name} = 0.0;",
-                        "    else {",
-                        "        const double a = r0[j0] + (r0[j1] - r0[j0]) * wy;",
-                        "        const double b = r1[j0] + (r1[j1] - r1[j0]) * wy;",
-                        f"        {name} = (b - a) / ({tb}[0][i1] - {tb}[0][i0]);",
-                        "    }"]
+                out += [*edges,
+                        f"    if (xq <= {tb}[0][0] || xq >= {tb}[0][{nx - 1}]) {name} = 0.0;",
+                        f"    else {name} = (b - a) / ({tb}[0][i1] - {tb}[0][i0]);"]
             else:
                 out += [f"    if (yq <= {tb}[1][0] || yq >= {tb}[1][{ny - 1}]) {name} = 0.0;",
                         "    else {",
@@ -215,7 +218,7 @@ class Printer:
                     f"    else if (xq >= {tb}[0][{last}]) {name} = {end[1]};",
                     "    else {",
                     f"        int lo = 0, hi = {last};",
-                    f"        while (hi - lo > 1) {{ const int mid = (lo + hi) / 2; if ({tb}[0][mid] <= xq) lo = mid; else hi = mid; }}",
+                    f"        {_bisect_c(tb, 0, 'xq', 'lo', 'hi')}",
                     f"        {inside}",
                     "    }", "}"]
         if op == "matvec":

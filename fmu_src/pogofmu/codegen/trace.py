@@ -238,12 +238,12 @@ class Sym:
     def __float__(self):
         called = _call_in_caller()
         fm = called.split(".", 1)[1] if called and called.startswith("math.") else None
-        if fm in FMATH_NAMES:
+        if fm in fmath.FUNCTIONS:
             raise TraceError(f"{called}(...) of a traced value: the generator follows pogofmu.fmath only. "
                              f"Rewrite: fmath.{fm}(...) (from pogofmu import fmath)")
         what = f"{called}(...)" if called else "float() of a traced value, or a call into math or numpy that converts it"
         raise TraceError(f"{what}: the generator follows pogofmu.fmath only. Rewrite: fmath.<name>(v) for "
-                         "math.<name>(v) (" + ", ".join(sorted(FMATH_NAMES)) + "), and v (or v * 1.0 for an int) "
+                         "math.<name>(v) (" + ", ".join(sorted(fmath.FUNCTIONS)) + "), and v (or v * 1.0 for an int) "
                          "for float(v)" + ("; fmath has no such function: write it with these, or keep it out of "
                                            "the native FMU (--backend python)" if called else ""))
 
@@ -269,11 +269,6 @@ def logical_not(v):
     if isinstance(v, Sym):
         return Sym(_rec().node("not", (_arg(v),), BOOL), BOOL)
     return not v
-
-
-# the functions of pogofmu.fmath a model may call on a traced value
-FMATH_NAMES = ("sqrt", "exp", "log", "log10", "sin", "cos", "tan", "asin", "acos", "atan", "atan2", "sinh", "cosh",
-               "tanh", "hypot", "pow", "copysign", "isfinite", "trunc", "interp", "interp2")
 
 
 def _call_in_caller():
@@ -332,6 +327,14 @@ def _binary_fn(name, real):
     return fn
 
 
+def _table_op(name, T, args, on_numbers):
+    """A table (fmath.Table, Table2) at ``args``: one node of the table and the arguments when one is
+    traced, else its value on numbers."""
+    if any(isinstance(a, Sym) for a in args):
+        return Sym(_rec().node(name, (T, *(_arg(a) for a in args)), FLOAT), FLOAT)
+    return on_numbers(*args)
+
+
 def _isfinite(x):
     if isinstance(x, Sym):
         return Sym(_rec().node("isfinite", (x.i,), BOOL), BOOL)
@@ -372,13 +375,10 @@ TRACED_MATH = {
     "tanh": _unary_fn("tanh", math.tanh),
     "log10": _unary_fn("log10", math.log10),
     "copysign": _binary_fn("copysign", math.copysign),
-    "interp2": lambda x, y, T: (Sym(_rec().node("interp2", (T, _arg(x), _arg(y)), FLOAT), FLOAT)
-                                if isinstance(x, Sym) or isinstance(y, Sym) else T.at(x, y)),
-    "interp2_d": lambda x, y, T, which: (Sym(_rec().node(f"interp2_d{which}", (T, _arg(x), _arg(y)), FLOAT), FLOAT)
-                                         if isinstance(x, Sym) or isinstance(y, Sym) else T.d_at(x, y, which)),
-    "interp": lambda x, T: Sym(_rec().node("interp", (T, _arg(x)), FLOAT), FLOAT) if isinstance(x, Sym) else T.at(x),
-    "interp_slope": lambda x, T: (Sym(_rec().node("interp_slope", (T, _arg(x)), FLOAT), FLOAT) if isinstance(x, Sym)
-                                  else T.slope_at(x)),
+    "interp": lambda x, T: _table_op("interp", T, (x,), T.at),
+    "interp_slope": lambda x, T: _table_op("interp_slope", T, (x,), T.slope_at),
+    "interp2": lambda x, y, T: _table_op("interp2", T, (x, y), T.at),
+    "interp2_d": lambda x, y, T, which: _table_op(f"interp2_d{which}", T, (x, y), lambda a, b: T.d_at(a, b, which)),
     "trunc": math.trunc,  # on a traced value: Sym.__trunc__, an operation of the generated C
     "isfinite": _isfinite,
     "is_number": _is_number,

@@ -146,8 +146,7 @@ class Dual:
     def __float__(self):
         raise NotDifferentiable("float() of a dual number, or a call into math that converts it (math.sqrt(v)): "
                                 "a derivative follows pogofmu.fmath only. Rewrite: fmath.<name>(v) for math.<name>(v) "
-                                "(sqrt, exp, log, log10, sin, cos, tan, asin, acos, atan, atan2, sinh, cosh, tanh, "
-                                "hypot, pow, copysign), and v (or v * 1.0 for an int) for float(v)")
+                                f"({', '.join(fmath.FUNCTIONS)}), and v (or v * 1.0 for an int) for float(v)")
 
     def __format__(self, spec):
         return format(self.v, spec)

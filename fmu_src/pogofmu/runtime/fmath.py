@@ -23,6 +23,10 @@ __all__ = ["sqrt", "exp", "log", "cos", "sin", "atan2", "hypot", "tan", "asin", 
            "tanh", "log10", "pow", "copysign", "trunc", "isfinite", "is_number", "matvec", "interp", "interp2", "Table", "Table2",
            "Matrix", "NotConstantError"]
 
+# the functions a model may call on a state (named by the generator's refusals)
+FUNCTIONS = ("sqrt", "exp", "log", "log10", "sin", "cos", "tan", "asin", "acos", "atan", "atan2", "sinh", "cosh",
+             "tanh", "hypot", "pow", "copysign", "isfinite", "trunc", "interp", "interp2")
+
 # the functions a traced value's table must provide (``trunc`` is Python's own protocol,
 # ``__trunc__``, and needs no table)
 HOOKED = ("sqrt", "exp", "log", "cos", "sin", "atan2", "hypot", "tan", "asin", "acos", "atan", "sinh", "cosh",
@@ -77,12 +81,9 @@ def pow(a, b):  # noqa: A001 (the name users know from math)
     negative power raises ZeroDivisionError; a negative base to a non-integer power, which Python
     answers with a complex number, raises ValueError (math domain error); an overflow raises
     OverflowError. (``math.pow`` differs only in the first: ValueError.)"""
-    r = a ** b
+    r = a ** b  # (Python's float power raises the OverflowError itself)
     if isinstance(r, complex):
         raise ValueError("math domain error")
-    if isinstance(r, float) and math.isinf(r) and isinstance(a, (int, float)) and isinstance(b, (int, float)) \
-            and math.isfinite(a) and math.isfinite(b):
-        raise OverflowError("Numerical result out of range")
     return r
 
 
@@ -327,25 +328,27 @@ class Table2(Matrix):
         lo, hi = _bisect(bs, n, v)
         return lo, hi, (v - bs[lo]) / (bs[hi] - bs[lo])
 
-    def at(self, x, y):
-        """Bilinear between the four corners of the cell holding (x, y), held at the edges."""
+    def _corners(self, x, y):
+        """The cell of (x, y) and the table along y on its two x edges: (i0, i1, wx, j0, j1, a, b)."""
         r = self.rows
         i0, i1, wx = self._cell(r[0], self.nx, x)
         j0, j1, wy = self._cell(r[1], self.ny, y)
         a = r[2 + i0][j0] + (r[2 + i0][j1] - r[2 + i0][j0]) * wy
         b = r[2 + i1][j0] + (r[2 + i1][j1] - r[2 + i1][j0]) * wy
+        return i0, i1, wx, j0, j1, a, b
+
+    def at(self, x, y):
+        """Bilinear between the four corners of the cell holding (x, y), held at the edges."""
+        _, _, wx, _, _, a, b = self._corners(x, y)
         return a + (b - a) * wx
 
     def d_at(self, x, y, which):
         """The partial derivative of :meth:`at` in x (``which`` 0) or y (1): the cell's, 0.0 where held."""
         r = self.rows
-        i0, i1, wx = self._cell(r[0], self.nx, x)
-        j0, j1, wy = self._cell(r[1], self.ny, y)
+        i0, i1, wx, j0, j1, a, b = self._corners(x, y)
         if which == 0:
             if x <= r[0][0] or x >= r[0][self.nx - 1]:
                 return 0.0
-            a = r[2 + i0][j0] + (r[2 + i0][j1] - r[2 + i0][j0]) * wy
-            b = r[2 + i1][j0] + (r[2 + i1][j1] - r[2 + i1][j0]) * wy
             return (b - a) / (r[0][i1] - r[0][i0])
         if y <= r[1][0] or y >= r[1][self.ny - 1]:
             return 0.0
