@@ -66,6 +66,7 @@ class Exchange:
         self._start_keys = []
         self._start = {}  # the outputs feeding them at the macro step's start t_mark
         self.t_mark = None
+        self.event_sources = []  # [(t, components whose event it was)], one per event instant
         self.native = None  # the C stepping of the components it serves (.native_level)
         from .native_level import NativeLevels, library
 
@@ -532,6 +533,7 @@ class Synchronizer:
                      f"component after it in the update order is not synchronized with it (it stays at the "
                      f"end of the communication step)")
         self.next_event = {}  # component -> time event it asked for (FMI 3.0 nextEventTime)
+        self.cause = ()  # the components whose event ended the latest macro step (advance)
         self.switch_now = None  # Jacobi: the switching outputs at the inputs of the latest point
 
     @staticmethod
@@ -669,9 +671,11 @@ class Synchronizer:
                     cut = (inst, r)  # it stopped at (or just before) an event: everyone goes no further
                 elif r.event_at is not None and event is None and r.t_end == goal:
                     event = r  # an event exactly at the end of the step
+                    self.cause = (inst.name,)
             stepped += todo
             if cut is not None:
                 inst, event = cut
+                self.cause = (inst.name,)
                 target = event.t_end
                 back = [prev for prev in stepped if prev.t > target and prev.must_save]
 
@@ -693,6 +697,7 @@ class Synchronizer:
                     ex.map(redo, back)
         if event is None and next_event and target in next_event.values():
             event = StepResult(target, event_at=target, event_mode=True)
+            self.cause = tuple(inst.name for inst, t_next in next_event.items() if t_next == target)
         if event is None and switch0:
             if jacobi:
                 self.switch_now = self._probe(t, target)
@@ -701,9 +706,11 @@ class Synchronizer:
                     return target, None
                 self.switch_now = None
             if self._switch_values() != switch0:
+                switched = self._switched(switch0)  # (before the bisection moves them back)
                 located = self._locate_switch(t, target, switch0)
                 if located is not None:
                     target, event = located
+                    self.cause = switched
         return target, event
 
     def _probed(self, t):
@@ -732,6 +739,12 @@ class Synchronizer:
             if tau > t:
                 inst.do_step(t, tau - t)
             ex.read(inst)
+
+    def _switched(self, switch0):
+        """The components whose switching outputs differ from ``switch0`` (a located switch's)."""
+        now = self._switch_values()
+        names = [key[0] for key, a, b in zip(self._switch_keys, switch0, now) if a != b]
+        return tuple(dict.fromkeys(names)) or tuple(dict.fromkeys(k[0] for k in self._switch_keys))
 
     def _switch_values(self):
         """The latest values of every switching output (feed-through discrete outputs)."""
@@ -891,6 +904,7 @@ def synchronized(ex: Exchange, t0, t_end, step, tolerance=1e-10, jacobi=False, p
                     t_reached = ev.event_at
                 else:
                     sync.iterate(t_reached)
+                ex.event_sources.append((t_reached, sync.cause))
                 if t_reached < T:
                     ex.row(t_reached, RIGHT)
             if t_reached <= t and ev is None:

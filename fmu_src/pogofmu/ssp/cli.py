@@ -68,6 +68,29 @@ def run(ssp, parameters=None, stop_time=None, step=1e-3, out=None, algorithm="ga
     return rec, csv_path, png_path
 
 
+def parse_sets(texts) -> dict:
+    """``--set Component.parameter=VALUE`` options -> ``{"Component.parameter": value}`` (checked
+    against the system by :func:`~.validate.apply_overrides`)."""
+    import math
+
+    out = {}
+    for text in texts:
+        name, sep, value = text.partition("=")
+        name = name.strip()
+        if not sep or "." not in name or not value.strip():
+            raise SSPError(f"--set {text!r}: expected COMPONENT.PARAMETER=VALUE, e.g. PogoStick.k=120")
+        try:
+            number = float(value)
+        except ValueError:
+            raise SSPError(f"--set {text!r}: {value.strip()!r} is not a number") from None
+        if not math.isfinite(number):
+            raise SSPError(f"--set {text!r}: {value.strip()!r} is not a finite number")
+        if name in out:
+            raise SSPError(f"--set {text!r}: {name} is set twice")
+        out[name] = number
+    return out
+
+
 def _on_off(text):
     if text not in ("on", "off"):
         raise argparse.ArgumentTypeError(f"{text!r}: on or off")
@@ -125,6 +148,8 @@ def main(argv=None, prog="pogofmu ssp"):
     r.add_argument("--record", metavar="PATTERN",
                    help="the columns to record: glob patterns over component.connector, comma-separated "
                         "(e.g. 'Actuator_*.z,Reconstructor.piston_rms'; default: every connector)")
+    r.add_argument("--set", action="append", default=[], metavar="COMPONENT.PARAMETER=VALUE",
+                   help="a parameter value over the parameter set, e.g. PogoStick.k=120 (repeatable)")
     r.add_argument("--out", help="output folder (default results/<SSP name>)")
     r.add_argument("--quiet", action="store_true", help="no progress lines")
     c = sub.add_parser("check", parents=[common],
@@ -143,7 +168,7 @@ def main(argv=None, prog="pogofmu ssp"):
             return 0
         run(args.ssp, args.parameters, args.stop_time, args.step, args.out, args.algorithm, not args.quiet,
             events=args.events, event_tolerance=args.event_tolerance, rel_tol=args.rel_tol, abs_tol=args.abs_tol,
-            threads=args.threads, record=args.record, inputs=args.inputs)
+            threads=args.threads, record=args.record, inputs=args.inputs, overrides=parse_sets(args.set))
     except SSPError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1

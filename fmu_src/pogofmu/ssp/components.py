@@ -94,6 +94,7 @@ class Component:
         self.name = comp.name
         self.messages = []
         self.dead = False
+        self.initialized = False  # exitInitializationMode returned
         self.echo = echo
         self.md = comp.model_description
         self.dir = _unpacked(comp, workdir, extract)
@@ -296,7 +297,8 @@ class Component:
         try:
             if self._state is not None:
                 self._free_state()
-            self.fmu.terminate()
+            if self.initialized:  # (fmi*Terminate is not allowed before initialization has ended)
+                self.fmu.terminate()
         finally:
             self.fmu.freeInstance()
 
@@ -377,6 +379,7 @@ class Fmi2CoSimulation(Component):
     def exit_initialization(self, t0):
         self.fmu.exitInitializationMode()
         self.t = t0
+        self.initialized = True
 
     def _do_step_call(self, t, h) -> StepResult:
         status = self._do_step(self.fmu.component, t, h, 1)
@@ -488,6 +491,7 @@ class Fmi3CoSimulation(_Fmi3):
     def exit_initialization(self, t0):
         self.fmu.exitInitializationMode()  # then in Event Mode when eventModeUsed (the master iterates)
         self.t = t0
+        self.initialized = True
 
     def enter_step_mode(self):
         self._changed_otherwise()
@@ -547,6 +551,7 @@ class Fmi3ModelExchange(_Fmi3):
     def exit_initialization(self, t0):
         self.fmu.exitInitializationMode()  # then in Event Mode
         self.t = t0
+        self.initialized = True
 
     def enter_continuous_time_mode(self):
         self.fmu.enterContinuousTimeMode()

@@ -234,6 +234,7 @@ def model_exchange(ex, t0, t_end, step, rel_tol=1e-10, abs_tol=1e-12, progress=N
                     changed |= not np.array_equal(x_new, x)
                     if changed:  # (a root in the direction no event fires on changes nothing: no rows)
                         ex.record.add(left)
+                        ex.event_sources.append((t_reached, ()))
                         if t_reached < T:
                             ex.row(t_reached, RIGHT)
                     x = x_new

@@ -14,7 +14,7 @@ from .components import Fmi2CoSimulation, Fmi3CoSimulation, Fmi3ModelExchange
 from .graph import algebraic_loop, loop_text
 from .package import SSPError, read_ssd, unpack
 from .record import Result
-from .validate import _fmu_unit, validate
+from .validate import _fmu_unit, apply_overrides, validate
 
 ALGORITHMS = ("gauss-seidel", "jacobi", "model-exchange")
 DEFAULT_INPUTS = "interpolate"  # --inputs (docs/ssp-master.md, "Inputs over a step": why)
@@ -142,35 +142,10 @@ def select_columns(system, order, record=None):
     return [(n, c) for n, c in cols if any(match(f"{n}.{c.name}", p) for p in patterns)]
 
 
-def simulate(ssp, parameters: Optional[str] = None, stop_time: Optional[float] = None, step: float = 1e-3,
-             start_time: Optional[float] = None, algorithm: str = "gauss-seidel", progress: bool = False,
-             echo_log: bool = True, sink=None, events: bool = True, event_tolerance: float = DEFAULT_EVENT_TOLERANCE,
-             rel_tol: float = 1e-10, abs_tol: float = 1e-12, threads: int = 1, record=None,
-             inputs: str = DEFAULT_INPUTS):
-    """Run an SSP package; return a :class:`~.record.Result` (see the package docstring).
-
-    ``algorithm``: ``gauss-seidel`` or ``jacobi`` co-simulation, with every component brought to
-    each event instant (``events=True``) or a fixed communication step (``events=False``); or
-    ``model-exchange``, the strongly coupled solution (FMI 3.0 model exchange, ``rel_tol`` and
-    ``abs_tol`` its integrator's tolerances). ``step`` is the communication step, the output grid.
-
-    ``inputs``: ``interpolate`` (the default) — with Gauss–Seidel, a component whose FMU can
-    interpolate its inputs (FMI 2.0 ``canInterpolateInputs``) gets every real input whose source has
-    already stepped as the line between the source's values at the step's start and end
-    (``fmi2SetRealInputDerivatives``); ``hold`` — every input held over a step. Jacobi and model
-    exchange are not affected.
-
-    ``threads``: the components of one level of the update order (none feeding another, e.g. the
-    mirror's actuators) step in parallel on this many threads; the results are those of one
-    thread, to the bit. ``record``: glob patterns over ``component.connector`` (a list, or one
-    string with commas), the columns recorded (default: every connector).
-
-    ``sink(names, types, units, span)``, if given, makes the recorder instead (an object with
-    ``add(row)`` and ``close(complete)``, e.g. a :class:`~.record.CSVStream`): it is called once the
-    package and every number are found valid, before any FMU is loaded, and what it returns is
-    returned.
-    """
-    # no scipy import here: it would cost the master 50 MB of its memory budget
+def check_options(step=1e-3, stop_time=None, start_time=None, algorithm="gauss-seidel", events=True,
+                  event_tolerance=DEFAULT_EVENT_TOLERANCE, rel_tol=1e-10, abs_tol=1e-12, threads=1,
+                  inputs=DEFAULT_INPUTS):
+    """The run's options (those of :func:`simulate`), checked before anything is read."""
     if algorithm not in ALGORITHMS:
         raise SSPError(f"algorithm {algorithm!r} is not one of {', '.join(ALGORITHMS)}")
     if inputs not in INPUTS:
@@ -192,23 +167,66 @@ def simulate(ssp, parameters: Optional[str] = None, stop_time: Optional[float] =
     if not (0 < rel_tol < 1 and abs_tol > 0):
         raise SSPError(f"model-exchange tolerances --rel-tol = {rel_tol!r}, --abs-tol = {abs_tol!r} must be "
                        f"0 < rel-tol < 1 and abs-tol > 0")
+
+
+def time_span(system, start_time, stop_time, step):
+    """``(t0, t_last)``: the run's start and its last communication point (the stop time given,
+    else the system's default experiment's), which must be a whole number of steps after t0."""
+    t0 = system.start_time if start_time is None else float(start_time)
+    t_end = stop_time if stop_time is not None else system.stop_time
+    if t_end is None:
+        raise SSPError("no stop time: give one (--stop-time) or set ssd:DefaultExperiment stopTime")
+    if not t_end > t0:
+        raise SSPError(f"stop time {t_end!r} s must be later than the start time {t0!r} s")
+    n_steps = int(round((t_end - t0) / step))
+    if n_steps < 1 or not math.isclose(t0 + n_steps * step, t_end, rel_tol=1e-9, abs_tol=1e-12):
+        raise SSPError(f"stop time {t_end} - start time {t0} is not a whole number of steps {step}")
+    return t0, grid_point(t0, step, n_steps)  # (the last communication point)
+
+
+def simulate(ssp, parameters: Optional[str] = None, stop_time: Optional[float] = None, step: float = 1e-3,
+             start_time: Optional[float] = None, algorithm: str = "gauss-seidel", progress: bool = False,
+             echo_log: bool = True, sink=None, events: bool = True, event_tolerance: float = DEFAULT_EVENT_TOLERANCE,
+             rel_tol: float = 1e-10, abs_tol: float = 1e-12, threads: int = 1, record=None,
+             inputs: str = DEFAULT_INPUTS, overrides=None):
+    """Run an SSP package; return a :class:`~.record.Result` (see the package docstring).
+
+    ``algorithm``: ``gauss-seidel`` or ``jacobi`` co-simulation, with every component brought to
+    each event instant (``events=True``) or a fixed communication step (``events=False``); or
+    ``model-exchange``, the strongly coupled solution (FMI 3.0 model exchange, ``rel_tol`` and
+    ``abs_tol`` its integrator's tolerances). ``step`` is the communication step, the output grid.
+
+    ``inputs``: ``interpolate`` (the default) — with Gauss–Seidel, a component whose FMU can
+    interpolate its inputs (FMI 2.0 ``canInterpolateInputs``) gets every real input whose source has
+    already stepped as the line between the source's values at the step's start and end
+    (``fmi2SetRealInputDerivatives``); ``hold`` — every input held over a step. Jacobi and model
+    exchange are not affected.
+
+    ``threads``: the components of one level of the update order (none feeding another, e.g. the
+    mirror's actuators) step in parallel on this many threads; the results are those of one
+    thread, to the bit. ``record``: glob patterns over ``component.connector`` (a list, or one
+    string with commas), the columns recorded (default: every connector). ``overrides``:
+    ``{"Component.parameter": value}`` set over the selected parameter sets (``--set``).
+
+    The returned recorder also gets ``event_sources``: ``[(t, components)]``, one entry per
+    event instant the master synchronized, naming the components whose event it was (empty for
+    an event seen only through the integrator of ``model-exchange``).
+
+    ``sink(names, types, units, span)``, if given, makes the recorder instead (an object with
+    ``add(row)`` and ``close(complete)``, e.g. a :class:`~.record.CSVStream`): it is called once the
+    package and every number are found valid, before any FMU is loaded, and what it returns is
+    returned.
+    """
+    # no scipy import here: it would cost the master 50 MB of its memory budget
+    check_options(step, stop_time, start_time, algorithm, events, event_tolerance, rel_tol, abs_tol, threads, inputs)
     work = Path(tempfile.mkdtemp(prefix="pogofmu_ssp_"))
     instances = {}
     res = ex = None
     try:
         root = unpack(Path(ssp), work / "package")
         system = read_ssd(root)
-        selected = validate(system, parameters)
-        t0 = system.start_time if start_time is None else float(start_time)
-        t_end = stop_time if stop_time is not None else system.stop_time
-        if t_end is None:
-            raise SSPError("no stop time: give one (--stop-time) or set ssd:DefaultExperiment stopTime")
-        if not t_end > t0:
-            raise SSPError(f"stop time {t_end!r} s must be later than the start time {t0!r} s")
-        n_steps = int(round((t_end - t0) / step))
-        if n_steps < 1 or not math.isclose(t0 + n_steps * step, t_end, rel_tol=1e-9, abs_tol=1e-12):
-            raise SSPError(f"stop time {t_end} - start time {t0} is not a whole number of steps {step}")
-        t_last = grid_point(t0, step, n_steps)  # the last communication point
+        selected = apply_overrides(system, validate(system, parameters), overrides)
+        t0, t_last = time_span(system, start_time, stop_time, step)
         check_step_against_time_constants(system, selected, step, algorithm)
         loop = algebraic_loop(system)
         if loop is not None:
@@ -254,6 +272,7 @@ def simulate(ssp, parameters: Optional[str] = None, stop_time: Optional[float] =
         res.parameter_set = ", ".join(sorted({ps.name for ps in selected.values() if ps is not None})) or "none"
         res.algorithm, res.events, res.step, res.connections = algorithm, events, step, list(system.connections)
         res.inputs = inputs
+        res.event_sources = ex.event_sources
         res.close(complete=True)
         res.last_time = t_last
         return res
@@ -270,4 +289,4 @@ def simulate(ssp, parameters: Optional[str] = None, stop_time: Optional[float] =
         shutil.rmtree(work, ignore_errors=True)
 
 
-__all__ = ["ALGORITHMS", "simulate", "initialize", "Fmi2CoSimulation", "Fmi3CoSimulation", "Fmi3ModelExchange"]
+__all__ = ["ALGORITHMS", "check_options", "time_span", "simulate", "initialize", "Fmi2CoSimulation", "Fmi3CoSimulation", "Fmi3ModelExchange"]

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Dict, Optional
 
-from .package import REAL, WHOLE, ParameterSet, SSPError, System, _problem_text, same_type
+from .package import REAL, WHOLE, Parameter, ParameterSet, SSPError, System, _problem_text, same_type
 
 def _fmu_unit(var):
     unit = getattr(var, "unit", None)
@@ -184,6 +184,50 @@ def validate(system: System, parameters: Optional[str] = None) -> Dict[str, Opti
     if problems:
         raise SSPError(_problem_text(system, problems))
     return selected
+
+
+def apply_overrides(system: System, selected, overrides) -> Dict[str, Optional[ParameterSet]]:
+    """The selected parameter sets with ``overrides`` (``{"Component.parameter": value}``, what
+    ``--set`` and a system sweep give) put over them: a value replaces the set's value of that
+    parameter in its place, or comes after the set's values. Each name must be a real or integer
+    parameter of a component's FMU; an integer takes integral values only."""
+    if not overrides:
+        return selected
+    out = dict(selected)
+    for key, value in overrides.items():
+        comp_name, dot, name = str(key).partition(".")
+        comp = system.components.get(comp_name) if dot else None
+        if comp is None:
+            raise SSPError(f"--set {key}={value!r}: {comp_name!r} is not a component of system {system.name!r} "
+                           f"(give Component.parameter; components: {', '.join(system.components)})")
+        var = (comp.variables or {}).get(name)
+        if var is None or var.causality != "parameter":
+            params = sorted(n for n, v in (comp.variables or {}).items() if v.causality == "parameter")
+            raise SSPError(f"--set {key}={value!r}: {name!r} is not a parameter of Component {comp_name} "
+                           f"({comp.source}; parameters: {', '.join(params)})")
+        if var.type not in REAL + WHOLE or var.type == "Enumeration":
+            raise SSPError(f"--set {key}={value!r}: parameter {name} of Component {comp_name} is {var.type}; only "
+                           f"reals and integers can be set")
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or value != value \
+                or value in (float("inf"), float("-inf")):
+            raise SSPError(f"--set {key}={value!r}: the value must be a finite number")
+        if var.type in WHOLE:
+            if float(value) != int(value):
+                raise SSPError(f"--set {key}={value!r}: parameter {name} of Component {comp_name} is an "
+                               f"{var.type}: the value must be integral")
+            value = int(value)
+        else:
+            value = float(value)
+        ps = out.get(comp_name)
+        given = Parameter(name, var.type, value, None)
+        if ps is None:
+            out[comp_name] = ParameterSet("--set", "--set", [given])
+            continue
+        params = [given if p.name == name else p for p in ps.parameters]
+        if not any(p.name == name for p in ps.parameters):
+            params.append(given)
+        out[comp_name] = ParameterSet(ps.name, ps.source, params)
+    return out
 
 
 def selectable_sets(system) -> list:
