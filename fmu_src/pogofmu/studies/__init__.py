@@ -11,6 +11,11 @@
 * ``soil`` — Monte Carlo of Penetrator.fmu over an uncertain Hunt-Crossley soil (K, n, c_r):
   distributions of the deepest penetration ``delta_max``, the first rebound height (apex of the
   mass after the first liftoff) and the number of hops (liftoffs) in the run.
+* ``landing`` (:mod:`.landing`) — Monte Carlo of the SpaceHopper *system* (SSP, the master per
+  run) over its leg's contact, its controller's gains and gravity: the first touchdown, the
+  touchdown speed, the highest apex, the energy at the end.
+* ``coupling`` (:mod:`.coupling`) — the first apex's error against the communication step, for
+  every master algorithm.
 
 Host-side code (fmpy, dask, pyarrow, matplotlib).
 """
@@ -391,8 +396,10 @@ def study_main(argv, prog="pogofmu study"):
                     help=f"replace a default distribution or add one (defaults: {' '.join(SOIL_DEFAULTS)})")
     add_arguments(so)
     from pogofmu.studies import coupling as coupling_study
+    from pogofmu.studies import landing as landing_study
 
     coupling_study.add_parser(sub)
+    landing_study.add_parser(sub)
     args = ap.parse_args(argv)
     try:
         if args.study == "coupling":
@@ -400,6 +407,8 @@ def study_main(argv, prog="pogofmu study"):
                 return coupling_study.main(args)
             except coupling_study.StudyError as exc:
                 raise SweepError(str(exc)) from None
+        if args.study == "landing":
+            return landing_study.main(args)
         if args.study == "work-precision":
             work_precision(Path(args.out), Path(args.fmu), Path(args.reference) if args.reference else None, args.workers, args.scheduler,
                            not args.no_progress)

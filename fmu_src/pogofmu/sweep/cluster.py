@@ -13,9 +13,8 @@ import time
 from pathlib import Path
 from typing import Optional
 
-from .parquet import _done_ids, _parts_dir, _write_atomic, _write_timeseries, check_output, failed_runs, schema
-from .runner import run_chunk
-from .spec import Sweep, SweepError, prepare
+from .parquet import _done_ids, _parts_dir, _write_atomic, check_output, failed_runs
+from .spec import Sweep, SweepError
 
 # Dask settings of a local cluster: the worker's statistical profiler (a stack sample every 10 ms) and
 # the monitors polling every 20-500 ms cost ~7 % of a PogoStick run's CPU time; a sweep needs none of them
@@ -94,7 +93,8 @@ def check_workers(client):
         import importlib
 
         # the package first: a worker where it is missing (or hidden) must fail here, not find the runner cached
-        for module in ("numpy", "scipy.integrate", "fmpy", "pogofmu.sweep", "pogofmu.sweep.runner"):
+        for module in ("numpy", "scipy.integrate", "fmpy", "pogofmu.sweep", "pogofmu.sweep.runner",
+                       "pogofmu.sweep.system", "pogofmu.ssp.master"):
             importlib.import_module(module)
 
     try:
@@ -106,15 +106,16 @@ def check_workers(client):
 
 def run_sweep(sweep: Sweep, client, resume=False, overwrite=False, progress=True, log=print):
     """Run every missing point of the sweep on the client's cluster; write sweep.out. Returns the
-    number of runs done by this call."""
+    number of runs done by this call. ``sweep``: a :class:`~.spec.Sweep` of an FMU or a
+    :class:`~.system.SystemSweep` of an SSP package (what the loop asks of it: ``load()``,
+    ``spec()``, ``task``, ``label``, ``write_series()``)."""
     import pyarrow as pa
     import pyarrow.parquet as pq
     from distributed import as_completed
     from tqdm import tqdm
 
-    data, sha, md = prepare(sweep)
+    data, sha, sch = sweep.load()
     check_output(Path(sweep.out), sweep.timeseries_dir, overwrite, resume)
-    sch = schema(md, sweep.names, sweep.settings)
     spec = json.dumps(sweep.spec(sha), sort_keys=True)
     out = Path(sweep.out)
     parts = _parts_dir(out)
@@ -124,13 +125,13 @@ def run_sweep(sweep: Sweep, client, resume=False, overwrite=False, progress=True
         if out.exists() and not parts.exists():
             old = pq.read_schema(out).metadata or {}
             if old.get(b"pogofmu.sweep") != spec.encode():
-                raise SweepError(f"--resume: {out} holds a different sweep (FMU file, points or settings differ)")
+                raise SweepError(f"--resume: {out} holds a different sweep (its file, points or settings differ)")
             log(f"{out}: all {len(sweep.points)} runs are done already")
             return 0
         if parts.exists():
             old = (parts / "spec.json").read_text() if (parts / "spec.json").exists() else ""
             if old != spec:
-                raise SweepError(f"--resume: {parts} belongs to a different sweep (FMU file, points or settings "
+                raise SweepError(f"--resume: {parts} belongs to a different sweep (its file, points or settings "
                                  "differ); run that sweep's command again, or delete the folder")
     elif parts.exists() or out.exists():
         if not overwrite:
@@ -157,13 +158,14 @@ def run_sweep(sweep: Sweep, client, resume=False, overwrite=False, progress=True
     size = sweep.chunk_size or max(1, min(64, math.ceil(len(todo) / (32 * n_workers))))
     chunks = [todo[k:k + size] for k in range(0, len(todo), size)]
     data_f = client.scatter(data, broadcast=True)
-    submit = lambda chunk: client.submit(run_chunk, sha, data_f, sweep.names, chunk, sweep.settings,  # noqa: E731
+    task = sweep.task
+    submit = lambda chunk: client.submit(task, sha, data_f, sweep.names, chunk, sweep.settings,  # noqa: E731
                                          pure=False)
     futures = {}
     for chunk in chunks:
         futures[submit(chunk)] = chunk
     bar = tqdm(total=len(sweep.points), initial=len(done), unit="run", disable=not progress,
-               desc=Path(sweep.fmu).stem, file=sys.stderr, smoothing=0.1)
+               desc=sweep.label, file=sys.stderr, smoothing=0.1)
     n_run = 0
     failed = 0
     stop = Interrupts()
@@ -201,7 +203,7 @@ def run_sweep(sweep: Sweep, client, resume=False, overwrite=False, progress=True
                 rows = []
                 for row, res in results:
                     if ts_dir is not None and res is not None:
-                        _write_timeseries(ts_dir, row["run_id"], res)
+                        sweep.write_series(ts_dir, row["run_id"], res)
                     rows.append(row)
                     failed += row["status"] != "ok"
                 table = pa.Table.from_pylist(rows, schema=sch)
@@ -237,7 +239,7 @@ def run_sweep(sweep: Sweep, client, resume=False, overwrite=False, progress=True
 
 def execute(sweep: Sweep, workers=None, scheduler=None, **kwargs):
     """Open the cluster, run the sweep, close the cluster (also on an interruption)."""
-    prepare(sweep)  # a bad option fails before any worker starts
+    sweep.load()  # a bad option fails before any worker starts
     check_output(Path(sweep.out), sweep.timeseries_dir, kwargs.get("overwrite", False), kwargs.get("resume", False))
     try:
         client, cluster = open_cluster(workers, scheduler)
