@@ -1,4 +1,4 @@
-"""Run by tests/test_reliability.py in a fresh process: instantiate one FMU (argv[1]) n times
+"""Run by tests/test_concurrent_instantiation.py in a fresh process: instantiate one FMU (argv[1]) n times
 (argv[2]) through fmpy, one after the other, each initialized, stepped once and freed; print, as
 JSON, which of the FMU's private modules (``_pogofmu_*``) the process holds after the first and
 after the last instance (name -> id of the module object), and the modules the FMU's boot code

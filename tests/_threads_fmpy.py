@@ -1,4 +1,4 @@
-"""First instantiations from several threads at once, in a fresh process (tests/test_reliability.py).
+"""First instantiations from several threads at once, in a fresh process (tests/test_concurrent_instantiation.py).
 
     python _threads_fmpy.py DIST NAME,NAME,...
 

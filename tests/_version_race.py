@@ -1,5 +1,5 @@
 """Python-hosted FMUs instantiated while another thread of the process calls Py_GetVersion without
-pause (tests/test_reliability.py), in a fresh process.
+pause (tests/test_concurrent_instantiation.py), in a fresh process.
 
     python _version_race.py DIST NAME,NAME,... HAMMER.so
 

@@ -461,3 +461,49 @@ class RawInstance:
 
     def close(self):
         self.fmu.freeInstance()
+
+
+# ---- FMUs driven through fmpy or a C host, for the tests that need the FMU's own functions --------
+
+def fmi_function(inst, name, restype=None):
+    """The FMU's function `name` of a :class:`RawInstance` as a fresh ctypes object (fmpy's argument
+    types left alone)."""
+    fn = inst.fmu.dll[name]
+    if restype is not None:
+        fn.restype = restype
+    return fn
+
+
+def fmi3_fmpy_instance(name, interface="cs", event_mode=False):
+    """An FMI 3.0 instance of dist/fmi3/<name>.fmu through fmpy, instantiated with logging on:
+    co-simulation (with or without event mode and early return) or model exchange (``"me"``).
+    Returns the fmpy object and the list its messages are appended to as ``(status, text)``."""
+    from fmpy import extract, read_model_description
+    from fmpy.fmi3 import FMU3Model, FMU3Slave
+
+    path = DIST / "fmi3" / f"{name}.fmu"
+    md = read_model_description(str(path))
+    messages = []
+    log = lambda env, status, cat, msg: messages.append((status, msg.decode()))  # noqa: E731
+    if interface == "cs":
+        fmu = FMU3Slave(guid=md.guid, unzipDirectory=extract(str(path)), modelIdentifier=md.coSimulation.modelIdentifier,
+                        instanceName="calls3")
+        fmu.instantiate(loggingOn=True, eventModeUsed=event_mode, earlyReturnAllowed=event_mode, logMessage=log)
+    else:
+        fmu = FMU3Model(guid=md.guid, unzipDirectory=extract(str(path)), modelIdentifier=md.modelExchange.modelIdentifier,
+                        instanceName="calls3")
+        fmu.instantiate(loggingOn=True, logMessage=log)
+    return fmu, messages
+
+
+def c_host_run(tmp_path, unzipdir, env=None):
+    """The FMI 2.0 FMU unzipped in ``unzipdir`` run for 0.01 s in steps of 1 ms by the C host
+    tests/c_host/fmi2_host.c (compiled into ``tmp_path``; no Python in it), in an empty environment
+    unless ``env`` is given: the finished process, one line of ``y`` per communication point."""
+    from fmpy import read_model_description
+
+    host = compile_c_host(ROOT / "tests" / "c_host" / "fmi2_host.c", tmp_path / "fmi2_host")
+    md = read_model_description(str(Path(unzipdir) / "modelDescription.xml"))
+    y = next(v.valueReference for v in md.modelVariables if v.name == "y")
+    return subprocess.run([str(host), str(unzipdir), md.coSimulation.modelIdentifier, md.guid, "0.01", "1e-3", str(y), "-"],
+                          capture_output=True, text=True, timeout=120, env=env or {"PATH": "/usr/bin:/bin"})

@@ -6,6 +6,9 @@ FMUs' own table (fmu_src/native/call_states.h): a legal call succeeds, an illega
 Error naming the function, nothing is ever Fatal, and the instance stays usable after every Error
 (the next legal call succeeds).  FMU states are taken, serialized, deserialized, damaged, restored
 and freed in every call state, and restoring one puts the model back where the state was taken.
+Written-out sequences besides: calls out of sequence in FMI 2.0 and FMI 3.0 (and a bad tolerance,
+an unknown log category, a co-simulation function on a model-exchange instance) are refused with
+Error naming the function and the state, and the instance goes on.
 
 Both backends, on the project's PogoStick and HopController and on two user models drawn by the
 event semantics' generator (tests/hybrid_draws.py); derandomized and short in CI (``POGOFMU_STATEFUL_EXAMPLES=500`` for a long run),
@@ -27,7 +30,8 @@ from hypothesis import strategies as st
 from hypothesis.stateful import RuleBasedStateMachine, precondition, rule
 
 from pogofmu.fmpy_raw import raw_call
-from support import BACKENDS, DIST, RawInstance, require, ROOT
+from support import BACKENDS, DIST, Instance, RawInstance, require, ROOT
+from support import fmi3_fmpy_instance as _fmi3_raw
 
 EXAMPLES = int(os.environ.get("POGOFMU_STATEFUL_EXAMPLES", "10"))
 SETTINGS = settings(max_examples=EXAMPLES, stateful_step_count=30, derandomize=True, deadline=None,
@@ -799,3 +803,100 @@ def test_a_step_after_event_handling_needed_is_refused_until_event_mode(backend)
             assert inst.do_step(1e-3)[0] == OK, inst.last()
     finally:
         inst.close()
+
+
+# =============================================================================================
+# Written-out sequences: refused with Error naming the function and the state
+# =============================================================================================
+
+def _raw(fmu, name, *args):
+    """The FMU's own function, its status returned (fmpy's wrappers raise on Error)."""
+    return raw_call(fmu, name, *args)
+
+
+def _fmi2(name="PogoStick"):
+    inst = Instance(name, "calls")
+    return inst, inst.fmu
+
+
+def _last(inst):
+    return inst.messages[-1][2] if inst.messages else ""
+
+
+def test_fmi2_calls_out_of_sequence_are_refused_and_the_instance_goes_on():
+    import ctypes
+
+    inst, fmu = _fmi2()
+    try:
+        F = ctypes.c_double
+        # before initialization: no step, no exit, no terminate
+        assert _raw(fmu, "fmi2ExitInitializationMode") == 3
+        assert "fmi2ExitInitializationMode refused: not allowed in Instantiated" in _last(inst)
+        assert _raw(fmu, "fmi2DoStep", F(0.0), F(1e-3), 1) == 3 and "fmi2DoStep refused" in _last(inst)
+        # a bad tolerance, an unknown log category
+        assert _raw(fmu, "fmi2SetupExperiment", 1, F(-1.0), F(0.0), 0, F(0.0)) == 3
+        assert "tolerance = -1 violates the rule" in _last(inst)
+        cats = (ctypes.c_char_p * 1)(b"logNoSuchThing")
+        assert _raw(fmu, "fmi2SetDebugLogging", 1, 1, cats) == 3
+        assert "'logNoSuchThing' is not a log category of this FMU" in _last(inst) and "logEvents" in _last(inst)
+        # the legal sequence still works
+        assert _raw(fmu, "fmi2SetupExperiment", 0, F(0.0), F(0.0), 0, F(0.0)) == 0
+        assert _raw(fmu, "fmi2EnterInitializationMode") == 0
+        assert _raw(fmu, "fmi2EnterInitializationMode") == 3  # a second one
+        assert "not allowed in Initialization Mode" in _last(inst)
+        assert _raw(fmu, "fmi2ExitInitializationMode") == 0
+        assert _raw(fmu, "fmi2SetupExperiment", 0, F(0.0), F(0.0), 0, F(0.0)) == 3  # after initialization
+        assert "fmi2SetupExperiment refused: not allowed in Step Complete" in _last(inst)
+        assert _raw(fmu, "fmi2DoStep", F(0.0), F(1e-3), 1) == 0
+        assert _raw(fmu, "fmi2Terminate") == 0
+        assert _raw(fmu, "fmi2DoStep", F(1e-3), F(1e-3), 1) == 3  # after terminate
+        assert "fmi2DoStep refused: not allowed in Terminated" in _last(inst)
+        assert not [m for m in inst.messages if m[0] >= 4]  # nothing fatal
+        assert _raw(fmu, "fmi2Reset") == 0
+        inst.init().run_to(0.01, 1e-3)  # usable after every refusal
+    finally:
+        fmu.freeInstance()
+
+
+def test_fmi3_calls_out_of_sequence_are_refused():
+    import ctypes
+
+    B = ctypes.c_bool
+    flags = [B(), B(), B(), B(), B()]
+    refs = [ctypes.byref(f) for f in flags] + [ctypes.byref(ctypes.c_double())]
+    # co-simulation without event mode: no Event Mode at all
+    fmu, messages = _fmi3_raw("PogoStick", "cs", event_mode=False)
+    try:
+        fmu.enterInitializationMode()
+        fmu.exitInitializationMode()  # -> Step Mode
+        assert _raw(fmu, "fmi3UpdateDiscreteStates", *refs) == 3
+        assert "fmi3UpdateDiscreteStates refused: not allowed in Step Mode" in messages[-1][1]
+        assert _raw(fmu, "fmi3EnterEventMode") == 3 and "eventModeUsed = false" in messages[-1][1]
+        assert _raw(fmu, "fmi3EnterStepMode") == 3 and "fmi3EnterStepMode refused: not allowed in Step Mode" in \
+            messages[-1][1]
+        fmu.doStep(0.0, 1e-3)  # still usable
+    finally:
+        fmu.terminate()
+        fmu.freeInstance()
+    # with event mode: Event Mode twice in a row
+    fmu, messages = _fmi3_raw("PogoStick", "cs", event_mode=True)
+    try:
+        fmu.enterInitializationMode()
+        fmu.exitInitializationMode()  # -> Event Mode
+        assert _raw(fmu, "fmi3EnterEventMode") == 3 and "not allowed in Event Mode" in messages[-1][1]
+        fmu.updateDiscreteStates()
+        fmu.enterStepMode()
+        fmu.enterEventMode()
+        assert _raw(fmu, "fmi3EnterEventMode") == 3 and "fmi3EnterEventMode refused" in messages[-1][1]
+    finally:
+        fmu.terminate()
+        fmu.freeInstance()
+    # a co-simulation function on a model-exchange instance
+    fmu, messages = _fmi3_raw("PogoStick", "me")
+    try:
+        fmu.enterInitializationMode()
+        fmu.exitInitializationMode()
+        assert _raw(fmu, "fmi3EnterStepMode") == 3
+        assert "it is a co-simulation function, and this instance is a model-exchange instance" in messages[-1][1]
+    finally:
+        fmu.freeInstance()

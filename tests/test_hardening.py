@@ -1,5 +1,7 @@
-"""The engine's hardening: starts on a guard, the work budget, tight tolerances, extreme
-parameters, messages that name the rule, refused tolerances, the event log in constant memory —
+"""The engine's hardening: starts on a guard, the work budget (per second simulated, and per call:
+max_steps_per_call, the same refusal from both backends; fmi2CancelStep refused naming it), tight
+tolerances, extreme parameters, messages that name the rule, refused tolerances, the event log in
+constant memory —
 each against an independent reference (closed form, the closed-form event table, the energy
 balance, the rule). Bad steps and NaN inputs: tests/test_conformance.py; the SSP master's
 inputs and memory: tests/test_ssp.py; the README's usage and packaging:
@@ -11,7 +13,8 @@ import re
 import numpy as np
 import pytest
 
-from support import Instance, assert_parameter_rejected, init_failure_text, reference_events, simulate
+from support import (BACKENDS, ERROR, STEP, Instance, RawInstance, assert_parameter_rejected,
+                     init_failure_text, reference_events, simulate)
 
 G = 9.81
 STICKS = ["PogoStick", "PogoStickMem", "PogoStickSMA"]
@@ -136,6 +139,107 @@ def test_a_model_without_states_takes_no_internal_steps():
     assert sim.n_steps == 0 and sim.t_out == 1e4
     run = simulate("HopController", start_values={"max_step": 1e-6}, stop_time=2.0)  # the FMU, 2000 steps
     assert not run.errors
+
+
+# ---- one call's work is bounded by a parameter: max_steps_per_call ----------------------------
+
+def _set_reals(inst, **values):
+    import ctypes
+
+    for name, value in values.items():
+        vr = (ctypes.c_uint32 * 1)(inst.vars[name].valueReference)
+        if inst.vars[name].type in ("Integer", "Int32"):  # (method)
+            v = (ctypes.c_int32 * 1)(value)
+            status = inst.raw("fmi2SetInteger", vr, 1, v) if inst.fmi == 2 else inst.raw("fmi3SetInt32", vr, 1, v, 1)
+        else:
+            v = (ctypes.c_double * 1)(value)
+            status = inst.raw("fmi2SetReal", vr, 1, v) if inst.fmi == 2 else inst.raw("fmi3SetFloat64", vr, 1, v, 1)
+        assert status == 0, inst.last()
+
+
+def _bounded_call(backend, fmi, h, **settings):
+    """Initialize with `settings`, take one step of `h` s; the status, the message, the step's CPU
+    seconds (of this process, which runs the FMU: not the wall time, which a loaded machine stretches)."""
+    import time
+
+    inst = RawInstance(backend, fmi)
+    try:
+        _set_reals(inst, **settings)
+        inst.enter_initialization()
+        inst.exit_initialization()
+        start = time.process_time()
+        status, _ = inst.do_step(h)
+        return status, inst.last(), time.process_time() - start, inst
+    except BaseException:
+        inst.close()
+        raise
+
+
+@pytest.mark.parametrize("fmi", [2, 3])
+def test_a_step_needing_more_than_max_steps_per_call_is_refused_at_once(fmi):
+    """step_size/max_step = 1e4 internal steps at least, max_steps_per_call = 1000: refused before
+    any work, naming the parameter, its value and how to raise it; the instance goes on with a
+    shorter step.  The same text from both backends."""
+    texts = []
+    for backend in BACKENDS:
+        status, text, seconds, inst = _bounded_call(backend, fmi, 100.0, max_steps_per_call=1000.0)
+        try:
+            assert status == ERROR and seconds < 1.0, (status, text, seconds)
+            assert "max_steps_per_call = 1000" in text and "raise the parameter max_steps_per_call" in text, text
+            inst.t = 0.0  # the refused step moved nothing
+            assert inst.do_step(1e-2)[0] == 0, inst.last()
+        finally:
+            inst.close()
+        texts.append(text)
+    assert texts[0] == texts[1], texts
+
+
+@pytest.mark.parametrize("fmi", [2, 3])
+def test_a_call_that_takes_more_than_max_steps_per_call_ends_naming_it(fmi):
+    """max_step = 0 (unbounded: nothing to refuse beforehand) and a stiff leg (c = 3e4, ~1e4
+    internal steps per second of contact, with the explicit method 5: the default method 0 would
+    go implicit there) in one step of 2 s: the call stops after 2000 internal
+    steps with Error naming max_steps_per_call, where it stopped and how to go on — identically on
+    both backends (the engines count the same steps); with the parameter raised the same step
+    completes."""
+    texts = []
+    for backend in BACKENDS:
+        status, text, seconds, inst = _bounded_call(backend, fmi, 2.0, c=3e4, max_step=0.0, max_steps_per_call=2000.0,
+                                                    method=5)
+        try:
+            assert status == ERROR, (status, text)
+            assert "max_steps_per_call = 2000 internal steps taken in one call" in text, text
+            assert "raise the parameter max_steps_per_call" in text and "shorter communication steps" in text, text
+        finally:
+            inst.close()
+        texts.append(text)
+        status, text, _, inst = _bounded_call(backend, fmi, 2.0, c=3e4, max_step=0.0, max_steps_per_call=1e6, method=5)
+        inst.close()
+        assert status == 0, text
+    assert texts[0] == texts[1], texts
+
+
+def test_max_steps_per_call_is_a_parameter_with_a_rule():
+    from support import assert_parameter_rejected
+
+    assert_parameter_rejected("PogoStick", {"max_steps_per_call": 0.5}, "max_steps_per_call",
+                              "1 <= max_steps_per_call < inf")
+
+
+@pytest.mark.parametrize("backend", BACKENDS, ids=["python", "native"])
+def test_fmi2_cancel_step_is_refused_naming_the_rule(backend):
+    """FMI 2.0 §4.2.2: fmi2CancelStep only stops an asynchronous fmi2DoStep that returned fmi2Pending;
+    these FMUs declare canRunAsynchronuously = false and never return it, so a call is Error naming
+    the rule (the instance goes on)."""
+    inst = RawInstance(backend, 2)
+    try:
+        inst.reach(STEP)
+        assert inst.raw("fmi2CancelStep") == ERROR
+        text = inst.last()
+        assert "fmi2CancelStep refused" in text and "fmi2Pending" in text and "max_steps_per_call" in text, text
+        assert inst.do_step()[0] == 0, inst.last()
+    finally:
+        inst.close()
 
 
 # ---- tight tolerances work -----------------------------------------------------------------
