@@ -16,7 +16,7 @@ fastest of ``--repeat`` kept (the machine's load only adds):
 Beside them, what the machine's two cores give: two processes of a plain arithmetic loop against
 one (a shared VM's two vCPUs give less than 2).
 
-A 12-ring native mirror (939 FMUs) builds and runs (docs/ssp-master.md, "12 rings"), but its
+A 12-ring native mirror (939 FMUs) builds and runs (docs/performance.md, "12 rings"), but its
 export takes ~9 min of CPU, so it is not one of these cases. The packages are generated into a
 temporary folder (``--packages DIR`` reuses ``DIR/m1.ssp``, ``DIR/m4.ssp``; the 4-ring export
 takes minutes).
