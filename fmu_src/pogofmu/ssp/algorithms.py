@@ -19,6 +19,7 @@ from operator import attrgetter
 from typing import Dict, List
 
 from .components import REAL_TYPES, StepResult
+from .native_level import failed_after_step
 from .package import SSPError
 
 INPUTS = ("hold", "interpolate")  # --inputs: how a Gauss-Seidel component sees the inputs over a step
@@ -187,13 +188,7 @@ class Exchange:
         end = t + h
         entry = (True, t, h)
         for inst in batch.saving:  # the FMU state itself saved at t, then the step (see Component.save)
-            j = inst._journal
-            if j is not None and len(j) == 1:  # (the list of the previous step's C save: reused)
-                j[0] = entry
-            else:
-                inst._journal = [entry]
-            inst._mark = 0
-            inst.saved_at = inst.t
+            inst.saved_in_c(entry)
         for inst in batch.fast:
             inst.t = end
         out = [StepResult(end)] * len(insts)  # (one object: nobody changes a step's result)
@@ -201,7 +196,7 @@ class Exchange:
         for k, code, before in bad:
             inst = batch.fast[k]
             if code > 1:
-                inst.t = end if code >> 8 in (4, 6) else t  # (a read fails after the step)
+                inst.t = end if failed_after_step(code) else t
                 errors.append((batch.pos[k], nat.error(inst, code, t, h)))
             elif code == 1:
                 out[batch.pos[k]] = on_event(inst, before)
@@ -254,6 +249,14 @@ class Exchange:
             self._pool = None
         if self.native is not None:
             self.native.close()
+
+    def takes_lines(self, inst) -> bool:
+        """Whether ``inst`` takes some of its inputs as lines over a step (:meth:`interpolate_inputs`)."""
+        return inst.name in self._lines
+
+    def input_lines(self, name) -> tuple:
+        """The input connectors component ``name`` takes as lines over a step (empty: none)."""
+        return self._lines.get(name, ())
 
     def ready(self, inst) -> bool:
         """Every input of ``inst`` has a source value."""
@@ -616,18 +619,19 @@ class Synchronizer:
     # ---- the macro step: synchronize -----------------------------------------------------------
     def advance(self, t, T):
         """Bring every component from ``t`` to ``T``, or to the first event before it; returns
-        ``(t_reached, step result of the event or None)``."""
-        ex, target, event, stepped = self.ex, T, None, []
-        jacobi = self.jacobi
+        ``(t_reached, step result of the event or None)``: the levels stepped in update order
+        (:meth:`_step_level`), the earliest event among a level's components cutting the macro
+        step (:meth:`_earliest`, :meth:`_back_to`), then a time event or a switch of a
+        feed-through output inside the step (:meth:`_switch_event`)."""
+        ex, jacobi = self.ex, self.jacobi
         switch0 = None
         if self._switch_keys:
             switch0 = self.switch_now if jacobi and self.switch_now is not None else self._switch_values()
         self.switch_now = None
-        next_event = self.next_event
-        if next_event:
-            for t_next in next_event.values():  # time events asked for by FMI 3.0 components
-                if t < t_next < target:
-                    target = t_next
+        target = T
+        for t_next in self.next_event.values():  # time events asked for by FMI 3.0 components
+            if t < t_next < target:
+                target = t_next
         if jacobi:
             ex.feed_all(ex.order)
         else:
@@ -636,6 +640,7 @@ class Synchronizer:
         ran = None  # the levels stepped by one C call (Gauss-Seidel, every component at the step's start)
         if not jacobi and max(map(_TIME, ex.order)) < target:
             ran = ex.step_levels(self.levels, t, target - t, on_event)
+        event, stepped = None, []
         for k, level in enumerate(self.levels):
             # the level's components step together to ``target`` (in parallel with --threads);
             # the earliest event among them then cuts the macro step, as one after the other the
@@ -646,72 +651,97 @@ class Synchronizer:
             else:
                 todo = [inst for inst in level if inst.t < target]
                 stepped += [inst for inst in level if inst.t >= target]  # ahead (they cannot roll back): they wait
-            goal = target
-
-            def one(inst):
-                if not jacobi:
-                    ex.feed(inst, lines=True)
-                if inst.must_save:
-                    inst.save()
-                if inst.rollback:
-                    return self._step(inst, t, goal)  # (it reads the outputs)
-                r = inst.do_step(t, goal - t)
-                ex.read(inst)
-                return r
-            if results is None:
-                results = ex.step_level(todo, t, goal - t, not jacobi, one, save=True, on_event=on_event)
-            cut = None
-            pairs = zip(todo, results)
-            if len(results) > 1 and results.count(results[0]) == len(results):
-                pairs = ((todo[0], results[0]),)  # one result for all (a C call without events): the checks once
-            for inst, r in pairs:
-                if r.terminate:
-                    raise SSPError(f"Component {inst.name} asked to terminate the simulation at t = {r.t_end!r} s")
-                if r.t_end < goal and (cut is None or r.t_end < cut[1].t_end):
-                    cut = (inst, r)  # it stopped at (or just before) an event: everyone goes no further
-                elif r.event_at is not None and event is None and r.t_end == goal:
-                    event = r  # an event exactly at the end of the step
-                    self.cause = (inst.name,)
+                results = self._step_level(todo, t, target, on_event)
+            cut, at_end = self._earliest(todo, results, target)
+            if at_end is not None and event is None:
+                event, self.cause = at_end[1], (at_end[0].name,)  # an event exactly at the end of the step
             stepped += todo
             if cut is not None:
                 inst, event = cut
                 self.cause = (inst.name,)
                 target = event.t_end
-                back = [prev for prev in stepped if prev.t > target and prev.must_save]
-
-                def redo(prev, inst=inst):
-                    prev.restore()
-                    if not jacobi and prev.name in ex._lines:  # its input lines over the shorter span
-                        ex.feed(prev, lines=True)
-                    try:
-                        if target > t:
-                            prev.do_step(t, target - t)
-                    except SSPError as exc:
-                        raise SSPError(f"{exc} (the step shortened to the event of Component {inst.name} at "
-                                       f"t = {target!r} s)") from None
-                    ex.read(prev)
-                if not jacobi and any(prev.name in ex._lines for prev in back):
-                    for prev in back:  # in update order: a line's source is redone before it is fed
-                        redo(prev)
-                else:
-                    ex.map(redo, back)
-        if event is None and next_event and target in next_event.values():
+                self._back_to([prev for prev in stepped if prev.t > target and prev.must_save], t, target, inst)
+        if event is None and self.next_event and target in self.next_event.values():
             event = StepResult(target, event_at=target, event_mode=True)
-            self.cause = tuple(inst.name for inst, t_next in next_event.items() if t_next == target)
+            self.cause = tuple(inst.name for inst, t_next in self.next_event.items() if t_next == target)
         if event is None and switch0:
-            if jacobi:
-                self.switch_now = self._probe(t, target)
-                if self.switch_now == switch0:
-                    self._unprobe(t, target)
-                    return target, None
-                self.switch_now = None
-            if self._switch_values() != switch0:
-                switched = self._switched(switch0)  # (before the bisection moves them back)
-                located = self._locate_switch(t, target, switch0)
-                if located is not None:
-                    target, event = located
-                    self.cause = switched
+            target, event = self._switch_event(t, target, switch0)
         return target, event
+
+    def _step_level(self, todo, t, goal, on_event) -> list:
+        """Step the components ``todo`` of one level from ``t`` to ``goal`` (fed, saved where they
+        must, read; in C where it serves them): their step results."""
+        ex, jacobi = self.ex, self.jacobi
+
+        def one(inst):
+            if not jacobi:
+                ex.feed(inst, lines=True)
+            if inst.must_save:
+                inst.save()
+            if inst.rollback:
+                return self._step(inst, t, goal)  # (it reads the outputs)
+            r = inst.do_step(t, goal - t)
+            ex.read(inst)
+            return r
+        return ex.step_level(todo, t, goal - t, not jacobi, one, save=True, on_event=on_event)
+
+    @staticmethod
+    def _earliest(todo, results, goal):
+        """``(cut, at_end)``: the component that stopped earliest before ``goal`` (at or just before
+        its event) with its result, and the first one with an event exactly at ``goal``; each
+        ``(component, result)`` or None. A component asking to terminate ends the run."""
+        cut = at_end = None
+        pairs = zip(todo, results)
+        if len(results) > 1 and results.count(results[0]) == len(results):
+            pairs = ((todo[0], results[0]),)  # one result for all (a C call without events): the checks once
+        for inst, r in pairs:
+            if r.terminate:
+                raise SSPError(f"Component {inst.name} asked to terminate the simulation at t = {r.t_end!r} s")
+            if r.t_end < goal and (cut is None or r.t_end < cut[1].t_end):
+                cut = (inst, r)  # it stopped at (or just before) an event: everyone goes no further
+            elif r.event_at is not None and at_end is None and r.t_end == goal:
+                at_end = (inst, r)
+        return cut, at_end
+
+    def _back_to(self, back, t, target, cause):
+        """The components ``back`` (stepped past ``target``, saved at ``t``) restored and stepped to
+        ``target``, the instant of the event of ``cause``."""
+        ex, jacobi = self.ex, self.jacobi
+
+        def redo(prev):
+            prev.restore()
+            if not jacobi and ex.takes_lines(prev):  # its input lines over the shorter span
+                ex.feed(prev, lines=True)
+            try:
+                if target > t:
+                    prev.do_step(t, target - t)
+            except SSPError as exc:
+                raise SSPError(f"{exc} (the step shortened to the event of Component {cause.name} at "
+                               f"t = {target!r} s)") from None
+            ex.read(prev)
+        if not jacobi and any(ex.takes_lines(prev) for prev in back):
+            for prev in back:  # in update order: a line's source is redone before it is fed
+                redo(prev)
+        else:
+            ex.map(redo, back)
+
+    def _switch_event(self, t, target, switch0):
+        """``(target, event)`` after a step from ``t`` to ``target`` without an event: a
+        feed-through discrete output that switched inside it is located (Jacobi: probed first)
+        and is the step's event."""
+        if self.jacobi:
+            self.switch_now = self._probe(t, target)
+            if self.switch_now == switch0:
+                self._unprobe(t, target)
+                return target, None
+            self.switch_now = None
+        if self._switch_values() != switch0:
+            switched = self._switched(switch0)  # (before the bisection moves them back)
+            located = self._locate_switch(t, target, switch0)
+            if located is not None:
+                self.cause = switched
+                return located
+        return target, None
 
     def _probed(self, t):
         """The switching components a probe from ``t`` can restore."""

@@ -267,6 +267,33 @@ class Component:
         self._journal, self._mark = [], 0
         self.saved_at = self.t
 
+    # ---- stepped by the master's C level (pogofmu.ssp.native_level) ---------------------------
+    @property
+    def journaling(self) -> bool:
+        """Whether the calls since the FMU state was last really saved are kept (see :meth:`save`):
+        the C level steps such a component only where it saves it itself."""
+        return self._journal is not None
+
+    def state_address(self) -> int:
+        """The address of the FMU state object the C level saves into (made here once)."""
+        if self._state is None:
+            try:
+                self._save()
+            except Exception as exc:  # noqa: BLE001
+                raise self.fail("saving its state", exc) from None
+        return ctypes.addressof(self._state)
+
+    def saved_in_c(self, step):
+        """The C level saved the FMU state at :attr:`t` (into :meth:`state_address`), then made
+        ``step``, a journal entry ``(True, t, h)``: :meth:`restore` goes back to that save."""
+        j = self._journal
+        if j is not None and len(j) == 1:  # (the list of the previous step's C save: reused)
+            j[0] = step
+        else:
+            self._journal = [step]
+        self._mark = 0
+        self.saved_at = self.t
+
     def restore(self):
         """Back to the state remembered by the latest :meth:`save` (the FMU state saved, then the
         journaled calls up to that save made again; the state there is then saved itself, so a

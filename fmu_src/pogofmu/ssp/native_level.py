@@ -34,11 +34,26 @@ from .components import REAL_TYPES, Fmi2CoSimulation, _call_failed
 
 INT_TYPES = ("Integer", "Int32", "Int16", "Int8", "UInt8", "UInt16", "UInt32", "Enumeration")  # exact in a double
 FMI2_INT = ("Integer", "Enumeration")
-OP_FEED, OP_SAVE, OP_STEP, OP_READ = 1, 2, 4, 8
-CALLS = {1: ("setting its inputs", "fmi2SetReal"), 5: ("setting its inputs", "fmi2SetInteger"),
-         7: ("setting its inputs", "fmi2SetRealInputDerivatives"),
-         2: ("saving its state", "fmi2GetFMUstate"), 3: ("step", "fmi2DoStep"),
-         4: ("reading its outputs", "fmi2GetReal"), 6: ("reading its outputs", "fmi2GetInteger")}
+# pg_level.c's enums (tests/test_ssp_native_layout.py compares them with the C source)
+OP_FEED, OP_SAVE, OP_STEP, OP_READ = 1, 2, 4, 8  # what a component's turn in a C call does
+CALL_SET_REAL, CALL_SAVE, CALL_STEP, CALL_GET_REAL, CALL_SET_INT, CALL_GET_INT, CALL_SET_DERIV = range(1, 8)
+# a component's result code: 0 done, 1 done and its event counter changed, -1 not run (another
+# failed); else the failed call << 8 | its FMI status (> 1)
+CODE_DONE, CODE_EVENT, CODE_NOT_RUN = 0, 1, -1
+CALLS = {CALL_SET_REAL: ("setting its inputs", "fmi2SetReal"), CALL_SET_INT: ("setting its inputs", "fmi2SetInteger"),
+         CALL_SET_DERIV: ("setting its inputs", "fmi2SetRealInputDerivatives"),
+         CALL_SAVE: ("saving its state", "fmi2GetFMUstate"), CALL_STEP: ("step", "fmi2DoStep"),
+         CALL_GET_REAL: ("reading its outputs", "fmi2GetReal"), CALL_GET_INT: ("reading its outputs", "fmi2GetInteger")}
+
+
+def failed_call(code: int) -> int:
+    """The call (``CALL_*``) whose error a result code reports."""
+    return code >> 8
+
+
+def failed_after_step(code: int) -> bool:
+    """Whether the error a result code reports came after the step was made (reading the outputs)."""
+    return failed_call(code) in (CALL_GET_REAL, CALL_GET_INT)
 
 _P = ctypes.c_void_p
 _IP = ctypes.POINTER(ctypes.c_int)
@@ -268,7 +283,7 @@ class NativeLevels:
         ex, idx, hidx = self.ex, self.value.index, self.held.index
         ins = {"real": ([], [], []), "int": ([], [], [])}
         first = None
-        lines = ex._lines.get(inst.name, ())
+        lines = ex.input_lines(inst.name)
         line_start, line_span, sources = [], [], []
         for c in ex.incoming[inst.name]:
             kind = "real" if inst.type_of(c.end_connector) in REAL_TYPES else "int"
@@ -354,7 +369,7 @@ class NativeLevels:
 
     def error(self, inst, code, t, h):
         """The master's error for a failed call of ``inst`` in C (as the Python path words it)."""
-        what, function = CALLS[code >> 8]
+        what, function = CALLS[failed_call(code)]
         exc = _call_failed(function, code & 0xFF)
         if what == "step":
             what = f"fmi2DoStep from t = {t:.10g} s (step {h:g} s)"
@@ -377,15 +392,13 @@ class Batch:
             saving = feed is not None and save and inst.must_save
             # served: a component that keeps a journal of its calls for a restore is saved here
             # (only the components that must save keep one: Component.save)
-            if nat.serves(inst) and (saving or inst._journal is None):
+            if nat.serves(inst) and (saving or not inst.journaling):
                 self.pos.append(k)
                 self.fast.append(inst)
                 ops.append(base | OP_SAVE if saving else base)
                 if saving:
                     self.saving.append(inst)
-                    if inst._state is None:
-                        inst._save()  # the FMU state object, made once (the C code saves into it)
-                    nat._plan(inst)[0].state = ctypes.addressof(inst._state)
+                    nat._plan(inst)[0].state = inst.state_address()  # (the C code saves into it)
             else:
                 self.slow.append(k)
         n = len(self.fast)

@@ -109,14 +109,16 @@ def figure(path: Path, rows, samples, stop_time, parameters, seed):
         ax.set_ylabel("runs")
     ax = axes[1, 1]
     if len(ok):
-        sc = ax.scatter([r["PogoStick.k"] for r in ok], [r["final_energy_J"] for r in ok],
-                        c=[r["HopController.K_D"] for r in ok], s=10)
-        fig.colorbar(sc, ax=ax, label="HopController.K_D")
-    ax.set_xlabel("PogoStick.k [N/m]")
-    ax.set_ylabel(f"energy at t = {stop_time:g} s [J]")
+        sc = ax.scatter([r["HopController.K_D"] for r in ok], [r["highest_apex_m"] for r in ok],
+                        c=[r["HopController.tau_E"] for r in ok], s=10)
+        fig.colorbar(sc, ax=ax, label="HopController.tau_E [s]")
+    ax.set_xlabel("HopController.K_D (the controller's energy gain)")
+    ax.set_ylabel("highest apex of y [m]")
     for a in axes.ravel():
         a.grid(True, alpha=0.3)
-    specs = ", ".join(f"{n} ~ {d}{a}" for n, d, a in samples.values())
+    import textwrap
+
+    specs = textwrap.fill(", ".join(f"{n} ~ {d}{a}" for n, d, a in samples.values()), 150)
     fig.suptitle(f"SpaceHopper ({parameters}), {stop_time:g} s, {len(ok)} of {len(rows)} runs ok (seed {seed})\n"
                  f"{specs}", fontsize=7)
     fig.tight_layout()
