@@ -1,7 +1,8 @@
 """The package build compiles the host-side libraries (the engine the host tools run, the SSP
 master's C level) into pogofmu/_lib, so an installed package carries them; the compiler is the
-system's cc, gcc or clang, else the ziglang package's zig cc (a build requirement).  Everything
-else is in pyproject.toml."""
+system's cc, gcc or clang, else the ziglang package's zig cc (a build requirement). It also copies
+the segmented mirror's model files (examples/segmented_mirror/) beside ``pogofmu mirror``'s
+builder.  Everything else is in pyproject.toml."""
 import shutil
 import sys
 from pathlib import Path
@@ -26,6 +27,13 @@ class BuildPyWithHostLibraries(build_py):
         shutil.rmtree(into, ignore_errors=True)  # (setuptools keeps build/ between builds: no stale library)
         build.host_engine_library(into=into)
         build.host_level_library(into=into)
+        # the segmented mirror's model files (pogofmu mirror builds its system from them): a checkout
+        # has them in examples/, an installed package beside the builder
+        models = Path(self.build_lib) / "pogofmu" / "studies" / "segmented_mirror"
+        shutil.rmtree(models, ignore_errors=True)
+        models.mkdir(parents=True)
+        for f in sorted((HERE / "examples" / "segmented_mirror").glob("*.py")):
+            shutil.copy2(f, models / f.name)
 
 
 class BinaryDistribution(Distribution):

@@ -95,7 +95,7 @@ def main(argv):
                                    "--parameters", body, "--stop-time", "30", "--step", "1e-3",
                                    "--out", str(ROOT / "results" / f"SpaceHopper-{body}")], cwd=ROOT)
         # the 1-ring segmented mirror phasing through a gust: pistons.png and piston_map.png
-        rc |= subprocess.call([sys.executable, "-m", "pogofmu.ssp.mirror", "demo", str(ROOT / "results" / "Mirror_R1")],
+        rc |= subprocess.call([sys.executable, "-m", "pogofmu.studies.mirror", "demo", str(ROOT / "results" / "Mirror_R1")],
                               cwd=ROOT)
         return rc
     if cmd == "test":

@@ -215,7 +215,7 @@ def mirror(tmp_path_factory):
     from support import run_pogofmu
 
     folder = tmp_path_factory.mktemp("csv")
-    proc = run_pogofmu("ssp", "mirror", "--rings", "1", "--backend", "native", "--out", "m.ssp", cwd=folder,
+    proc = run_pogofmu("mirror", "--rings", "1", "--backend", "native", "--out", "m.ssp", cwd=folder,
                        timeout=600)
     assert proc.returncode == 0, proc.stderr
     return folder

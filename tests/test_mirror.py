@@ -1,7 +1,7 @@
 """The segmented mirror (docs/segmented-mirror.md) as a user runs it: the example's model files
 copied into a temporary folder and exported by ``pogofmu export``; each model against an
 independent reference written here (scipy for the actuator and the controller, numpy's
-least squares for the reconstructor); ``pogofmu ssp mirror`` packages checked by ``pogofmu ssp
+least squares for the reconstructor); ``pogofmu mirror`` packages checked by ``pogofmu ssp
 check``, and a 1-ring mirror run by ``pogofmu ssp run``.
 """
 from __future__ import annotations
@@ -199,7 +199,7 @@ def fmi3_commands(path, zt, G, z):
 def test_mirror_packages_of_one_ring_have_15_components_and_pass_ssp_check(tmp_path):
     for fmi, version in (("2", "1.0"), ("3", "2.0")):
         out = tmp_path / f"mirror{fmi}.ssp"
-        proc = pogofmu("ssp", "mirror", "--rings", "1", "--fmi", fmi, "--out", out, cwd=tmp_path)
+        proc = pogofmu("mirror", "--rings", "1", "--fmi", fmi, "--out", out, cwd=tmp_path)
         assert proc.returncode == 0, proc.stderr
         assert "15 FMUs" in proc.stdout
         check = pogofmu("ssp", "check", out, cwd=tmp_path)
@@ -246,7 +246,7 @@ def update_order(ssp, folder):
 
 @pytest.mark.parametrize("args", [("--rings", "0", "--out", "m.ssp"), ("--rings", "1", "--out", "m.zip")])
 def test_a_wrong_mirror_command_is_one_line_without_traceback(tmp_path, args):
-    proc = pogofmu("ssp", "mirror", *args, cwd=tmp_path)
+    proc = pogofmu("mirror", *args, cwd=tmp_path)
     assert proc.returncode == 2
     assert "Traceback" not in proc.stderr and len(proc.stderr.strip().splitlines()) == 1, proc.stderr
 
@@ -258,7 +258,7 @@ def test_one_ring_mirror_phases_after_its_gust_with_actuators_on_their_stops(tmp
     the reconstructor's gain), so 0.8 s after a 2.5 mm excursion leaves well under 1 um; a loop
     that did not phase, or an event handled wrong, would be off by tens of um."""
     ssp = tmp_path / "m.ssp"
-    assert pogofmu("ssp", "mirror", "--rings", "1", "--out", ssp, cwd=tmp_path).returncode == 0
+    assert pogofmu("ssp", "mirror", "--rings", "1", "--out", ssp, cwd=tmp_path).returncode == 0  # (the old command line)
     proc = pogofmu("ssp", "run", ssp, "--step", "1e-3", "--out", "run", "--quiet", cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     data = np.genfromtxt(tmp_path / "run" / "default.csv", delimiter=",", names=True, deletechars="")
@@ -277,7 +277,7 @@ def test_controllers_whose_saturation_events_undo_each_other_end_in_one_line_not
     at one instant (t = 0.0417 s): the master wrote event rows without end (4.3 GB of CSV). Now
     it stops with an event storm naming the instant, exit status 1, one line."""
     ssp = tmp_path / "m.ssp"
-    assert pogofmu("ssp", "mirror", "--rings", "1", "--out", ssp, cwd=tmp_path).returncode == 0
+    assert pogofmu("ssp", "mirror", "--rings", "1", "--out", ssp, cwd=tmp_path).returncode == 0  # (the old command line)
     edited = tmp_path / "storm.ssp"
     with zipfile.ZipFile(ssp) as src, zipfile.ZipFile(edited, "w") as dst:
         for item in src.infolist():

@@ -23,7 +23,7 @@ STEP, STOP = 1e-3, 1.5
 @pytest.fixture(scope="module")
 def package(tmp_path_factory):
     folder = tmp_path_factory.mktemp("mirror_libcosim")
-    proc = run_pogofmu("ssp", "mirror", "--rings", "1", "--backend", "native", "--out", "m.ssp", cwd=folder,
+    proc = run_pogofmu("mirror", "--rings", "1", "--backend", "native", "--out", "m.ssp", cwd=folder,
                        timeout=900)
     assert proc.returncode == 0, proc.stderr
     return folder / "m.ssp"

@@ -1,4 +1,4 @@
-"""The 1-ring mirror (7 segments, 15 FMUs, ``pogofmu ssp mirror --rings 1``) run by the SSP
+"""The 1-ring mirror (7 segments, 15 FMUs, ``pogofmu mirror --rings 1``) run by the SSP
 master against the independent scipy closed loop of tests/references.py (every actuator with
 its stops, every PID loop, the least-squares reconstruction in one ODE).
 
@@ -26,10 +26,10 @@ EDGES = [(0, j) for j in range(1, 7)] + [(j, j % 6 + 1) for j in range(1, 7)]
 
 
 def mirror_package(tmp_path_factory, fmi):
-    """``pogofmu ssp mirror --rings 1 --fmi <fmi>`` (Python-hosted FMUs) in a folder of its own."""
+    """``pogofmu mirror --rings 1 --fmi <fmi>`` (Python-hosted FMUs) in a folder of its own."""
     folder = tmp_path_factory.mktemp(f"mirror_validation{fmi}")
     out = folder / f"m{fmi}.ssp"
-    proc = run_pogofmu("ssp", "mirror", "--rings", "1", "--fmi", fmi, "--out", out, cwd=folder, timeout=900)
+    proc = run_pogofmu("mirror", "--rings", "1", "--fmi", fmi, "--out", out, cwd=folder, timeout=900)
     assert proc.returncode == 0, proc.stderr
     return out
 

@@ -21,7 +21,7 @@ def pogofmu(*args, cwd):
 @pytest.fixture(scope="module")
 def mirror(tmp_path_factory):
     folder = tmp_path_factory.mktemp("threads")
-    proc = pogofmu("ssp", "mirror", "--rings", "1", "--backend", "native", "--out", "m.ssp", cwd=folder)
+    proc = pogofmu("mirror", "--rings", "1", "--backend", "native", "--out", "m.ssp", cwd=folder)
     assert proc.returncode == 0, proc.stderr
     return folder
 

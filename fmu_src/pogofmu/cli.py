@@ -9,8 +9,9 @@ COMMANDS = {
     "export": ("pogofmu.build.export", "main", "export model files (HybridModels) as FMUs: FMI 2.0/3.0, Python-hosted/native"),
     "run": ("pogofmu.experiments", "main", "simulate each FMU's default experiment: CSV, event table, figures"),
     "ssp": ("pogofmu.ssp.cli", "main", "run or check an SSP system (events synchronized, or model exchange)"),
-    "sweep": ("pogofmu.sweep", "sweep_main", "grids and Monte Carlo of one FMU on Dask, to Parquet"),
-    "study": ("pogofmu.studies", "study_main", "the studies: work-precision, soil, coupling"),
+    "sweep": ("pogofmu.sweep", "sweep_main", "grids and Monte Carlo of an FMU or a system on Dask, to Parquet"),
+    "study": ("pogofmu.studies", "study_main", "the studies: work-precision, soil, landing, coupling"),
+    "mirror": ("pogofmu.studies.mirror", "main", "the SSP system of a segmented telescope mirror of R rings"),
 }
 
 
@@ -39,6 +40,8 @@ def main(argv=None) -> int:
         print(f"pogofmu {__version__}")
         return 0
     cmd, rest = argv[0], argv[1:]
+    if cmd == "ssp" and rest[:1] == ["mirror"]:  # (the mirror's command before it left the SSP package)
+        cmd, rest = "mirror", rest[1:]
     if cmd not in COMMANDS:
         print(f"pogofmu: unknown command {cmd!r}: the commands are {', '.join(COMMANDS)} (pogofmu --help)",
               file=sys.stderr)

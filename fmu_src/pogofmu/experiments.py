@@ -19,7 +19,6 @@ from pathlib import Path
 
 from pogofmu.runtime.status import status_name
 
-ROOT = Path(__file__).resolve().parents[2]
 
 
 def simulate_default(fmu: Path, start_values=None, model=None, **kwargs):
@@ -297,8 +296,8 @@ def run(dist: Path, out: Path, names=()):
 def main(argv=None, prog="pogofmu run"):
     ap = argparse.ArgumentParser(prog=prog, description="simulate each FMU's default experiment with fmpy: "
                                  "results/<FMU>/{timeseries.csv, events.csv, figure*.png}")
-    ap.add_argument("--dist", default=str(ROOT / "dist"), help="folder of the built FMUs (default dist/)")
-    ap.add_argument("--out", default=str(ROOT / "results"), help="output folder (default results/)")
+    ap.add_argument("--dist", default="dist", help="folder of the built FMUs (default: dist in the current folder)")
+    ap.add_argument("--out", default="results", help="output folder (default: results in the current folder)")
     ap.add_argument("names", nargs="*", help="FMU names (default: every FMU in --dist)")
     args = ap.parse_args(argv)
     try:

@@ -15,9 +15,10 @@ One module per job:
   :mod:`.native_level` — their hot path in C (``native/master/pg_level.c``, the GIL released);
 * :mod:`.coupled` — the strongly coupled algorithm (``--algorithm model-exchange``, CVODE);
 * :mod:`.plot` — the run's figure; :mod:`.cli` — the command line; :mod:`.__main__` — ``python -m``;
-* :mod:`.libcosim_runner` — a package run under libcosim in a process of its own (studies, tests);
-* :mod:`.mirror` — ``pogofmu ssp mirror``: the segmented mirror's system (an application, not the
-  generic master: issue 47 moves it out).
+* :mod:`.libcosim_runner` — a package run under libcosim in a process of its own (studies, tests).
+
+Applications built on it live elsewhere: the segmented mirror's system in
+:mod:`pogofmu.studies.mirror` (``pogofmu mirror``), system sweeps in :mod:`pogofmu.sweep.system`.
 
 Host-side code (fmpy, numpy, matplotlib); never imported inside an FMU.
 """

@@ -111,10 +111,6 @@ def main(argv=None, prog="pogofmu ssp"):
     """The command line (``run`` / ``check``); returns the exit status. ``prog`` names the command
     in the usage text (a console command forwarding here may pass its own)."""
     argv = sys.argv[1:] if argv is None else list(argv)
-    if argv[:1] == ["mirror"]:  # the generator of segmented-mirror systems has its own options
-        from .mirror import main as mirror
-
-        return mirror(argv[1:], prog=f"{prog} mirror")
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument("--debug", action="store_true",
                         help="show the Python traceback of an unexpected error (also: POGOFMU_DEBUG=1)")

@@ -30,7 +30,6 @@ from typing import Optional
 
 from pogofmu.sweep import Settings, Sweep, SweepError, add_arguments, execute, make_points, parse_sample
 
-ROOT = Path(__file__).resolve().parents[3]
 TOLERANCES = [10.0 ** -k for k in range(3, 13)]  # 1e-3 ... 1e-12
 SOIL_DEFAULTS = [  # the soil of the default drop (K = 1e4 N/m^1.5, n = 1.5, c_r = 0.5), made uncertain
     "K=lognormal(9.2103404,0.5)",  # median 1e4 N/m^n (ln 1e4 = 9.2103404), a factor 1.65 per sigma
@@ -381,14 +380,14 @@ def study_main(argv, prog="pogofmu study"):
     ap = argparse.ArgumentParser(prog=prog, description="studies: CSV + PNG")
     sub = ap.add_subparsers(dest="study", required=True)
     wp = sub.add_parser("work-precision", help="Figs 21-22: event-time error and events located vs rel_tol")
-    wp.add_argument("--out", default=str(ROOT / "results" / "work-precision"), help="output folder")
-    wp.add_argument("--fmu", default=str(ROOT / "dist" / "PogoStick.fmu"))
+    wp.add_argument("--out", default="results/work-precision", help="output folder")
+    wp.add_argument("--fmu", default="dist/PogoStick.fmu")
     wp.add_argument("--reference", default=None,
                     help="closed-form events as a CSV (columns event, time_s); default: computed")
     add_arguments(wp)
     so = sub.add_parser("soil", help="Monte Carlo of the Penetrator over an uncertain soil")
-    so.add_argument("--out", default=str(ROOT / "results" / "soil"), help="output folder")
-    so.add_argument("--fmu", default=str(ROOT / "dist" / "Penetrator.fmu"))
+    so.add_argument("--out", default="results/soil", help="output folder")
+    so.add_argument("--fmu", default="dist/Penetrator.fmu")
     so.add_argument("--samples", type=int, default=200, help="Monte Carlo samples (default 200)")
     so.add_argument("--seed", type=int, default=0)
     so.add_argument("--stop-time", type=float, default=10.0, help="[s] (default 10)")

@@ -28,7 +28,6 @@ import time
 import zipfile
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[3]
 STEPS = (1e-4, 3e-4, 1e-3, 3e-3, 1e-2, 3e-2, 1e-1)
 STOP = {"moon": 2.1, "earth": 0.9, "ceres": 6.0}  # past the first apex; a whole number of every step
 ALGORITHMS = {  # name: (package, simulate keywords)
@@ -229,9 +228,9 @@ def _steps(text):
 
 def add_parser(sub):
     co = sub.add_parser("coupling", help="first-apex error vs communication step for every master algorithm")
-    co.add_argument("--out", default=str(ROOT / "results" / "coupling"), help="output folder")
-    co.add_argument("--ssp", default=str(ROOT / "dist" / "SpaceHopper.ssp"), help="the FMI 2.0 package")
-    co.add_argument("--ssp-fmi3", default=str(ROOT / "dist" / "SpaceHopper-fmi3.ssp"), help="the FMI 3.0 package")
+    co.add_argument("--out", default="results/coupling", help="output folder")
+    co.add_argument("--ssp", default="dist/SpaceHopper.ssp", help="the FMI 2.0 package")
+    co.add_argument("--ssp-fmi3", default="dist/SpaceHopper-fmi3.ssp", help="the FMI 3.0 package")
     co.add_argument("--steps", type=_steps, default=list(STEPS), help="comma-separated steps [s] "
                     f"(default {','.join(f'{h:g}' for h in STEPS)})")
     co.add_argument("--bodies", default="moon,earth", help="parameter sets (default moon,earth)")

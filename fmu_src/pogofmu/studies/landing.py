@@ -16,7 +16,7 @@ from pathlib import Path
 
 from pogofmu.sweep import SweepError, execute, make_points, parse_sample
 
-from . import ROOT, _plt, _read_table, _write_csv
+from . import _plt, _read_table, _write_csv
 
 LANDING_DEFAULTS = [
     "PogoStick.k=lognormal(4.6051702,0.15)",  # median 100 N/m (ln 100), a factor 1.16 per sigma
@@ -31,8 +31,8 @@ SUMMARIES = ["PogoStick:first_event", "PogoStick:events", "PogoStick.ydot:min", 
 
 def add_parser(sub):
     la = sub.add_parser("landing", help="landing dispersion of the SpaceHopper system (soil, gains, gravity)")
-    la.add_argument("--out", default=str(ROOT / "results" / "landing"), help="output folder")
-    la.add_argument("--ssp", default=str(ROOT / "dist" / "native" / "SpaceHopper.ssp"), help="the SSP package")
+    la.add_argument("--out", default="results/landing", help="output folder")
+    la.add_argument("--ssp", default="dist/native/SpaceHopper.ssp", help="the SSP package")
     la.add_argument("--parameters", default="moon", help="parameter set of the package (default moon)")
     la.add_argument("--samples", type=int, default=200, help="Monte Carlo samples (default 200)")
     la.add_argument("--seed", type=int, default=0)
