@@ -1,5 +1,5 @@
 /* The independent limit of benchmark (g), benchmarks/bench_native.py: the basic pogo stick
- * (docs/models.md "PogoStick", /work/shared/MODELS.md Sect. 1) integrated by a hand-written
+ * (docs/models.md "PogoStick") integrated by a hand-written
  * Dormand-Prince 5(4) in plain C. Nothing of the project's engine or generated model is used: this
  * is what a competent programmer writes by hand for this one model, the cost a native FMU is
  * measured against.

@@ -24,7 +24,20 @@ from .runtime import __all__, __version__  # noqa: F401 (one place for the versi
 from .runtime import elements, fmath  # noqa: F401
 
 # ``import pogofmu.elements`` / ``pogofmu.fmath`` are the runtime's modules themselves (not copies):
-# the native generator traces a model's fmath calls by replacing the functions of that one module
+# a model file's calls of ``fmath`` are the runtime's functions, which the native generator follows
+# through the traced values' own tables (fmath's docstring)
 _sys.modules.setdefault(__name__ + ".elements", elements)
 _sys.modules.setdefault(__name__ + ".fmath", fmath)
 __all__ = list(__all__) + ["elements"]
+
+
+def _host_engine_library():
+    from pogofmu.codegen.build import host_engine_library  # (host-side: compiled once, or the wheel's)
+
+    return host_engine_library()
+
+
+# the runtime (which goes into FMUs) imports nothing of the host side: the host tells it where its engine is
+from .runtime.engine import cengine as _cengine  # noqa: E402
+
+_cengine.set_host_library(_host_engine_library)

@@ -150,7 +150,8 @@ def model_description_fmi2(cls, token: str, source_files=(), directional=False) 
 def model_description_fmi3(cls, token: str, directional=False) -> bytes:
     """FMI 3.0: model exchange and co-simulation in one description (pogofmu.runtime.fmi3 for the extra
     variables: state locals, derivatives, event indicators, and the independent variable time)."""
-    from pogofmu.runtime.fmi3 import check_state_outputs, fmi3_class, indicator_name
+    from pogofmu.runtime.fmi3 import check_state_outputs, fmi3_class
+    from pogofmu.runtime.interface import indicator_name
 
     from .dependencies import structure
 

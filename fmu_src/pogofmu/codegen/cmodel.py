@@ -18,7 +18,7 @@ from typing import Dict, List
 from pogofmu.memo import once_per_model
 from pogofmu.runtime.dual import Dual, value_and_tangent
 from pogofmu.runtime.engine import SOLVER_PARAMETERS
-from pogofmu.runtime.engine.cengine import discrete_layout  # the engine's layout of q: one definition
+from pogofmu.runtime.interface import discrete_layout  # the engine's layout of q: one definition
 from pogofmu.runtime.engine.settings import check_solver_parameters, domain_slack
 from pogofmu.runtime.model import HybridModel, Params
 

@@ -56,6 +56,7 @@ from .engine import SOLVER_PARAMETERS, Simulator, snapshot_from_data, snapshot_t
     split_parameters
 from .engine.settings import REL_TOL_MAX, REL_TOL_MIN
 from .eventlog import CATEGORY as EVENT_CATEGORY, event_message
+from .interface import LOG_CATEGORIES, FmiVariable, fmi2_variables  # (what the FMU exposes: one module)
 from .model import DomainError, HybridModel, ModelError, Params
 from .status import ERROR, FATAL, OK, WARNING, log_category
 
@@ -66,16 +67,6 @@ _STATE_FORMAT = "pogofmu-fmu-state-4"  # 4: the input derivatives ("du")
 # build of one model, see build_fmu.py), "pogofmu" from the source tree
 _BUILD = __name__.rpartition(".")[0]
 
-LOG_CATEGORIES = {
-    "logStatusWarning": "messages with status Warning",
-    "logStatusDiscard": "messages with status Discard",
-    "logStatusError": "messages with status Error",
-    "logStatusFatal": "messages with status Fatal",
-    "logAll": "all other messages",
-    "logEvents": "every state event: kind, exact time, state before the jump (parameter log_events = 1)",
-    "logSolver": "the solver's method switches (method = 0): time, methods, stiffness estimate; the Jacobian "
-                 "taken by differences (a model flow that does not run on dual numbers)",
-}
 
 
 class LogMsg(NamedTuple):
@@ -94,45 +85,6 @@ class FMUError(Exception):
     def __init__(self, message: str, status: int = ERROR):
         super().__init__(message)
         self.fmi_status = status
-
-
-# ---------------------------------------------------------------------------------------------
-# variables of an FMU, shared with build_fmu.py (which writes modelDescription.xml from them)
-# ---------------------------------------------------------------------------------------------
-
-@dataclass(frozen=True)
-class FmiVariable:
-    name: str
-    vr: int
-    type: str  # "Real" or "Integer"
-    causality: str  # parameter | input | output
-    variability: str  # fixed | continuous | discrete
-    description: str
-    unit: str = ""
-    start: Optional[float] = None
-    role: tuple = ()  # ("parameter", name) | ("input", index) | ("output", name)
-    element: tuple = ()  # an element of an array input or output: (array name, 1-based index, size)
-
-
-def fmi2_variables(model: HybridModel) -> Tuple[FmiVariable, ...]:
-    """The FMU's variables in value-reference order: the model's parameters, the solver's settings
-    (every FMU has them, after the model's own), inputs, outputs."""
-    out = []
-    for par in model.parameters + SOLVER_PARAMETERS:
-        out.append(FmiVariable(par.name, len(out), "Integer" if par.integer else "Real", "parameter", "fixed",
-                               par.description, par.unit, par.default, ("parameter", par.name)))
-    for i, var in enumerate(model.inputs):
-        integer = var.name in model.integer_inputs
-        out.append(FmiVariable(var.name, len(out), "Integer" if integer else "Real", "input",
-                               "discrete" if integer else "continuous", var.description, var.unit,
-                               int(var.start) if integer else float(var.start), ("input", i), var.element))
-    integers = model.all_integer_outputs()
-    for var in model.all_outputs():
-        integer = var.name in integers
-        out.append(FmiVariable(var.name, len(out), "Integer" if integer else "Real", "output",
-                               "discrete" if integer else "continuous", var.description, var.unit,
-                               None, ("output", var.name), var.element))
-    return tuple(out)
 
 
 def _values_getter(names):

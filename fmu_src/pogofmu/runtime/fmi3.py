@@ -52,65 +52,12 @@ from __future__ import annotations
 import math
 from typing import Tuple
 
-from .fmi2 import FMUError, FmiVariable, HybridSlave, fmi2_variables
+from .fmi2 import FMUError, HybridSlave
+from .interface import FmiVariable, array_table, fmi3_variables, indicator_name, rate_unit  # noqa: F401
 from .model import FALLING, HybridModel, ModelError
 from .status import ERROR
 
 __all__ = ["fmi3_variables", "fmi3_class", "Fmi3Slave", "rate_unit", "indicator_name", "array_table"]
-
-# the unit of d(state)/dt for the units of pogofmu.runtime.units
-_RATE_UNITS = {"m": "m/s", "m/s": "m/s2", "m.s": "m", "s": "", "J": "W", "": ""}
-
-
-def rate_unit(unit: str) -> str:
-    """The unit of the time derivative of a state in ``unit`` (the SI names of the common ones,
-    ``<unit>/s`` for any other: ``degC`` -> ``degC/s``, ``N.m`` -> ``(N.m)/s``)."""
-    if unit in _RATE_UNITS:
-        return _RATE_UNITS[unit]
-    return f"{unit}/s" if unit.replace("_", "").isalnum() else f"({unit})/s"
-
-
-def indicator_name(event) -> str:
-    return f"guard_{event.name}"
-
-
-def fmi3_variables(model: HybridModel) -> Tuple[FmiVariable, ...]:
-    """FMI 2.0 variables, then state locals, derivatives and event indicators (module docstring).
-
-    Outputs, state locals and time have the role ``("output", name)`` (``outputs[name]`` of the
-    adapter, refreshed once per step and served from the launcher's buffers); derivatives and
-    indicators ``("derived", name)``, computed only when asked for."""
-    out = list(fmi2_variables(model))
-    names = {v.name for v in out}
-    for var in model.states:
-        if var.name not in names:
-            out.append(FmiVariable(var.name, len(out), "Real", "local", "continuous",
-                                   f"continuous state: {var.description}", var.unit, None, ("output", var.name)))
-    for var in model.states:
-        out.append(FmiVariable(f"der({var.name})", len(out), "Real", "local", "continuous",
-                               f"time derivative of {var.name} ({var.description})", rate_unit(var.unit), None,
-                               ("derived", f"der({var.name})")))
-    for ev in model.events:
-        way = "falling: fires at > 0 -> <= 0" if ev.direction == FALLING else "rising: fires at < 0 -> >= 0"
-        out.append(FmiVariable(indicator_name(ev), len(out), "Real", "local", "continuous",
-                               f"event indicator of {ev.name}: its guard ({way}) while active, 1 while inactive",
-                               "", None, ("derived", indicator_name(ev))))
-    out.append(FmiVariable("time", len(out), "Real", "independent", "continuous", "simulation time", "s", None,
-                           ("output", "time")))
-    return tuple(out)
-
-
-def array_table(variables) -> Tuple[int, ...]:
-    """The FMI 3.0 arrays among ``variables``: ``(value reference, number of elements)`` pairs, flat.
-    An array variable has the value reference of its first element; its elements' own value
-    references (consecutive, after it) are not FMI 3.0 variables: the entry file (pg_fmi3.c) expands
-    an array's value reference into them, so that the backends see scalars only."""
-    out = []
-    for v in variables:
-        if v.element and v.element[1] == 1:
-            out += [v.vr, v.element[2]]
-    return tuple(out)
-
 
 def check_state_outputs(model: HybridModel):
     """An output that shares its name with a state is that state's variable in FMI 3.0: its value

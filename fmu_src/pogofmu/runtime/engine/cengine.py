@@ -19,7 +19,8 @@ Where the library comes from:
 
 * inside a Python-hosted FMU, the FMU's launcher carries the engine (its ``pgb_*`` functions); the
   bootstrap names the launcher (:func:`use_library`);
-* on the host, ``pogofmu.codegen.build.host_engine_library``: an installed package's copy, compiled
+* on the host, where the host-side package says (:func:`set_host_library`; ``pogofmu/__init__.py``
+  gives ``pogofmu.codegen.build.host_engine_library``): an installed package's copy, compiled
   when the package was built (``pogofmu/_lib``), else compiled once per version of its sources into
   the user's cache folder (``POGOFMU_CACHE``, else the platform's cache folder).
 
@@ -44,6 +45,7 @@ from dataclasses import dataclass
 from typing import List, Optional
 
 from ..dual import Dual, value_and_tangent
+from ..interface import discrete_layout  # noqa: F401 (the engine's layout of q, said once)
 from ..model import FALLING, DomainError, HybridModel, ModelError, ParameterError, Params, ZenoError, reads_time
 from .settings import SOLVER_PARAMETERS, check_solver_parameters, domain_slack, split_parameters
 
@@ -156,13 +158,21 @@ def use_library(path) -> None:
             _LIB_PATH, _LIB = str(path), None
 
 
+_HOST_LIBRARY = None  # on the host: a function giving the engine library's path (set_host_library)
+
+
+def set_host_library(finder) -> None:
+    """On the host, the host-side package says where the engine library is (``pogofmu/__init__.py``
+    gives ``pogofmu.codegen.build.host_engine_library``): the runtime imports no host-side code."""
+    global _HOST_LIBRARY
+    _HOST_LIBRARY = finder
+
+
 def _find_library() -> str:
-    try:  # on the host: the project's build code compiles the engine once
-        from pogofmu.codegen.build import host_engine_library
-    except ImportError:
+    if _HOST_LIBRARY is None:
         raise ModelError("the engine library is not available: this copy of the runtime was loaded without its "
-                         "FMU's launcher (run the FMU through its binary)") from None
-    return str(host_engine_library())
+                         "FMU's launcher (run the FMU through its binary)")
+    return str(_HOST_LIBRARY())
 
 
 def library():
@@ -260,13 +270,6 @@ def _doubles(values, n=None):
 
 def _number_or_nan(v) -> float:
     return float(v) if isinstance(v, (int, float)) else math.nan
-
-
-def discrete_layout(model: HybridModel, p=None):
-    """The slots of the discrete state ``q``: ``(key, 'i' or 'f')`` in the order of the model's initial
-    ``q`` (the native generator's layout)."""
-    _, q = model.initial(model.params() if p is None else p)
-    return tuple((k, "i" if isinstance(v, int) and not isinstance(v, (bool, float)) else "f") for k, v in q.items())
 
 
 class _Static:
