@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Build every FMU of the project into dist/, validate it, and pack the SSP systems.
 
-A thin caller of the package's exporter (:func:`pogofmu.build.build_project`, the code behind
+A thin caller of the package's exporter (:func:`pogofmu.exporter.build_project`, the code behind
 ``pogofmu export``): for each model of ``fmu_src/pogofmu/runtime/models/`` the four FMUs —
 ``dist/<Model>.fmu`` (FMI 2.0 co-simulation), ``dist/fmi3/<Model>.fmu`` (FMI 3.0 model exchange and
 co-simulation with event mode), ``dist/native/<Model>.fmu`` and ``dist/native/fmi3/<Model>.fmu``
@@ -22,7 +22,7 @@ sys.path.insert(0, str(ROOT / "fmu_src"))  # this checkout's package, whichever 
 
 
 def main(argv=None):
-    from pogofmu.build import BuildError, build_project
+    from pogofmu.exporter import BuildError, build_project
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--dest", default=str(ROOT / "dist"), help="output folder (default: dist/)")

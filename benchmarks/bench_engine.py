@@ -2,7 +2,7 @@
 """Benchmark (a): the engine alone against a scipy ``solve_ivp`` restart loop of the same model.
 
 For every case of ``benchmarks/cases/`` (see its docstring to add one): the engine
-(``pogofmu.runtime.engine.Simulator`` on the model, no FMI) and the case's scipy loop (terminal events,
+(``pogofmu.runtime.solver.Simulator`` on the model, no FMI) and the case's scipy loop (terminal events,
 restart loop) integrate the case's experiment at ``rel_tol = 1e-9``, ``abs_tol = 1e-12``,
 ``max_step = 0.01``; engine method 5 (Dormand-Prince 5(4)) against ``RK45``, method 8 (DOP853)
 against ``DOP853``.  The runs alternate (engine, scipy, scipy, engine, ...) so that load from other
@@ -45,7 +45,7 @@ SPEED_TARGET = 2.0
 
 
 def run_engine(model, p, stop_time):
-    from pogofmu.runtime.engine import Simulator
+    from pogofmu.runtime.solver import Simulator
 
     sim = Simulator(model, p, t_stop=stop_time, keep_history=True)  # the event times are compared
     sim.advance(stop_time)

@@ -6,7 +6,7 @@ project's launcher, the same variables, the same output buffers, the same FMI tr
 slave's ``do_step`` returns at once (:func:`floor_of` rewrites the slave module inside a copy of
 the built ``.fmu``; the outputs stay those of the start).  It measures what fmpy and the
 project's launcher cost per communication step before any model code runs.  The FMUs are built
-into a temporary folder (``pogofmu.build.build_project(tmp, names)``, never into dist/), then run
+into a temporary folder (``pogofmu.exporter.build_project(tmp, names)``, never into dist/), then run
 alternately through ``fmpy.simulate_fmu`` with fmpy's defaults (validation, extraction to a
 temporary folder), ``stop_time`` = the case's, ``output_interval = 1e-3``; the best CPU time
 (``time.process_time``) of ``--repeat`` runs of each counts (the median is printed too).  The FMU
@@ -83,7 +83,7 @@ FLOOR_STEP = """
 
 def build(dest: Path, names):
     """Build the cases' FMUs (FMI 2.0) into ``dest``; return {name: path}."""
-    from pogofmu.build import build_project
+    from pogofmu.exporter import build_project
 
     with quiet():
         built = build_project(dest, sorted(set(names)), cache=ROOT / "build" / "native")
@@ -136,7 +136,7 @@ def compile_c_host(dest: Path) -> Path:
     import shutil
     import subprocess
 
-    from pogofmu.build import fmi_headers
+    from pogofmu.exporter import fmi_headers
 
     exe = dest / "fmi2_record"
     cc = shutil.which("cc") or shutil.which("gcc")

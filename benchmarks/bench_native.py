@@ -149,7 +149,7 @@ class Limit:
 
     def __init__(self, name: str, dest: Path):
         from pogofmu.codegen.build import ENGINE, ENGINE_SOURCES, compile_c, write_model_source
-        from pogofmu.runtime.engine import SOLVER_PARAMETERS
+        from pogofmu.runtime.solver import SOLVER_PARAMETERS
         from pogofmu.runtime.models import get
 
         model = get(name)
@@ -168,7 +168,7 @@ class Limit:
 def main(argv=None):
     from fmpy import read_model_description
 
-    from pogofmu import build
+    from pogofmu import exporter as build
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--repeat", type=int, default=7)

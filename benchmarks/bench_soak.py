@@ -62,7 +62,7 @@ def main(argv=None):
     ap.add_argument("--sizes", type=int, nargs="+", default=[10_000, 100_000, 1_000_000])
     ap.add_argument("--no-fmpy", action="store_true", help="skip the fmpy simulate_ssp peer")
     args = ap.parse_args(argv)
-    from pogofmu.build import build_project
+    from pogofmu.exporter import build_project
 
     with tempfile.TemporaryDirectory(prefix="pogofmu_soak_") as tmp:
         tmp = Path(tmp)

@@ -37,7 +37,7 @@ sys.path.insert(0, str(ROOT / "fmu_src"))
 import references  # noqa: E402  (the tests' independent references)
 from native_engine import NativeEngine  # noqa: E402
 from pogofmu.codegen.build import engine_library  # noqa: E402
-from pogofmu.runtime.engine import SOLVER_PARAMETERS  # noqa: E402
+from pogofmu.runtime.solver import SOLVER_PARAMETERS  # noqa: E402
 from pogofmu.runtime.models import penetrator  # noqa: E402
 
 T_END = 10.0

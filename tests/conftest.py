@@ -38,7 +38,7 @@ def pytest_collection_modifyitems(config, items):
 
 @pytest.fixture(scope="session")
 def built_fmus():
-    from pogofmu.build import Exporter, build_project, load_model_file
+    from pogofmu.exporter import Exporter, build_project, load_model_file
     from support import DIST, example_files
 
     built = build_project(DIST, ssp_dir=ROOT / "ssp", cache=ROOT / "build" / "native")

@@ -6,7 +6,7 @@ from __future__ import annotations
 import ctypes as C
 
 from native_model import PgModel, arr, same_number
-from pogofmu.runtime.engine import SOLVER_PARAMETERS, Simulator
+from pogofmu.runtime.solver import SOLVER_PARAMETERS, Simulator
 from pogofmu.runtime.model import ModelError
 
 

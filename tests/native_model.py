@@ -5,7 +5,7 @@ from __future__ import annotations
 import ctypes as C
 import math
 
-from pogofmu.runtime.engine.cengine import PG_ARITH, PG_OK, PG_RAISE, PgMsg, layouts  # noqa: F401 (pg_model.h)
+from pogofmu.runtime.solver.cengine import PG_ARITH, PG_OK, PG_RAISE, PgMsg, layouts  # noqa: F401 (pg_model.h)
 
 D = C.POINTER(C.c_double)
 

@@ -73,7 +73,7 @@ def example_files():
 
 def example_models():
     """``{FMU name: model}`` of the example files, as the exporter loads them."""
-    from pogofmu.build import load_model_file
+    from pogofmu.exporter import load_model_file
 
     return {s.model.name: s.model for f in example_files() for s in load_model_file(f)}
 
@@ -277,7 +277,7 @@ def run_libcosim(name, stop_time, step, outputs, initial=None, timeout=120):
 def compile_c_host(source, exe):
     """Compile a C importer of tests/c_host/ with the resolved C compiler against fmpy's FMI headers;
     assert it links no libpython (it must bring nothing but dlopen)."""
-    from pogofmu import build
+    from pogofmu import exporter as build
     from pogofmu.codegen.build import c_compiler
 
     cc = c_compiler()  # the system's, else zig cc (the ziglang package): never missing

@@ -592,7 +592,7 @@ def test_every_fmi_function_is_defined_once_for_both_backends():
     the native FMUs' (with the native backend) alike."""
     import re
 
-    from pogofmu import build
+    from pogofmu import exporter as build
     from pogofmu.codegen.build import FMI_ENTRY
     from support import ROOT
 

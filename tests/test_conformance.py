@@ -14,8 +14,8 @@ import zipfile
 
 import pytest
 
-from pogofmu import build
-from pogofmu.runtime.engine import SOLVER_PARAMETERS
+from pogofmu import exporter as build
+from pogofmu.runtime.solver import SOLVER_PARAMETERS
 from support import DIST, Instance, example_models, fmu_path, init_failure_text, model_of, run_libcosim, simulate
 
 FMUS = build.model_names()
@@ -119,7 +119,7 @@ def test_bad_step_and_nan_input_are_refused_instance_survives(name):
                 inst.fmu.doStep(currentCommunicationPoint=0.0, communicationStepSize=h)
                 assert inst.outputs() == before
                 # and the engine takes no internal step for it (counted, not timed)
-                from pogofmu.runtime.engine import Simulator
+                from pogofmu.runtime.solver import Simulator
                 sim = Simulator(model)
                 sim.advance(h)
                 assert sim.n_steps == 0 and sim.t_out == h
@@ -216,7 +216,7 @@ def test_a_native_state_holds_its_models_arrays_not_the_engines_maxima(name):
     its model (pg_sizes.h): its state is far below what five arrays of the engine's maximum input
     count alone would take (the state's inputs and their slopes, the engine's inputs, slopes and
     inputs at a model call: 40 kB), where the engine's maxima made it 76 kB."""
-    from pogofmu.build.export import engine_limits
+    from pogofmu.exporter.export import engine_limits
 
     inst = Instance(name).init()
     try:
@@ -290,7 +290,7 @@ def test_loop_figures_asked_for_by_the_issues(name, loop):
 def test_default_experiment_declares_the_default_rel_tol(name):
     """The tolerance an importer passes becomes rel_tol (tests/test_tolerance.py), so the declared
     one is the default rel_tol: fmpy, which passes it, runs the FMU as an importer passing none."""
-    from pogofmu.runtime.engine import solver_defaults
+    from pogofmu.runtime.solver import solver_defaults
 
     de = model_description(name).find("DefaultExperiment")
     assert float(de.get("tolerance")) == solver_defaults()["rel_tol"]

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from pogofmu import build
+from pogofmu import exporter as build
 from support import fmu_path, parse_event_log, require, ROOT
 
 WITH_STATES = [n for n in build.model_names() if build.slave_class(n).model.states]

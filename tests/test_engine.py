@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from pogofmu.runtime.engine import Simulator
+from pogofmu.runtime.solver import Simulator
 from pogofmu.runtime.model import FALLING, RISING, Event, HybridModel, Parameter, Variable, ZenoError
 
 pytestmark = pytest.mark.own_fmus  # (exports its own FMUs, or needs none)

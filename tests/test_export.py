@@ -660,8 +660,8 @@ def test_a_model_wider_than_the_engine_is_refused_in_one_line_for_every_backend(
 def test_the_engine_itself_refuses_a_model_wider_than_it_naming_the_count(tmp_path):
     """Past the exporter (a model handed to the engine directly): the engine's own refusal; one
     input fewer runs."""
-    from pogofmu.build.source import load_model_file
-    from pogofmu.runtime.engine.cengine import Simulator
+    from pogofmu.exporter.source import load_model_file
+    from pogofmu.runtime.solver.cengine import Simulator
     from pogofmu.runtime.model import ModelError
 
     models = {}
@@ -778,8 +778,8 @@ def test_an_fmu_is_written_whole_or_not_at_all(tmp_path, monkeypatch, failure):
     """Ctrl-C or a failed write half-way through an FMU, or an FMU that does not validate: the
     earlier FMU of that name is untouched and no temporary file stays; Ctrl-C stays Ctrl-C, a failed
     write is an OutputError naming the FMU."""
-    from pogofmu.build import package
-    from pogofmu.build.errors import BuildError, OutputError
+    from pogofmu.exporter import package
+    from pogofmu.exporter.errors import BuildError, OutputError
 
     out = tmp_path / "Ball.fmu"
     out.write_bytes(b"the earlier FMU")

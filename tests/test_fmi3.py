@@ -21,7 +21,7 @@ from functools import lru_cache
 import numpy as np
 import pytest
 
-from pogofmu import build
+from pogofmu import exporter as build
 from support import DIST, ROOT, compile_c_host, fmu_path, parse_event_log, reference_events, simulate
 
 MODELS = {name: build.slave_class(name).model for name in build.model_names()}

@@ -65,7 +65,7 @@ def test_another_builds_serialized_state_is_refused_naming_the_build(tmp_path):
     from fmpy.fmi1 import FMICallException
     from fmpy.fmi2 import FMU2Slave
 
-    from pogofmu import build
+    from pogofmu import exporter as build
 
     with contextlib.redirect_stdout(io.StringIO()):
         other = build.build_one("PogoStick", tmp_path, token_seed="another build")

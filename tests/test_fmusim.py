@@ -25,7 +25,7 @@ import subprocess
 import numpy as np
 import pytest
 
-from pogofmu import build
+from pogofmu import exporter as build
 from support import fmu_path, simulate
 from test_portability import BARE_ENV
 

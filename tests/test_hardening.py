@@ -131,7 +131,7 @@ def test_a_model_without_states_takes_no_internal_steps():
     """HopController (no states) with max_step = 1e-6: before, 8 s of CPU per simulated second
     (internal steps of max_step on nothing).  Its max_step is unused, so it is not refused, and
     the engine takes no step: over 1e4 s, n_steps stays 0."""
-    from pogofmu.runtime.engine import Simulator
+    from pogofmu.runtime.solver import Simulator
     from pogofmu.runtime.models.hop_controller import MODEL
 
     sim = Simulator(MODEL, dict(max_step=1e-6))
@@ -354,7 +354,7 @@ def _footprint(obj, seen=None):
 def test_state_size_is_constant_as_events_grow():
     """Before: ~1.9 kB more per event in every fmi2GetFMUstate copy.  Without log_events the
     snapshot's size is the same after 300 and 3000 events; with it, the history is there."""
-    from pogofmu.runtime.engine import Simulator
+    from pogofmu.runtime.solver import Simulator
 
     model = _elastic_ball()
     period = 2 * math.sqrt(2e-3 / G)
@@ -388,7 +388,7 @@ def test_a_collapse_after_one_event_is_not_called_an_event_storm():
     """After a single event the dynamics become too fast to resolve (acceleration 1e300 m/s2 once
     the ball has hit the ground): the message says so, names the event and the time; "event
     storm" is kept for accumulating events (test_engine.py::test_zeno_ends_in_a_clear_error)."""
-    from pogofmu.runtime.engine import Simulator
+    from pogofmu.runtime.solver import Simulator
     from pogofmu.runtime.model import FALLING, Event, HybridModel, ModelError, Parameter, Variable, ZenoError
 
     model = HybridModel(

@@ -15,7 +15,7 @@ import ctypes
 
 import pytest
 
-from pogofmu import build
+from pogofmu import exporter as build
 from support import fmu_path
 
 MODELS = {name: build.slave_class(name).model for name in build.model_names()}

@@ -1,5 +1,5 @@
 """The two backends' models on the one engine (fmu_src/native/engine, C): the generated C of a
-model against its Python functions called back through the binding (runtime/engine/cengine.py).
+model against its Python functions called back through the binding (runtime/solver/cengine.py).
 
 Both integrate the same model — the C generated from the Python model — from the same parameters,
 settings and inputs, and are compared at every communication point *to the bit*: the served time,
@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 
 from native_engine import NativeEngine, both_runs
 from pogofmu.codegen.build import CompileError, c_compiler, engine_library
-from pogofmu.runtime.engine import SOLVER_PARAMETERS
+from pogofmu.runtime.solver import SOLVER_PARAMETERS
 from pogofmu.runtime.models import all_models
 from parameter_sets import THRUST, penetrator_params, stick_params
 from support import needs_mark
@@ -163,7 +163,7 @@ def test_refusals_and_failures_give_the_python_engines_messages(name, native):
 
 def _ball(jump_keeps_h):
     """The example ball (a user's model file); its bounce leaves h at 0, or (the variant) as it is."""
-    from pogofmu.build import load_model_file
+    from pogofmu.exporter import load_model_file
     from pogofmu.runtime.model import Event
     import dataclasses
 
@@ -182,7 +182,7 @@ def test_the_storm_and_the_budget_end_alike_in_both_engines(native, case):
     """Each end the engines promise (docs/errors.md), required, not only allowed: the same message at
     the same point in both engines — a ball at its accumulation point (200 events in 1e-6 s, or a
     bounce back past zero within its own rounding) and a work budget run out."""
-    from pogofmu.runtime.engine import Simulator
+    from pogofmu.runtime.solver import Simulator
     from pogofmu.runtime.model import ModelError
 
     model, values, stop, words = {

@@ -19,7 +19,7 @@ import zipfile
 import numpy as np
 import pytest
 
-from pogofmu import build
+from pogofmu import exporter as build
 from support import DIST, Instance, clean_venv, compile_c_host, fmu_path, simulate
 from test_portability import BARE_ENV, C_HOST_SOURCE, outputs_of, run_c_host
 

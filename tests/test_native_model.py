@@ -14,8 +14,8 @@ import pytest
 from native_model import NativeModel, python_result, same_number
 from pogofmu.codegen.build import CompileError, c_compiler, model_library
 from pogofmu.codegen.cmodel import discrete_layout
-from pogofmu.runtime.engine import SOLVER_PARAMETERS
-from pogofmu.runtime.engine.settings import check_solver_parameters, domain_slack
+from pogofmu.runtime.solver import SOLVER_PARAMETERS
+from pogofmu.runtime.solver.settings import check_solver_parameters, domain_slack
 from pogofmu.runtime.model import Params
 from pogofmu.runtime.models import all_models
 from support import needs_mark

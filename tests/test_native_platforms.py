@@ -41,7 +41,7 @@ from pathlib import Path
 
 import pytest
 
-from pogofmu import build
+from pogofmu import exporter as build
 from pogofmu.codegen.build import PLATFORMS, zig_cc
 from support import compile_c_host, fmu_path, needs
 from test_portability import BARE_ENV, C_HOST_SOURCE, outputs_of, run_c_host

@@ -50,7 +50,7 @@ import json, shutil, sys
 from pathlib import Path
 from fmpy import simulate_fmu
 from pogofmu.codegen.build import c_compiler, host_engine_library, host_level_library
-from pogofmu.runtime.engine.cengine import Simulator
+from pogofmu.runtime.solver.cengine import Simulator
 import importlib.util
 
 out = {"which": [shutil.which(n) for n in ("cc", "gcc", "clang")], "compiler": c_compiler()}
@@ -102,7 +102,7 @@ from pathlib import Path
 import pogofmu
 from pogofmu.codegen.build import host_engine_library, host_level_library
 from pogofmu.ssp import native_level
-from pogofmu.runtime.engine.cengine import Simulator
+from pogofmu.runtime.solver.cengine import Simulator
 from pogofmu.runtime.models import get
 
 sim = Simulator(get("PogoStick"), {}, keep_history=True)

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from pogofmu import build
+from pogofmu import exporter as build
 from support import clean_venv as _clean_venv
 from support import DIST, ROOT, compile_c_host, fmu_path, simulate
 
@@ -192,7 +192,7 @@ def test_c_host_with_a_cpython_older_than_3_10_is_told_which_it_found(c_host, un
     3.9.18; and the real one too where pyenv has it): instantiation fails naming the library, its
     version and the need, before calling anything in it."""
 
-    from pogofmu import build
+    from pogofmu import exporter as build
 
     source = tmp_path / "fake_python.c"
     source.write_text(FAKE_PYTHON)

@@ -17,8 +17,8 @@ import pytest
 
 from native_engine import NativeEngine
 from pogofmu.codegen.build import c_compiler, engine_library
-from pogofmu.runtime.engine import SOLVER_PARAMETERS
-from pogofmu.runtime.engine.cengine import FN, PgMsg
+from pogofmu.runtime.solver import SOLVER_PARAMETERS
+from pogofmu.runtime.solver.cengine import FN, PgMsg
 from pogofmu.runtime.models import all_models
 from references import hard_stop_reference, penetrator_contacts
 from support import example_models, fmu_path, needs_mark
@@ -235,7 +235,7 @@ def test_the_switch_both_ways_in_the_log(soil_refs):
 def python_run(model, method, t_end, **par):
     """A Simulator run (the Python-hosted FMUs' engine) to ``t_end``: its events [(name, time)], its
     final state and work, and the simulator."""
-    from pogofmu.runtime.engine import Simulator
+    from pogofmu.runtime.solver import Simulator
 
     sim = Simulator(model, {**par, "method": method, "rel_tol": 1e-8, "max_steps_per_second": 1e7,
                             "max_steps_per_call": 1e9}, t_stop=t_end, keep_history=True)
@@ -318,7 +318,7 @@ def test_the_python_jacobian_is_the_generated_one(n, native):
         return [[struct.pack("<d", v + 0.0) for v in col] for col in cols]  # (v + 0.0: -0.0 -> 0.0)
     import random
 
-    from pogofmu.runtime.engine import Simulator
+    from pogofmu.runtime.solver import Simulator
     from pogofmu.runtime.model import Params
 
     model = all_models()["Penetrator"]
@@ -409,7 +409,7 @@ def test_a_model_error_on_dual_numbers_is_raised_not_hidden():
 def test_non_stiff_defaults_keep_their_events_in_the_python_engine(name):
     """The Python-hosted FMUs' default experiments under method 0 (the default) are method 5's to the
     bit, with the same steps: the stiffness test never fires, no Jacobian is taken."""
-    from pogofmu.runtime.engine import Simulator
+    from pogofmu.runtime.solver import Simulator
 
     model = all_models()[name]
     runs = []

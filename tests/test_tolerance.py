@@ -71,7 +71,7 @@ def test_a_tolerance_outside_rel_tols_rule_is_brought_into_it_with_a_warning(nam
     """FMI's tolerance is a hint: one looser than rel_tol's rule allows runs at the loosest rel_tol
     (the same events as a run with that rel_tol set), with a warning naming both; the same text
     from both backends."""
-    from pogofmu.runtime.engine.settings import REL_TOL_MAX
+    from pogofmu.runtime.solver.settings import REL_TOL_MAX
 
     _, messages = run(name, 0.1, relative_tolerance=1e-2)
     assert [text for status, text in messages if "the importer's tolerance" in text and status == 1] == [
@@ -84,7 +84,7 @@ def test_the_c_adapter_clamps_to_the_rule_of_the_settings():
     """pg_instance.c writes rel_tol's bounds as numbers: they are settings.py's."""
     import re
 
-    from pogofmu.runtime.engine.settings import REL_TOL_MAX, REL_TOL_MIN
+    from pogofmu.runtime.solver.settings import REL_TOL_MAX, REL_TOL_MIN
 
     from support import ROOT
 

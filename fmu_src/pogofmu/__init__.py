@@ -12,7 +12,7 @@ and ``pogofmu export model.py --out DIR`` makes the FMUs of it.  The same names 
 FMUs, where the build rewrites the imports to the FMU's private copy of :mod:`pogofmu.runtime`.
 
 Two floors: :mod:`pogofmu.runtime` is the code that goes into every FMU (model, engine, FMI
-adapters; standard library only); the host-side tools beside it — :mod:`pogofmu.build` (the
+adapters; standard library only); the host-side tools beside it — :mod:`pogofmu.exporter` (the
 exporter), :mod:`pogofmu.experiments` (default experiments), :mod:`pogofmu.ssp` (the SSP master),
 :mod:`pogofmu.sweep`, :mod:`pogofmu.studies` and :mod:`pogofmu.cli` (the ``pogofmu`` command) —
 never go into an FMU.
@@ -38,6 +38,6 @@ def _host_engine_library():
 
 
 # the runtime (which goes into FMUs) imports nothing of the host side: the host tells it where its engine is
-from .runtime.engine import cengine as _cengine  # noqa: E402
+from .runtime.solver import cengine as _cengine  # noqa: E402
 
 _cengine.set_host_library(_host_engine_library)

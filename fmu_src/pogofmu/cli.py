@@ -6,7 +6,7 @@ import sys
 
 # command: (module, function, one line for --help); each gets the rest of the line and its own prog
 COMMANDS = {
-    "export": ("pogofmu.build.export", "main", "export model files (HybridModels) as FMUs: FMI 2.0/3.0, Python-hosted/native"),
+    "export": ("pogofmu.exporter.export", "main", "export model files (HybridModels) as FMUs: FMI 2.0/3.0, Python-hosted/native"),
     "run": ("pogofmu.experiments", "main", "simulate each FMU's default experiment: CSV, event table, figures"),
     "ssp": ("pogofmu.ssp.cli", "main", "run or check an SSP system (events synchronized, or model exchange)"),
     "sweep": ("pogofmu.sweep", "sweep_main", "grids and Monte Carlo of an FMU or a system on Dask, to Parquet"),

@@ -376,7 +376,7 @@ void pg_inst_notes_end(PgInstance *in, PgNotes *nt)
 }
 
 /* ---- initialization ------------------------------------------------------------------------ */
-/* the rule of rel_tol: REL_TOL_MIN, REL_TOL_MAX of runtime/engine/settings.py (tests/test_tolerance.py
+/* the rule of rel_tol: REL_TOL_MIN, REL_TOL_MAX of runtime/solver/settings.py (tests/test_tolerance.py
  * holds the two to the same numbers) */
 #define REL_TOL_MIN 1e-14
 #define REL_TOL_MAX 1e-3

@@ -1,4 +1,4 @@
-/* pogofmu engine: the functions the Python binding calls (pogofmu.runtime.engine.cengine, through
+/* pogofmu engine: the functions the Python binding calls (pogofmu.runtime.solver.cengine, through
  * ctypes), the only exported symbols of the engine wherever it is linked: the host's engine
  * library, and the launcher of the Python-hosted FMUs (whose model functions are Python callbacks).
  *

@@ -1,5 +1,5 @@
 /* pogofmu engine: the hybrid integrator of every FMU (native ones link it with their generated
- * model; the Python-hosted ones' launcher carries it, runtime/engine/cengine.py binds it), written
+ * model; the Python-hosted ones' launcher carries it, runtime/solver/cengine.py binds it), written
  * once in C for any model.
  *
  * Its rules (docs/solver.md): DOPRI5 / DOP853 / Rodas5P with

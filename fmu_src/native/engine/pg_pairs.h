@@ -1,5 +1,5 @@
 /* pogofmu native engine: the Runge-Kutta pairs (pg_pairs.c is generated from the
- * tableaux, runtime/engine/tableaux.py, by pogofmu.codegen.cpairs). Stage vectors are rows of PG_MAX_X doubles. */
+ * tableaux, runtime/solver/tableaux.py, by pogofmu.codegen.cpairs). Stage vectors are rows of PG_MAX_X doubles. */
 #ifndef PG_PAIRS_H
 #define PG_PAIRS_H
 

@@ -115,7 +115,7 @@ def _load(resources, engine=None):
         _repoint_package(package, package_dir)
     _import_from_file(package, os.path.join(package_dir, "__init__.py"), package_dir)
     if engine:
-        importlib.import_module(package + ".engine.cengine").use_library(engine)
+        importlib.import_module(package + ".solver.cengine").use_library(engine)
     slave = _import_from_file(module, os.path.join(resources, module + ".py"))
     cls = getattr(slave, cls)
     if conf.get("fmi", ["2"])[0] == "3":  # the same slave file, behind the FMI 3.0 adapter

@@ -1,5 +1,5 @@
 """Compiling the native code: a model's generated C with the engine's C files, by the system C
-compiler (host-side; :mod:`pogofmu.build` and the tests use it); the native FMUs' binaries, for
+compiler (host-side; :mod:`pogofmu.exporter` and the tests use it); the native FMUs' binaries, for
 every platform of :data:`PLATFORMS`, by zig (:func:`native_fmu`).  Functions that take a model take
 a :class:`~pogofmu.runtime.model.HybridModel` or the name of one of the project's models.
 
@@ -189,7 +189,7 @@ def host_engine_library(cc: Optional[str] = None, into: Optional[Path] = None) -
     """The engine as a shared library for this machine (its ``pgb_*`` functions exported): the
     installed package's prebuilt copy, else compiled once per version of its sources, flags and
     compiler into :func:`cache_dir` (:func:`_host_library`): what the host-side
-    tools run a Python model's simulation with (:mod:`pogofmu.runtime.engine.cengine`)."""
+    tools run a Python model's simulation with (:mod:`pogofmu.runtime.solver.cengine`)."""
     return _host_library("pogofmu_engine", [ENGINE / s for s in BINDING_SOURCES], ENGINE.glob("*.h"), [ENGINE],
                          ["-fvisibility=hidden"], cc, ": the engine is C", into)
 

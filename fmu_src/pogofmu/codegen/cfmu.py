@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Sequence
 
-from pogofmu.runtime.engine import SOLVER_PARAMETERS
+from pogofmu.runtime.solver import SOLVER_PARAMETERS
 from pogofmu.runtime.interface import LOG_CATEGORIES, array_table, fmi2_variables, fmi3_variables
 from pogofmu.runtime.model import HybridModel
 

@@ -3,7 +3,7 @@
 Every pure function of the model is traced (:mod:`.trace`) and printed (:mod:`.cprint`) as a C
 function of ``fmu_src/native/engine/pg_model.h``'s interface: the solver settings' rules, the
 parameter rules, the initial state (the pieces of the engine's
-:func:`~pogofmu.runtime.engine.simulator.prepare`), the flow as the engine calls it
+:func:`~pogofmu.runtime.solver.simulator.prepare`), the flow as the engine calls it
 (``bind(q, u, p)(t, x)``), each event's guard, activity and jump, the outputs, the domain
 conditions (with the engine's slack) and the scales. No equation is written a second time: the C
 is what the Python does, operation by operation.
@@ -17,9 +17,9 @@ from typing import Dict, List
 
 from pogofmu.memo import once_per_model
 from pogofmu.runtime.dual import Dual, value_and_tangent
-from pogofmu.runtime.engine import SOLVER_PARAMETERS
+from pogofmu.runtime.solver import SOLVER_PARAMETERS
 from pogofmu.runtime.interface import discrete_layout  # the engine's layout of q: one definition
-from pogofmu.runtime.engine.settings import check_solver_parameters, domain_slack
+from pogofmu.runtime.solver.settings import check_solver_parameters, domain_slack
 from pogofmu.runtime.model import HybridModel, Params
 
 from .cprint import Printer, c_string, literal, matrix_table, message_lines, result_nodes

@@ -9,7 +9,7 @@ The parts are numbers or values that carry their own math (a class with an ``__f
 :mod:`.fmath`):
 
 * on floats, inside a Python-hosted FMU and the host tools, a column of the flow's exact Jacobian
-  for the engine's Rosenbrock method (``flow_jvp`` of the Python binding, :mod:`.engine.cengine`);
+  for the engine's Rosenbrock method (``flow_jvp`` of the Python binding, :mod:`.solver.cengine`);
 * on traced values (``pogofmu.codegen.trace.Sym``), inside the code generator's trace: the
   function's operations *and* those of the chain rule, printed as C, are the native FMUs'
   ``flow_jvp`` and ``outputs_jvp``.

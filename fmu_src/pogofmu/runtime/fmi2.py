@@ -52,9 +52,9 @@ from operator import itemgetter
 from dataclasses import dataclass
 from typing import NamedTuple, Optional, Tuple
 
-from .engine import SOLVER_PARAMETERS, Simulator, snapshot_from_data, snapshot_to_data, solver_defaults, \
+from .solver import SOLVER_PARAMETERS, Simulator, snapshot_from_data, snapshot_to_data, solver_defaults, \
     split_parameters
-from .engine.settings import REL_TOL_MAX, REL_TOL_MIN
+from .solver.settings import REL_TOL_MAX, REL_TOL_MIN
 from .eventlog import CATEGORY as EVENT_CATEGORY, event_message
 from .interface import LOG_CATEGORIES, FmiVariable, fmi2_variables  # (what the FMU exposes: one module)
 from .model import DomainError, HybridModel, ModelError, Params

@@ -44,7 +44,7 @@ class FmiVariable:
 def fmi2_variables(model: HybridModel) -> Tuple[FmiVariable, ...]:
     """The FMU's variables in value-reference order: the model's parameters, the solver's settings
     (every FMU has them, after the model's own), inputs, outputs."""
-    from .engine.settings import SOLVER_PARAMETERS  # (here: the engine's package imports this module)
+    from .solver.settings import SOLVER_PARAMETERS  # (here: the engine's package imports this module)
 
     out = []
     for par in model.parameters + SOLVER_PARAMETERS:

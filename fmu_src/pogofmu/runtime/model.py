@@ -28,7 +28,7 @@ from typing import Callable, Mapping, Optional, Sequence, Tuple
 from . import fmath
 
 _HERE = os.path.dirname(os.path.abspath(__file__))
-_INTERNAL = (_HERE, os.path.join(_HERE, "engine"))
+_INTERNAL = (_HERE, os.path.join(_HERE, "solver"))
 
 
 def _site():

@@ -134,7 +134,7 @@ def engine_work(method: int, max_step: float, rel_tol: float, stop: float = STOP
     evaluations, CPU seconds, events, and the mass state (y, ydot) at ``stop``."""
     import time
 
-    from pogofmu.runtime.engine import Simulator
+    from pogofmu.runtime.solver import Simulator
     from pogofmu.runtime.models import get
 
     model, count = _counted(get("PogoStick"))

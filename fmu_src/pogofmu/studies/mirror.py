@@ -6,8 +6,8 @@
 N = 1 + 3 R (R + 1) segments on a hexagonal grid, each an ``Actuator_i`` (MirrorActuator) with
 its ``Controller_i`` (SegmentController), and one ``Reconstructor`` (Reconstructor_R<R>): 2 N + 1
 components.  The model files are the ones of ``examples/segmented_mirror/``; they are exported
-here, as ``pogofmu export`` does (:class:`pogofmu.build.Exporter`), into a temporary folder and
-packed with them (:func:`pogofmu.build.pack_ssp`).  The Reconstructor of a ring count the
+here, as ``pogofmu export`` does (:class:`pogofmu.exporter.Exporter`), into a temporary folder and
+packed with them (:func:`pogofmu.exporter.pack_ssp`).  The Reconstructor of a ring count the
 example file does not define at module level is a two-line model file written beside it
 (``MODEL = reconstructor_model(R)``).
 
@@ -225,7 +225,7 @@ def write_system(folder: Path, rings: int, grid, fmi: int = 2) -> Path:
 
 def model_sources(folder: Path, rings: int):
     """The three models, loaded from the model files copied into ``folder``."""
-    from pogofmu.build import load_model_file
+    from pogofmu.exporter import load_model_file
 
     sources = load_model_file(folder / "mirror_actuator.py") + load_model_file(folder / "segment_controller.py")
     name = f"Reconstructor_R{rings}"
@@ -240,7 +240,7 @@ def model_sources(folder: Path, rings: int):
 def generate(rings: int, out: Path, fmi: int = 2, backend: str = "python", log=lambda *a: None,
              example: Path = EXAMPLE) -> Path:
     """Export the FMUs, write the system and pack it as ``out`` (an .ssp); returns ``out``."""
-    from pogofmu.build import Exporter, pack_ssp
+    from pogofmu.exporter import Exporter, pack_ssp
 
     grid = load_example(example)
     with tempfile.TemporaryDirectory(prefix="pogofmu_mirror_") as tmp:
@@ -273,8 +273,8 @@ def main(argv=None, prog="pogofmu mirror") -> int:
                     help="python: Python-hosted FMUs (default); native: C generated from the models")
     ap.add_argument("--out", required=True, metavar="FILE.ssp", help="the package to write")
     args = ap.parse_args(argv)
-    from pogofmu.build import BuildError, ModelFileError
-    from pogofmu.build.export import one_line
+    from pogofmu.exporter import BuildError, ModelFileError
+    from pogofmu.exporter.export import one_line
 
     start = time.perf_counter()
     out = Path(args.out)

@@ -31,7 +31,7 @@ from .errors import ModelFileError
 RUNTIME = Path(__file__).resolve().parents[1] / "runtime"
 # the public modules of the API and the runtime modules a model file may import, by the name it
 # imports them with -> the module of the FMU's private package ("" for the package itself)
-_RUNTIME_MODULES = sorted(p.stem for p in RUNTIME.glob("*.py") if p.stem != "__init__") + ["engine", "models"]
+_RUNTIME_MODULES = sorted(p.stem for p in RUNTIME.glob("*.py") if p.stem != "__init__") + ["solver", "models"]
 
 
 def _public_target(module: str) -> Optional[str]:

@@ -16,7 +16,7 @@ import math
 from typing import Dict, List, Set, Tuple
 
 from pogofmu.memo import once_per_model
-from pogofmu.runtime.engine import Simulator
+from pogofmu.runtime.solver import Simulator
 
 SAMPLES_PER_RUN = 400
 

@@ -2,7 +2,7 @@
 from the adapter's variable table, and the FMI 3.0 ``buildDescription.xml`` of a source FMU.
 
 The same writer serves every model, the project's and a user's: units are the model's own
-(:func:`pogofmu.build.checks.check_unit` checks their syntax), declared in ``<UnitDefinitions>``
+(:func:`pogofmu.exporter.checks.check_unit` checks their syntax), declared in ``<UnitDefinitions>``
 with their base-unit exponents where :mod:`pogofmu.runtime.units` knows them, by name otherwise.
 """
 from __future__ import annotations
@@ -11,7 +11,7 @@ import datetime
 import os
 from xml.etree import ElementTree as ET
 
-from pogofmu.runtime.engine import solver_defaults
+from pogofmu.runtime.solver import solver_defaults
 
 from .errors import BuildError
 

@@ -1,4 +1,5 @@
-"""The hybrid engine: the C engine (``fmu_src/native/engine/``) run for a Python model.
+"""The solver's Python side: the engine is C (``fmu_src/native/engine/``); here is its binding for a
+model written in Python, and the settings and tableaux both backends share.
 
 * :mod:`.cengine` — the :class:`Simulator`: the C engine (explicit Runge-Kutta pairs with error
   control, exact state-event location, restarts, the work budget, event storms, domain conditions)

@@ -63,7 +63,7 @@ def _is_number(v) -> bool:
 
 def reserved_names(model) -> dict:
     """Names a model's own variables may not take: what every FMU of it already has."""
-    from pogofmu.runtime.engine import SOLVER_PARAMETERS
+    from pogofmu.runtime.solver import SOLVER_PARAMETERS
 
     out = {p.name: "a solver setting of every pogofmu FMU" for p in SOLVER_PARAMETERS}
     out.update({v.name: "an output the engine adds to every FMU" for v in model.engine_outputs()})
