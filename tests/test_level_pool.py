@@ -17,7 +17,7 @@ import subprocess
 import pytest
 from support import ROOT, needs
 
-from pogofmu.codegen.build import MASTER
+from pogofmu.codegen.build import ENGINE, MASTER
 
 CC = os.environ.get("CC") or shutil.which("gcc") or shutil.which("cc")
 DRIVER = ROOT / "tests" / "c_host" / "level_pool.c"
@@ -25,7 +25,7 @@ DRIVER = ROOT / "tests" / "c_host" / "level_pool.c"
 
 def _build(tmp_path, flags):
     exe = tmp_path / "level_pool"
-    proc = subprocess.run([CC, *flags, "-Wall", "-Wextra", f"-I{MASTER}", str(DRIVER), "-o", str(exe), "-lm",
+    proc = subprocess.run([CC, *flags, "-Wall", "-Wextra", f"-I{MASTER}", f"-I{ENGINE}", str(DRIVER), "-o", str(exe), "-lm",
                            "-pthread"], capture_output=True, text=True)
     return exe if proc.returncode == 0 else proc.stderr
 

@@ -23,7 +23,8 @@ def _c_layout(tmp_path):
     cc = c_compiler()
     require(cc is not None, "a C compiler (gcc, or the ziglang package)")
     fields = [name for name, _ in native_level.PgmComp._fields_]
-    lines = [f'#include "{MASTER / "pg_level.c"}"', f'#include "{MASTER / "pg_csv.c"}"', "#include <stddef.h>",
+    lines = [f'#include "{MASTER / "pg_level.c"}"', f'#include "{MASTER / "pg_csv.c"}"',
+             f'#include "{MASTER.parent / "engine" / "pg_repr.c"}"', "#include <stddef.h>",
              "#include <stdio.h>", "int main(void) {", '    printf("sizeof %zu\\n", sizeof(pgm_comp));']
     lines += [f'    printf("{f} %zu\\n", offsetof(pgm_comp, {f}));' for f in fields]
     lines += [f'    printf("{e} %d\\n", (int){e});' for e in ENUMS]
@@ -31,7 +32,7 @@ def _c_layout(tmp_path):
     src = tmp_path / "layout.c"
     src.write_text("\n".join(lines) + "\n")
     exe = tmp_path / "layout"
-    r = _run_cc(cc, [str(src), "-o", str(exe), "-lpthread", "-lm"])
+    r = _run_cc(cc, [str(src), f"-I{MASTER.parent / 'engine'}", "-o", str(exe), "-lpthread", "-lm"])
     assert r.returncode == 0, r.stderr[-3000:]
     out = subprocess.run([str(exe)], capture_output=True, text=True, check=True).stdout
     return {k: int(v) for k, v in (line.split() for line in out.splitlines())}

@@ -19,6 +19,7 @@
  * Prints "ok" and exits 0; anything else is a failure (ThreadSanitizer exits 66 on a race). */
 #include "pg_level.c"
 #include "pg_csv.c"
+#include "pg_repr.c" /* (engine/: the one repr(float) in C) */
 
 #include <math.h>
 #include <stdio.h>

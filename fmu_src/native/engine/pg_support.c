@@ -33,73 +33,7 @@ void pg_msg_printf(PgMsg *m, const char *fmt, ...)
     if (n > 0) m->len += (size_t)n < PG_MSG_MAX - m->len ? (size_t)n : PG_MSG_MAX - 1 - m->len;
 }
 
-/* The shortest decimal digits that read back as v (Python's repr, dtoa mode 0): the correctly
- * rounded P-digit form for the least P that round-trips. digits: without the point; returns the
- * decimal exponent of the first digit (v = 0.d1d2... x 10^(exp + 1)). */
-static int shortest_digits(double v, char *digits, size_t size)
-{
-    char buf[40];
-    for (int prec = 1; prec <= 17; ++prec) {
-        snprintf(buf, sizeof buf, "%.*e", prec - 1, v);
-        if (strtod(buf, NULL) == v || prec == 17) {
-            char *e = strchr(buf, 'e');
-            int exp10 = atoi(e + 1);
-            size_t k = 0;
-            for (char *c = buf; c < e && k + 1 < size; ++c)
-                if (*c >= '0' && *c <= '9') digits[k++] = *c;
-            digits[k] = '\0';
-            while (k > 1 && digits[k - 1] == '0') digits[--k] = '\0'; /* (%.*e pads none, but be safe) */
-            return exp10;
-        }
-    }
-    return 0;
-}
-
-void pg_repr_double(double v, char *buf, size_t size)
-{
-    if (isnan(v)) {
-        snprintf(buf, size, "nan");
-        return;
-    }
-    if (isinf(v)) {
-        snprintf(buf, size, v > 0 ? "inf" : "-inf");
-        return;
-    }
-    if (v == 0.0) {
-        snprintf(buf, size, signbit(v) ? "-0.0" : "0.0");
-        return;
-    }
-    char digits[24];
-    int exp10 = shortest_digits(fabs(v), digits, sizeof digits);
-    int decpt = exp10 + 1; /* digits d1 d2 ... with the point after decpt of them */
-    int n = (int)strlen(digits);
-    char out[64];
-    size_t k = 0;
-    if (v < 0) out[k++] = '-';
-    if (decpt <= -4 || decpt > 16) { /* exponent notation: d.ddde+XX */
-        out[k++] = digits[0];
-        if (n > 1) {
-            out[k++] = '.';
-            for (int i = 1; i < n; ++i) out[k++] = digits[i];
-        }
-        k += (size_t)snprintf(out + k, sizeof out - k, "e%c%02d", exp10 < 0 ? '-' : '+', abs(exp10));
-    } else if (decpt <= 0) { /* 0.000ddd */
-        out[k++] = '0';
-        out[k++] = '.';
-        for (int i = 0; i < -decpt; ++i) out[k++] = '0';
-        for (int i = 0; i < n; ++i) out[k++] = digits[i];
-    } else { /* ddd.ddd, with .0 when there is no fraction */
-        for (int i = 0; i < decpt; ++i) out[k++] = i < n ? digits[i] : '0';
-        out[k++] = '.';
-        if (n > decpt) {
-            for (int i = decpt; i < n; ++i) out[k++] = digits[i];
-        } else {
-            out[k++] = '0';
-        }
-    }
-    out[k] = '\0';
-    snprintf(buf, size, "%s", out);
-}
+/* pg_repr_double (Python's repr): pg_repr.c, the one repr(float) in C. */
 
 void pg_format(double v, const char *spec, char *buf, size_t size)
 {

@@ -4,6 +4,7 @@
 #define PG_SUPPORT_H
 
 #include "pg_model.h"
+#include "pg_repr.h"
 
 void pg_msg_clear(PgMsg *m);
 void pg_msg_str(PgMsg *m, const char *s);
@@ -11,8 +12,7 @@ void pg_msg_str(PgMsg *m, const char *s);
  * format spec of the form [.N](g|e|f) as in f"{v:.6g}" */
 void pg_msg_value(PgMsg *m, double v, char kind, const char *spec);
 void pg_msg_printf(PgMsg *m, const char *fmt, ...);
-/* Python's repr() of a float into buf (at least 32 bytes) */
-void pg_repr_double(double v, char *buf, size_t size);
+/* Python's repr() of a float into buf: pg_repr.h (pg_repr_double) */
 void pg_format(double v, const char *spec, char *buf, size_t size);
 
 int pg_arith(PgMsg *m, int kind); /* sets m->arith and Python's detail text; returns PG_ARITH */

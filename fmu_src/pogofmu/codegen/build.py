@@ -104,12 +104,12 @@ def model_library(model, folder: Path, cc=None) -> Path:
     model = _model(model)
     src = write_model_source(model, folder)
     out = folder / f"lib{model.name}_model.so"
-    return compile_c([src, ENGINE / "pg_support.c"], out, include=[ENGINE], cc=cc)
+    return compile_c([src, ENGINE / "pg_support.c", ENGINE / "pg_repr.c"], out, include=[ENGINE], cc=cc)
 
 
 # the engine's C files (pg_pairs.c is generated from the tableaux by pogofmu.codegen.cpairs and kept
 # in the repository; a test regenerates it); pg_binding.c is what the Python binding calls
-ENGINE_SOURCES = ("pg_engine.c", "pg_pairs.c", "pg_rodas.c", "pg_support.c")
+ENGINE_SOURCES = ("pg_engine.c", "pg_pairs.c", "pg_rodas.c", "pg_support.c", "pg_repr.c")
 BINDING_SOURCES = (*ENGINE_SOURCES, "pg_binding.c")
 
 
@@ -201,8 +201,8 @@ def host_level_library(cc: Optional[str] = None, into: Optional[Path] = None) ->
     """The SSP master's C stepping of a level of components (``fmu_src/native/master/pg_level.c``,
     :mod:`pogofmu.ssp.native_level`) and its CSV rows (``pg_csv.c``, :mod:`pogofmu.ssp.record`),
     compiled once per version like :func:`host_engine_library`."""
-    return _host_library("pogofmu_level", [MASTER / "pg_level.c", MASTER / "pg_csv.c"], (), [MASTER],
-                         ["-fvisibility=hidden", "-pthread"], cc, "", into)
+    return _host_library("pogofmu_level", [MASTER / "pg_level.c", MASTER / "pg_csv.c", ENGINE / "pg_repr.c"],
+                         (ENGINE / "pg_repr.h",), [MASTER, ENGINE], ["-fvisibility=hidden", "-pthread"], cc, "", into)
 
 
 def engine_library(model, folder: Path, cc: Optional[str] = None) -> Path:
