@@ -133,14 +133,28 @@ static u128 pow5(int n)
     return n <= 27 ? (u128)POW5[n] : (u128)POW5[27] * POW5[n - 27];
 }
 
+/* v / d and v % d for a quotient below 2^64 and a small d, in 64-bit divisions: a 128-bit division
+ * would call the compiler's runtime (__udivti3), and zig's runtime, once linked, also brings its
+ * own exp, log, sin, ... which then replace the C library's in the whole binary: other last bits
+ * (a native FMU's outputs must be the Python-hosted FMU's, which use the C library's). */
+static unsigned long long div_small(u128 v, unsigned d, unsigned long long *rem)
+{
+    unsigned long long hi = (unsigned long long)(v >> 64), lo = (unsigned long long)v;
+    unsigned long long r = hi % d; /* (hi / d is 0: the quotient is below 2^64) */
+    unsigned long long mid = (r << 32) | (lo >> 32);
+    unsigned long long q1 = mid / d;
+    unsigned long long low = ((mid % d) << 32) | (lo & 0xffffffffULL);
+    *rem = low % d;
+    return (q1 << 32) + low / d;
+}
+
 /* A 2^t / d rounded to nearest, ties to even (d = 1, 10, 100; the result below 2^63). */
 static unsigned long long round_scaled(u128 a, int t, unsigned d)
 {
     unsigned long long q, b;
     if (t >= 0) {
         u128 v = a << t;
-        q = (unsigned long long)(v / d);
-        b = (unsigned long long)(v % d);
+        q = div_small(v, d, &b);
         return q + (2 * b > d || (2 * b == d && (q & 1)));
     } else {
         int sh = -t;
