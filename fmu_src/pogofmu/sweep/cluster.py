@@ -13,8 +13,9 @@ import time
 from pathlib import Path
 from typing import Optional
 
-from .parquet import _done_ids, _parts_dir, _write_atomic, check_output, failed_runs
-from .spec import Sweep, SweepError
+from .parquet import _done_ids, _parts_dir, _write_atomic, _write_timeseries, check_output, failed_runs, schema
+from .runner import run_chunk
+from .spec import Sweep, SweepError, prepare
 
 # Dask settings of a local cluster: the worker's statistical profiler (a stack sample every 10 ms) and
 # the monitors polling every 20-500 ms cost ~7 % of a PogoStick run's CPU time; a sweep needs none of them
@@ -104,17 +105,27 @@ def check_workers(client):
                          "pogofmu (with fmpy, numpy, scipy) installed (README: \"On a Dask cluster\")") from None
 
 
+def load(sweep):
+    """``(data, sha256, schema, task, write_series)`` of a sweep, checked before anything runs: an
+    FMU's :class:`~.spec.Sweep` (its Dask task :func:`~.runner.run_chunk`, its time series as
+    Parquet), or a system's :class:`~.system.SystemSweep`, which says its own."""
+    if isinstance(sweep, Sweep):
+        data, sha, md = prepare(sweep)
+        return data, sha, schema(md, sweep.names, sweep.settings), run_chunk, _write_timeseries
+    data, sha, sch = sweep.load()
+    return data, sha, sch, sweep.task, sweep.write_series
+
+
 def run_sweep(sweep: Sweep, client, resume=False, overwrite=False, progress=True, log=print):
     """Run every missing point of the sweep on the client's cluster; write sweep.out. Returns the
     number of runs done by this call. ``sweep``: a :class:`~.spec.Sweep` of an FMU or a
-    :class:`~.system.SystemSweep` of an SSP package (what the loop asks of it: ``load()``,
-    ``spec()``, ``task``, ``label``, ``write_series()``)."""
+    :class:`~.system.SystemSweep` of an SSP package (:func:`load`)."""
     import pyarrow as pa
     import pyarrow.parquet as pq
     from distributed import as_completed
     from tqdm import tqdm
 
-    data, sha, sch = sweep.load()
+    data, sha, sch, task, write_series = load(sweep)
     check_output(Path(sweep.out), sweep.timeseries_dir, overwrite, resume)
     spec = json.dumps(sweep.spec(sha), sort_keys=True)
     out = Path(sweep.out)
@@ -158,7 +169,6 @@ def run_sweep(sweep: Sweep, client, resume=False, overwrite=False, progress=True
     size = sweep.chunk_size or max(1, min(64, math.ceil(len(todo) / (32 * n_workers))))
     chunks = [todo[k:k + size] for k in range(0, len(todo), size)]
     data_f = client.scatter(data, broadcast=True)
-    task = sweep.task
     submit = lambda chunk: client.submit(task, sha, data_f, sweep.names, chunk, sweep.settings,  # noqa: E731
                                          pure=False)
     futures = {}
@@ -203,7 +213,7 @@ def run_sweep(sweep: Sweep, client, resume=False, overwrite=False, progress=True
                 rows = []
                 for row, res in results:
                     if ts_dir is not None and res is not None:
-                        sweep.write_series(ts_dir, row["run_id"], res)
+                        write_series(ts_dir, row["run_id"], res)
                     rows.append(row)
                     failed += row["status"] != "ok"
                 table = pa.Table.from_pylist(rows, schema=sch)
@@ -239,7 +249,7 @@ def run_sweep(sweep: Sweep, client, resume=False, overwrite=False, progress=True
 
 def execute(sweep: Sweep, workers=None, scheduler=None, **kwargs):
     """Open the cluster, run the sweep, close the cluster (also on an interruption)."""
-    sweep.load()  # a bad option fails before any worker starts
+    load(sweep)  # a bad option fails before any worker starts
     check_output(Path(sweep.out), sweep.timeseries_dir, kwargs.get("overwrite", False), kwargs.get("resume", False))
     try:
         client, cluster = open_cluster(workers, scheduler)

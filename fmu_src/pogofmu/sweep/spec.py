@@ -210,26 +210,6 @@ class Sweep:
     def label(self) -> str:
         return Path(self.fmu).stem
 
-    @property
-    def task(self):
-        """The Dask task of a chunk of points."""
-        from .runner import run_chunk
-
-        return run_chunk
-
-    def load(self):
-        """Check the sweep against the FMU before anything runs; returns (FMU bytes, sha256, Parquet schema)."""
-        from .parquet import schema
-
-        data, sha, md = prepare(self)
-        return data, sha, schema(md, self.names, self.settings)
-
-    def write_series(self, folder: Path, run_id: int, res):
-        """A run's outputs on the grid as the Parquet partition ``folder/run_id=N``."""
-        from .parquet import _write_timeseries
-
-        _write_timeseries(folder, run_id, res)
-
     def spec(self, sha: str) -> dict:
         """What identifies the sweep for --resume."""
         return {"fmu_sha256": sha, "names": self.names, "points": [list(p) for p in self.points],
