@@ -40,7 +40,9 @@ def sweep_main(argv, prog="pogofmu sweep"):
     system = _is_system(argv)
     ap = argparse.ArgumentParser(prog=prog, description=(
         "Run an FMU, or a system (an .ssp, with the SSP master), for every point of a grid (Cartesian "
-        "product) and/or for Monte Carlo samples on Dask; one Parquet row per run."))
+        "product) and/or for Monte Carlo samples on Dask; one Parquet row per run. "
+        + ("This is the system sweep's help." if system else
+           "A system's options (--parameters, --algorithm, --summary, ...): pogofmu sweep SYSTEM.ssp --help.")))
     ap.add_argument("fmu", metavar="FMU|SSP", help="the FMU file, e.g. dist/PogoStick.fmu, or an SSP package, "
                                                    "e.g. dist/native/SpaceHopper.ssp (its names are Component.parameter)")
     ap.add_argument("--grid", action="append", default=[], metavar="NAME=a:b:n|NAME=v1,v2,...",
