@@ -48,3 +48,32 @@ def built_fmus():
             for source in load_model_file(f):
                 built += ex.export(source)
     return built
+
+
+@pytest.fixture(scope="session")
+def gate_fmu(tmp_path_factory):
+    """tests/_sweep_gate.py built with pythonfmu, once: runs with k >= hold wait for a gate file
+    (the sweep tests that interrupt a sweep at a point they control)."""
+    from pythonfmu.builder import FmuBuilder
+
+    dest = tmp_path_factory.mktemp("gate")
+    return Path(FmuBuilder.build_FMU(Path(__file__).with_name("_sweep_gate.py"), dest=dest))
+
+
+@pytest.fixture(scope="session")
+def project_wheel(tmp_path_factory):
+    """``(wheel, site)``: this checkout built by ``pip wheel`` (no dependencies) and installed
+    into the folder ``site`` (``pip install --target``, no index), once a session."""
+    import subprocess
+
+    tmp = tmp_path_factory.mktemp("wheel")
+    wheels = tmp / "wheels"
+    proc = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(wheels), str(ROOT)],
+                          capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    (wheel,) = wheels.glob("pogofmu-*.whl")
+    site = tmp / "site"
+    proc = subprocess.run([sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--no-index", "--target",
+                           str(site), str(wheel)], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return wheel, site

@@ -507,3 +507,27 @@ def c_host_run(tmp_path, unzipdir, env=None):
     y = next(v.valueReference for v in md.modelVariables if v.name == "y")
     return subprocess.run([str(host), str(unzipdir), md.coSimulation.modelIdentifier, md.guid, "0.01", "1e-3", str(y), "-"],
                           capture_output=True, text=True, timeout=120, env=env or {"PATH": "/usr/bin:/bin"})
+
+
+# ---- interrupting a sweep at a point the test controls (tests/_sweep_gate.py) ------------------
+
+def wait_for(predicate, proc=None, timeout=300.0):
+    """Poll ``predicate`` until it holds (the sweep process, if given, still running); the bound is
+    only a guard against a hang, never what decides the outcome."""
+    import time
+
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        assert time.monotonic() < deadline, "timed out waiting (the test would otherwise hang)"
+        if proc is not None and proc.poll() is not None:
+            out, err = proc.communicate()
+            raise AssertionError(f"the sweep ended (exit {proc.returncode}) before the test could interrupt it: "
+                                 f"{out[-2000:]} {err[-3000:]}")
+        time.sleep(0.02)
+
+
+def saved_runs(parts: Path) -> dict:
+    """``run_id -> row`` of the part files an unfinished sweep has saved in ``parts``."""
+    import pyarrow.parquet as pq
+
+    return {r["run_id"]: r for f in parts.glob("chunk-*.parquet") for r in pq.read_table(f).to_pylist()}

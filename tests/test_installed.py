@@ -19,21 +19,13 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
-def installed(tmp_path_factory):
+def installed(tmp_path_factory, project_wheel):
     """``(site, run)``: the wheel installed into ``site``; ``run(*args, cwd)`` runs ``python -m
     pogofmu.cli ARGS`` with it in a fresh process."""
-    tmp = tmp_path_factory.mktemp("wheel")
-    wheels = tmp / "wheels"
-    proc = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(wheels), str(ROOT)],
-                          capture_output=True, text=True)
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    (wheel,) = wheels.glob("pogofmu-*.whl")
+    tmp = tmp_path_factory.mktemp("installed")
+    wheel, site = project_wheel
     names = zipfile.ZipFile(wheel).namelist()
     assert "pogofmu/studies/segmented_mirror/reconstructor.py" in names, [n for n in names if "studies" in n]
-    site = tmp / "site"
-    proc = subprocess.run([sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--no-index", "--target",
-                           str(site), str(wheel)], capture_output=True, text=True)
-    assert proc.returncode == 0, proc.stderr[-3000:]
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "POGOFMU_DIST")}
     env.update(PYTHONPATH=str(site), POGOFMU_CACHE=str(tmp / "cache"), MPLBACKEND="Agg")
 

@@ -112,25 +112,17 @@ print(json.dumps({"package": pogofmu.__file__, "engine": str(host_engine_library
 '''
 
 
-def test_the_wheel_carries_the_compiled_host_libraries(tmp_path):
+def test_the_wheel_carries_the_compiled_host_libraries(tmp_path, project_wheel):
     """``pip wheel`` compiles the engine and the SSP level library into pogofmu/_lib; installed (no
     index, no dependencies: the project's venv supplies them), the package uses them on a machine
     with no C compiler and compiles nothing into its cache."""
     require(importlib.util.find_spec("ziglang") is not None, "the ziglang package (PyPI, pyproject.toml)")
-    wheels = tmp_path / "wheels"
-    proc = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(wheels), str(ROOT)],
-                          capture_output=True, text=True)
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    (wheel,) = wheels.glob("pogofmu-*.whl")
+    wheel, site = project_wheel
     import zipfile
 
     names = zipfile.ZipFile(wheel).namelist()
     libs = sorted(Path(n).name.split("_")[1] for n in names if n.startswith("pogofmu/_lib/"))
     assert libs == ["engine", "level"], names
-    site = tmp_path / "site"
-    proc = subprocess.run([sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--no-index", "--target",
-                           str(site), str(wheel)], capture_output=True, text=True)
-    assert proc.returncode == 0, proc.stderr[-3000:]
     env = {k: v for k, v in os.environ.items() if k not in ("CC", "PATH", "PYTHONPATH")}
     env.update(PATH=bare_path(tmp_path / "bin"), POGOFMU_CACHE=str(tmp_path / "cache"), PYTHONPATH=str(site))
     proc = subprocess.run([sys.executable, "-c", INSTALLED], env=env, capture_output=True, text=True, cwd=tmp_path)

@@ -23,6 +23,8 @@ import pytest
 
 from pogofmu import cli
 from support import DIST, fmu_path, reference_events, simulate
+from support import saved_runs as _saved
+from support import wait_for as _wait_for
 
 POGOFMU = Path(sys.executable).with_name("pogofmu")  # the console script of the venv
 
@@ -249,15 +251,6 @@ def test_the_exit_status_tells_that_runs_failed(tmp_path, scheduler, capsys):
                   "--out", tmp_path / "good.parquet") == 0
 
 
-@pytest.fixture(scope="module")
-def gate_fmu(tmp_path_factory):
-    """tests/_sweep_gate.py built with pythonfmu: runs with k >= hold wait for a gate file."""
-    from pythonfmu.builder import FmuBuilder
-
-    dest = tmp_path_factory.mktemp("gate")
-    return Path(FmuBuilder.build_FMU(Path(__file__).with_name("_sweep_gate.py"), dest=dest))
-
-
 @pytest.fixture
 def gate():
     """A fresh gate of tests/_sweep_gate.py: ``gate.set`` is the sweep's ``--set`` of its number,
@@ -281,23 +274,6 @@ def gate():
     gate.open()
     time.sleep(0.5)
     path.unlink(missing_ok=True)
-
-
-def _wait_for(predicate, proc=None, timeout=300.0):
-    """Poll ``predicate`` until it holds (the sweep process, if given, still running); the bound is
-    only a guard against a hang, never what decides the outcome."""
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        assert time.monotonic() < deadline, "timed out waiting (the test would otherwise hang)"
-        if proc is not None and proc.poll() is not None:
-            out, err = proc.communicate()
-            raise AssertionError(f"the sweep ended (exit {proc.returncode}) before the test could interrupt it: "
-                                 f"{out[-2000:]} {err[-3000:]}")
-        time.sleep(0.02)
-
-
-def _saved(parts):
-    return {r["run_id"]: r for f in parts.glob("chunk-*.parquet") for r in pq.read_table(f).to_pylist()}
 
 
 @pytest.fixture(params=["idle", "loaded"])

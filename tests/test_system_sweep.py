@@ -18,7 +18,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from pogofmu import cli
-from support import DIST
+from support import DIST, saved_runs, wait_for
 
 POGOFMU = Path(sys.executable).with_name("pogofmu")
 SSP = DIST / "native" / "SpaceHopper.ssp"
@@ -162,14 +162,6 @@ def _gate_system(tmp, gate_fmu):
     return path
 
 
-@pytest.fixture(scope="module")
-def gate_fmu(tmp_path_factory):
-    from pythonfmu.builder import FmuBuilder
-
-    dest = tmp_path_factory.mktemp("gate")
-    return Path(FmuBuilder.build_FMU(Path(__file__).with_name("_sweep_gate.py"), dest=dest))
-
-
 def test_an_interrupted_system_sweep_resumes_with_the_missing_points(tmp_path, scheduler, gate_fmu):
     """Runs Gate.k = 0 and 1 pass the gate, the others wait: Ctrl-C once both are saved; --resume
     (gate open) runs only the others."""
@@ -186,12 +178,7 @@ def test_an_interrupted_system_sweep_resumes_with_the_missing_points(tmp_path, s
            "--out", str(out), "--no-progress"]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        deadline = time.monotonic() + 300  # (a guard against a hang, never what decides the outcome)
-        saved = lambda: {r["run_id"]: r for f in parts.glob("chunk-*.parquet")  # noqa: E731
-                         for r in pq.read_table(f).to_pylist()}
-        while len(saved()) < 2:
-            assert time.monotonic() < deadline and proc.poll() is None, proc.communicate()
-            time.sleep(0.02)
+        wait_for(lambda: len(saved_runs(parts)) >= 2, proc)
         proc.send_signal(signal.SIGINT)
         stdout, stderr = proc.communicate(timeout=120)
     finally:
@@ -201,7 +188,7 @@ def test_an_interrupted_system_sweep_resumes_with_the_missing_points(tmp_path, s
             proc.communicate()
     try:
         assert proc.returncode == 130 and "--resume" in stdout, (stdout, stderr[-2000:])
-        before = saved()
+        before = saved_runs(parts)
         assert sorted(before) == [0, 1]
         resumed = subprocess.run(cmd + ["--resume"], capture_output=True, text=True, timeout=300)
         assert resumed.returncode == 0, resumed.stderr[-2000:]

@@ -183,18 +183,11 @@ static int cmp_scaled(unsigned long long D, u128 a, int t)
     }
 }
 
+/* D (the digits of x 10^s, below 10^20) as digits: pg_put_uint's, without a NUL (d holds 20). */
 static void int_digits(unsigned long long D, int s, digits *out)
 {
-    char tmp[24];
-    int k = 0;
-    do {
-        tmp[k++] = (char)('0' + D % 10);
-        D /= 10;
-    } while (D);
-    out->n = k;
-    out->e = k - 1 - s;
-    for (int i = 0; i < k; i++)
-        out->d[i] = tmp[k - 1 - i];
+    out->n = (int)(pg_put_uint(out->d, D) - out->d);
+    out->e = out->n - 1 - s;
 }
 
 static int shortest_exact(double x, digits *out)

@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from pogofmu.sweep import SweepError, execute, make_points, parse_sample
+from pogofmu.sweep import SweepError, add_arguments, execute, make_points, parse_sample
 
 from . import _plt, _read_table, _write_csv
 
@@ -39,8 +39,6 @@ def add_parser(sub):
     la.add_argument("--stop-time", type=float, default=10.0, help="[s] (default 10)")
     la.add_argument("--sample", action="append", default=[], metavar="Component.parameter=DIST(a,b)",
                     help=f"replace a default distribution or add one (defaults: {' '.join(LANDING_DEFAULTS)})")
-    from pogofmu.sweep import add_arguments
-
     add_arguments(la)
     return la
 

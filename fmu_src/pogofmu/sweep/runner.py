@@ -198,6 +198,23 @@ def _problem(messages, text):
     return "; ".join([m[2] for m in messages if m[0] >= 2] + [text])
 
 
+_COPIES: Dict[str, Path] = {}
+_COPIES_LOCK = threading.Lock()
+
+
+def worker_copy(key: str, data: bytes, name: str) -> Path:
+    """The worker's copy, as a file ``name``, of the bytes that hash to ``key`` (the FMU or the SSP
+    package a sweep scattered): written once per worker, removed when the worker ends."""
+    with _COPIES_LOCK:
+        if key not in _COPIES:
+            folder = Path(tempfile.mkdtemp(prefix="pogofmu-sweep-"))
+            atexit.register(shutil.rmtree, folder, True)
+            path = folder / name
+            path.write_bytes(data)
+            _COPIES[key] = path
+        return _COPIES[key]
+
+
 _RUNNERS: Dict[str, Runner] = {}
 _RUNNERS_LOCK = threading.Lock()
 
@@ -206,11 +223,7 @@ def _runner(key: str, data: bytes) -> Runner:
     """The worker's Runner of the FMU whose bytes hash to key (written and extracted once)."""
     with _RUNNERS_LOCK:
         if key not in _RUNNERS:
-            folder = Path(tempfile.mkdtemp(prefix="pogofmu-sweep-"))
-            atexit.register(shutil.rmtree, folder, True)
-            path = folder / "model.fmu"
-            path.write_bytes(data)
-            _RUNNERS[key] = Runner(str(path))
+            _RUNNERS[key] = Runner(str(worker_copy(key, data, "model.fmu")))
         return _RUNNERS[key]
 
 

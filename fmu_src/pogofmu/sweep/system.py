@@ -27,10 +27,7 @@ CSV ``pogofmu ssp run`` writes, to ``DIR/run_id=N/timeseries.csv``.
 from __future__ import annotations
 
 import hashlib
-import math
-import shutil
 import tempfile
-import threading
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -253,24 +250,6 @@ def summarize(series, t, columns, sources):
     return out
 
 
-_PACKAGES: Dict[str, Path] = {}
-_PACKAGES_LOCK = threading.Lock()
-
-
-def _package(key: str, data: bytes) -> Path:
-    """The worker's copy of the package whose bytes hash to key (written once)."""
-    import atexit
-
-    with _PACKAGES_LOCK:
-        if key not in _PACKAGES:
-            folder = Path(tempfile.mkdtemp(prefix="pogofmu-sweep-"))
-            atexit.register(shutil.rmtree, folder, True)
-            path = folder / "system.ssp"
-            path.write_bytes(data)
-            _PACKAGES[key] = path
-        return _PACKAGES[key]
-
-
 def run_point(ssp: Path, point: Dict[str, float], settings: SystemSettings, columns: List[str]):
     """One run of the system at ``point``; returns (row, CSV bytes or None). Never raises for a
     failed run: its row says why."""
@@ -323,7 +302,9 @@ def _read_csv(path: Path, names):
 def run_system_chunk(key: str, data: bytes, names, chunk, settings: SystemSettings, columns=None):
     """Dask task: run [(run_id, point), ...] of the package whose bytes hash to ``key``; returns
     [(row, CSV bytes or None), ...]."""
-    ssp = _package(key, data)
+    from .runner import worker_copy
+
+    ssp = worker_copy(key, data, "system.ssp")
     out = []
     for run_id, point in chunk:
         values = dict(zip(names, point))
