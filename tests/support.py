@@ -511,6 +511,23 @@ def c_host_run(tmp_path, unzipdir, env=None):
 
 # ---- interrupting a sweep at a point the test controls (tests/_sweep_gate.py) ------------------
 
+def _stacks_of(proc) -> str:
+    """What a process that did not get where the test waited for was doing: SIGABRT makes a
+    process started with PYTHONFAULTHANDLER=1 write every thread's stack to its stderr."""
+    import signal
+    import subprocess
+
+    if proc is None or proc.poll() is not None:
+        return ""
+    proc.send_signal(signal.SIGABRT)
+    try:
+        out, err = proc.communicate(timeout=60)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        out, err = proc.communicate()
+    return f"; the process's output: {(out or '')[-2000:]}\n{(err or '')[-8000:]}"
+
+
 def wait_for(predicate, proc=None, timeout=300.0):
     """Poll ``predicate`` until it holds (the sweep process, if given, still running); the bound is
     only a guard against a hang, never what decides the outcome."""
@@ -518,7 +535,8 @@ def wait_for(predicate, proc=None, timeout=300.0):
 
     deadline = time.monotonic() + timeout
     while not predicate():
-        assert time.monotonic() < deadline, "timed out waiting (the test would otherwise hang)"
+        if time.monotonic() >= deadline:
+            raise AssertionError("timed out waiting (the test would otherwise hang)" + _stacks_of(proc))
         if proc is not None and proc.poll() is not None:
             out, err = proc.communicate()
             raise AssertionError(f"the sweep ended (exit {proc.returncode}) before the test could interrupt it: "
