@@ -91,10 +91,18 @@ static const char *type_name(const PgInstance *in, char t)
     return t == 'R' ? "Real" : t == 'I' ? "Integer" : t == 'B' ? "Boolean" : "String";
 }
 
-/* _variable */
-static const PgVar *variable(PgInstance *in, unsigned vr, char type)
+static PG_NOINLINE const PgVar *no_variable(PgInstance *in, unsigned vr, char type, const PgVar *v);
+
+/* _variable: the variable of value reference vr, of the type asked (the message only when not) */
+static inline const PgVar *variable(PgInstance *in, unsigned vr, char type)
 {
-    const PgVar *v = pg_inst_variable(in->fmu, vr);
+    const PgFmu *fmu = in->fmu;
+    const PgVar *v = vr < (unsigned)fmu->n_vars && fmu->vars[vr].vr == vr ? &fmu->vars[vr] : pg_inst_variable(fmu, vr);
+    return v && v->type == type ? v : no_variable(in, vr, type, v);
+}
+
+static PG_NOINLINE const PgVar *no_variable(PgInstance *in, unsigned vr, char type, const PgVar *v)
+{
     PgMsg m;
     pg_msg_clear(&m);
     if (!v) {

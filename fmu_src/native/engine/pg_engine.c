@@ -477,7 +477,9 @@ static void make_seg(PgEngine *e, PgSeg *seg, double t0, double t1, const double
     memmove(seg->y0, y0, n);
     memmove(seg->y1, y1, n);
     memmove(seg->f0, f0, n);
-    for (int j = 0; j < PG_MAX_STAGES; ++j) memmove(seg->K + j * PG_MAX_X, K + j * PG_MAX_X, n);
+    /* the stages the method has (its dense output reads no other) */
+    int stages = e->cur == M_DOP853 ? PG_MAX_STAGES : e->cur == M_RODAS ? PG_RODAS_STAGES : 7;
+    for (int j = 0; j < stages; ++j) memmove(seg->K + j * PG_MAX_X, K + j * PG_MAX_X, n);
     seg->dense_built = 0;
     seg->method = e->cur;
 }

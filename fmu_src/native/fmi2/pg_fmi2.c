@@ -55,7 +55,16 @@ static void log_from_backend(void *env, int status, const char *category, const 
     if (pg_log_wanted(&in->filter, status, category)) emit(in, status, category, message);
 }
 
-static int allowed(Inst *in, int rule, const char *function)
+static PG_NOINLINE int refused(Inst *in, int rule, const char *function);
+
+/* the call's rule holds in the instance's call state: the check of every call, kept to a test and
+ * a branch; the message is written only for a refusal */
+static inline int allowed(Inst *in, int rule, const char *function)
+{
+    return (in->mode & CALL_RULES[rule].cs) ? 1 : refused(in, rule, function);
+}
+
+static PG_NOINLINE int refused(Inst *in, int rule, const char *function)
 {
     const CallRule *r = &CALL_RULES[rule];
     unsigned mask = r->cs;
