@@ -6,14 +6,13 @@ project's launcher (``fmu_src/native``: the FMI entry files with the bridge to C
    ``resources/_pogofmu_<Model>_<hash>/``, a user's model file and its local modules go into its
    ``user/`` subpackage (their imports of ``pogofmu`` rewritten to the private name,
    :mod:`.source`), and a slave module generated here, ``resources/_pogofmu_<Model>_<hash>_slave.py``,
-   names the model's class (pythonfmu's loader wants the line ``class <Model>(Fmi2Slave):``), so
+   names the model's class (``resources/pogofmu_launch.txt`` tells the launcher these names), so
    that several FMUs — other models, other versions of the project — run side by side in one
    process; the build checks that this code imports in an isolated interpreter.
 2. ``binaries/<platform>/<Model>.so`` is the launcher, compiled with the system C compiler: it
-   brings a CPython interpreter into any FMI importer and calls the staged code.  Without a C
-   compiler the build warns and uses pythonfmu's Linux binary instead (the adapter speaks its
-   calling convention too): such an FMU runs only inside a Python process.  The Python-hosted
-   FMUs have no Windows binary: on Windows, use the native FMUs.
+   brings a CPython interpreter into any FMI importer and calls the staged code.  It is compiled
+   by the system's C compiler or, where there is none, by the ziglang package's (a dependency).
+   The Python-hosted FMUs have no Windows binary: on Windows, use the native FMUs.
 """
 from __future__ import annotations
 
@@ -116,8 +115,8 @@ class {name}(Fmi2Slave):
 
 
 def slave_source(package: str, module: str, attr: str, name: str) -> str:
-    """The slave module of one FMU (pythonfmu's loader looks for the literal class line, and a
-    second instance in one process crashes it if the class body holds no method: keep both)."""
+    """The slave module of one FMU: the model's class behind the FMI 2.0 adapter (the launcher's
+    boot code puts it behind the FMI 3.0 one for an FMI 3.0 FMU)."""
     return SLAVE_TEMPLATE.format(package=package, module=module, attr=attr, name=name)
 
 
@@ -155,7 +154,6 @@ def stage(source, stage_dir: Path, fmi_version: int, token_seed: str = ""):
         target.write_text(text, encoding="utf-8")
     (res / f"{module}.py").write_text(slave_source(package, source.module, source.attr, name))
     shutil.copy2(NATIVE / "python" / "pogofmu_boot.py", res / "pogofmu_boot.py")
-    (res / "slavemodule.txt").write_text(module)  # pythonfmu's binaries read it
     lines = ["# read by the launcher and resources/pogofmu_boot.py (written by pogofmu export)",
              f"package={package}", f"module={module}", f"class={name}", f"token={token}",
              f"fmi={fmi_version}"] + [f"python={lib}" for lib in python_libraries()]
@@ -203,7 +201,7 @@ def build_python_fmu(source, dest: Path, fmi_version: int, launcher: Path, token
         # the launcher for Linux (it carries the engine; Windows: the native FMUs)
         binaries = {"linux64": launcher}
     else:
-        # the launcher only: pythonfmu's Windows binaries speak FMI 2.0 (no FMI 3.0 Windows binary)
+        # the launcher for Linux, as for FMI 2.0
         members.append(("modelDescription.xml", model_description_fmi3(cls, token), False))
         binaries = {"x86_64-linux": launcher}
         dest = dest / "fmi3"

@@ -1,7 +1,6 @@
 """One adapter from any :class:`~pogofmu.runtime.model.HybridModel` to an FMI 2.0 co-simulation slave.
 
-A slave file is a few lines (pythonfmu's loader, used on the platforms where the FMU carries
-pythonfmu's binary, looks for the literal ``class <Name>(Fmi2Slave):``)::
+A slave file is a few lines (``pogofmu export`` writes it into the FMU's resources)::
 
     from pogofmu.runtime.fmi2 import HybridSlave as Fmi2Slave
     from pogofmu.runtime.models.pogo_stick import MODEL
@@ -12,22 +11,18 @@ pythonfmu's binary, looks for the literal ``class <Name>(Fmi2Slave):``)::
         def __init__(self, **kwargs):
             super().__init__(**kwargs)
 
-The adapter needs the standard library only and imports nothing from pythonfmu: it *implements*
-the calling convention of pythonfmu's binaries (constructor keywords, ``set_real``/``get_real``,
-``do_step`` returning a bool, ``log_queue``, ``_get_fmu_state`` ...), so the same code runs under
+The adapter needs the standard library only. It is driven by the project's launcher, the binary of
+every Python-hosted FMU: the FMI entry files ``fmu_src/native/fmi2/pg_fmi2.c`` / ``fmi3/pg_fmi3.c``
+(the call states, the ones the native FMUs are built from) with the bridge
+``fmu_src/native/python/pg_bridge.c``. The bridge calls :meth:`HybridSlave._launcher_attach`
+first, and then
 
-* the project's launcher (the FMI entry files ``fmu_src/native/fmi2/pg_fmi2.c`` /
-  ``fmi3/pg_fmi3.c`` with the bridge ``fmu_src/native/python/pg_bridge.c``: the Linux binary of
-  every Python-hosted FMU): it calls :meth:`HybridSlave._launcher_attach` first, and then
-
-  - serves outputs from buffers filled once per step (no Python call per ``fmi2GetReal``),
-  - maps an :class:`FMUError` to its ``fmi_status``: a refused call (bad input, a parameter
-    rule, a step that cannot be taken) returns ``fmi2Error`` with the message logged, and the
-    instance stays usable (``fmi2Reset``, ``fmi2SetFMUstate``, a corrected input);
-  - forwards warnings and errors to the importer's logger even with logging off;
-
-* pythonfmu's own binaries (kept for Windows), which turn any exception into ``fmi2Fatal``: there
-  a refused step returns False (``fmi2Discard``) with the reason logged, as pythonfmu allows.
+* serves outputs from buffers filled once per step (no Python call per ``fmi2GetReal``);
+* maps an :class:`FMUError` to its ``fmi_status``: a refused call (bad input, a parameter rule, a
+  step that cannot be taken, a model that stopped) returns ``fmi2Error`` with the message logged,
+  and the instance stays usable (``fmi2Reset``, ``fmi2SetFMUstate``, a corrected input); any
+  other exception is ``fmi2Fatal``;
+* forwards warnings and errors to the importer's logger even with logging off.
 
 Behaviour (FMI 2.0 co-simulation):
 
@@ -40,6 +35,10 @@ Behaviour (FMI 2.0 co-simulation):
   ``logEvents``): kind, exact time and the state before the jump;
 * ``fmi2GetFMUstate`` / ``fmi2SetFMUstate`` save and restore the whole engine; the serialized
   form is JSON (exact floats), checked against the model and build it came from.
+
+The native FMUs' adapter, ``fmu_src/native/adapter/pg_instance.c``, keeps the same rules in C
+(issue 47: one adapter for both backends is not done yet; the tests hold the two to the same
+bits, statuses and messages).
 """
 from __future__ import annotations
 
@@ -70,7 +69,7 @@ _BUILD = __name__.rpartition(".")[0]
 
 
 class LogMsg(NamedTuple):
-    """One queued log message: a tuple for the launcher, attributes for pythonfmu's binary."""
+    """One queued log message (the launcher reads it as a tuple)."""
 
     status: int
     category: str
@@ -114,7 +113,6 @@ class HybridSlave:
         self.resources = kwargs.get("resources")
         self.visible = kwargs.get("visible", False)
         self.log_queue = []
-        self._launcher = False
         variables, by_vr, real_out, int_out = self._variable_tables()
         self._vars = by_vr
         self._output_fn = model.output_fn
@@ -178,7 +176,6 @@ class HybridSlave:
         """Called by the launcher right after construction: errors become FMI statuses,
         and the outputs are served from the returned buffer (the reals as doubles, then the
         integers as int32, in the order of the value references given)."""
-        self._launcher = True
         return (self._real_out_vrs, self._int_out_vrs, self._obuf, self._ctl)
 
     @property
@@ -186,22 +183,15 @@ class HybridSlave:
         """The FMU's log categories (the launcher checks fmi2SetDebugLogging against them)."""
         return tuple(self.log_categories)
 
-    def _get_log_queue(self):  # pythonfmu's binary
-        return self.log_queue
-
     def log(self, msg: str, status: int = OK, category: Optional[str] = None):
         if category is None:
             category = log_category(status)
         self.log_queue.append(LogMsg(int(status), category, msg))
 
     def _refuse(self, message, status=ERROR):
-        """A call that cannot be carried out but leaves the instance usable: fmi2Error under the
-        launcher; under pythonfmu's binary (where any exception is fatal) the message is
-        logged and the caller returns its failure value."""
-        if self._launcher:
-            raise FMUError(message, status)
-        self.log(message, ERROR)
-        return False
+        """A call that cannot be carried out but leaves the instance usable: fmi2Error (the
+        launcher logs the message)."""
+        raise FMUError(message, status)
 
     # ---- variable access ----------------------------------------------------------------------
     def _variable(self, vr, type_):
@@ -401,7 +391,7 @@ class HybridSlave:
         except (ModelError, ValueError, ArithmeticError) as exc:
             self._sim = None
             raise FMUError(f"{model.name}: initialization failed: {exc}",
-                           ERROR if self._launcher else FATAL) from None
+                           ERROR) from None
         self._inputs_changed = any(self._du)  # derivatives set before: the first step takes them
         self._h_fast = self._fast_step_limit()
         self._drain_engine()
@@ -443,7 +433,7 @@ class HybridSlave:
         usable)."""
         self._failed = f"{type(self).model.name}: {exc}"
         self._drain_engine(failed=True)
-        return FMUError(self._failed, ERROR if self._launcher else FATAL)
+        return FMUError(self._failed, ERROR)
 
     def _stopped(self, call, t):
         """Why ``call`` is refused after the model stopped at ``t``."""
