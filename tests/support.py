@@ -528,7 +528,7 @@ def _stacks_of(proc) -> str:
     return f"; the process's output: {(out or '')[-2000:]}\n{(err or '')[-8000:]}"
 
 
-def wait_for(predicate, proc=None, timeout=300.0):
+def wait_for(predicate, proc=None, timeout=600.0):
     """Poll ``predicate`` until it holds (the sweep process, if given, still running); the bound is
     only a guard against a hang, never what decides the outcome."""
     import time
