@@ -43,7 +43,7 @@ import pytest
 
 from pogofmu import exporter as build
 from pogofmu.codegen.build import PLATFORMS, zig_cc
-from support import compile_c_host, fmu_path, needs
+from support import HOST_CFLAGS, compile_c_host, fmu_path, needs
 from test_portability import BARE_ENV, C_HOST_SOURCE, outputs_of, run_c_host
 
 FMUS = build.model_names()
@@ -111,7 +111,7 @@ def _assert_same_run(got, ref, name, exact):
 def _cross_compile(source, exe, target):
     """A C host of tests/c_host/ compiled for ``target`` (a zig target) with zig cc."""
     extra = ["-D__USE_MINGW_ANSI_STDIO=1"] if "windows" in target else ["-ldl"]
-    subprocess.run([*zig_cc(target), "-O1", "-Wall", f"-I{build.fmi_headers()}", str(source), "-o", str(exe), *extra],
+    subprocess.run([*zig_cc(target), *HOST_CFLAGS, f"-I{build.fmi_headers()}", str(source), "-o", str(exe), *extra],
                    check=True)
     return exe
 
