@@ -18,7 +18,7 @@
 #include "pg_repr.h"
 
 #include <float.h>
-#include <math.h>
+#include "pg_crt_math.h" /* (<math.h>; the Windows build: the UCRT's log10) */
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>

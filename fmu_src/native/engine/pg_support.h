@@ -3,6 +3,7 @@
 #ifndef PG_SUPPORT_H
 #define PG_SUPPORT_H
 
+#include "pg_crt_math.h" /* (<math.h>; the Windows build: the UCRT's math functions) */
 #include "pg_model.h"
 #include "pg_repr.h"
 

@@ -229,7 +229,8 @@ FMI_HEADERS = {2: ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.
 # tuple -> (FMI 2.0 folder, zig target, library suffix, flags).  Every target gets CFLAGS'
 # -ffp-contract=off (aarch64 compilers contract a*b+c into a fused multiply-add by default) and
 # no fast-math, so that each platform computes the same bits.  Linux: glibc 2.17 symbols at most;
-# macOS: 10.13 / 11.0 at least; Windows: the UCRT (part of Windows 10 and later), symbols stripped.
+# macOS: 10.13 / 11.0 at least; Windows: the UCRT (part of Windows 10 and later), symbols stripped,
+# and its math functions the UCRT's, not zig's compiler runtime's (POGOFMU_CRT_MATH: pg_crt_math.h).
 # FMI 2.0 names no aarch64 folder: fmpy's FMI 2.0 loader looks in binaries/<fmpy.platform>, which is
 # linux64 / darwin64 on aarch64 too; darwin64 therefore holds a universal (fat) Mach-O of both
 # macOS architectures, as the Reference-FMUs' FMI 2.0 builds do, and aarch64 Linux, which cannot
@@ -237,7 +238,7 @@ FMI_HEADERS = {2: ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.
 PLATFORMS = {
     "x86_64-linux": ("linux64", "x86_64-linux-gnu.2.17", ".so", ("-fPIC", "-fvisibility=hidden", "-s")),
     "aarch64-linux": ("aarch64-linux", "aarch64-linux-gnu.2.17", ".so", ("-fPIC", "-fvisibility=hidden", "-s")),
-    "x86_64-windows": ("win64", "x86_64-windows-gnu", ".dll", ("-s",)),
+    "x86_64-windows": ("win64", "x86_64-windows-gnu", ".dll", ("-s", "-DPOGOFMU_CRT_MATH")),
     "x86_64-darwin": ("darwin64", "x86_64-macos.10.13", ".dylib", ("-fPIC", "-fvisibility=hidden", "-s")),
     "aarch64-darwin": ("darwin64", "aarch64-macos.11.0", ".dylib", ("-fPIC", "-fvisibility=hidden", "-s")),
 }
