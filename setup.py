@@ -1,6 +1,7 @@
 """The package build compiles the host-side libraries (the engine the host tools run, the SSP
-master's C level) into pogofmu/_lib, so an installed package carries them; the compiler is the
-system's cc, gcc or clang, else the ziglang package's zig cc (a build requirement). It also copies
+master's C level) and, on Linux, the Python-hosted FMUs' launchers (FMI 2.0 and 3.0) into
+pogofmu/_lib, so an installed package carries them; the compiler is the system's cc, gcc or
+clang, else the ziglang package's zig cc (a build requirement). It also copies
 the segmented mirror's model files (examples/segmented_mirror/) beside ``pogofmu mirror``'s
 builder.  Everything else is in pyproject.toml."""
 import shutil
@@ -21,12 +22,16 @@ class BuildPyWithHostLibraries(build_py):
         sys.path.insert(0, str(HERE / "fmu_src"))
         try:
             from pogofmu.codegen import build
+            from pogofmu.exporter import python_fmu
         finally:
             sys.path.pop(0)
         into = Path(self.build_lib) / "pogofmu" / "_lib"
         shutil.rmtree(into, ignore_errors=True)  # (setuptools keeps build/ between builds: no stale library)
         build.host_engine_library(into=into)
         build.host_level_library(into=into)
+        if sys.platform.startswith("linux"):  # the Python-hosted FMUs' binary: Linux (docs/using-fmus.md)
+            for version in (2, 3):
+                python_fmu.compile_launcher(version, into=into)
         # the segmented mirror's model files (pogofmu mirror builds its system from them): a checkout
         # has them in examples/, an installed package beside the builder
         models = Path(self.build_lib) / "pogofmu" / "studies" / "segmented_mirror"

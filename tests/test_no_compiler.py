@@ -101,6 +101,7 @@ import json, sys
 from pathlib import Path
 import pogofmu
 from pogofmu.codegen.build import host_engine_library, host_level_library
+from pogofmu.exporter.python_fmu import compile_launcher
 from pogofmu.ssp import native_level
 from pogofmu.runtime.solver.cengine import Simulator
 from pogofmu.runtime.models import get
@@ -108,28 +109,32 @@ from pogofmu.runtime.models import get
 sim = Simulator(get("PogoStick"), {}, keep_history=True)
 sim.advance(0.5)
 print(json.dumps({"package": pogofmu.__file__, "engine": str(host_engine_library()),
-                  "level": str(host_level_library()), "level_loaded": native_level.library() is not None}))
+                  "level": str(host_level_library()), "level_loaded": native_level.library() is not None,
+                  "launcher2": str(compile_launcher(2, Path(sys.argv[1]))),
+                  "launcher3": str(compile_launcher(3, Path(sys.argv[1])))}))
 '''
 
 
 def test_the_wheel_carries_the_compiled_host_libraries(tmp_path, project_wheel):
-    """``pip wheel`` compiles the engine and the SSP level library into pogofmu/_lib; installed (no
-    index, no dependencies: the project's venv supplies them), the package uses them on a machine
-    with no C compiler and compiles nothing into its cache."""
+    """``pip wheel`` compiles the engine, the SSP level library and the Python-hosted FMUs' two
+    launchers into pogofmu/_lib; installed (no index, no dependencies: the project's venv supplies
+    them), the package uses them on a machine with no C compiler and compiles nothing into its
+    cache nor into the exporter's."""
     require(importlib.util.find_spec("ziglang") is not None, "the ziglang package (PyPI, pyproject.toml)")
     wheel, site = project_wheel
     import zipfile
 
     names = zipfile.ZipFile(wheel).namelist()
-    libs = sorted(Path(n).name.split("_")[1] for n in names if n.startswith("pogofmu/_lib/"))
-    assert libs == ["engine", "level"], names
+    libs = sorted("_".join(Path(n).name.split("_")[1:-1]) for n in names if n.startswith("pogofmu/_lib/"))
+    assert libs == ["engine", "launcher_fmi2", "launcher_fmi3", "level"], names
     env = {k: v for k, v in os.environ.items() if k not in ("CC", "PATH", "PYTHONPATH")}
     env.update(PATH=bare_path(tmp_path / "bin"), POGOFMU_CACHE=str(tmp_path / "cache"), PYTHONPATH=str(site))
-    proc = subprocess.run([sys.executable, "-c", INSTALLED], env=env, capture_output=True, text=True, cwd=tmp_path)
+    proc = subprocess.run([sys.executable, "-c", INSTALLED, str(tmp_path / "exporter-cache")], env=env,
+                          capture_output=True, text=True, cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr[-3000:]
     got = json.loads(proc.stdout.strip().splitlines()[-1])
     assert Path(got["package"]).is_relative_to(site)
-    for key in ("engine", "level"):
+    for key in ("engine", "level", "launcher2", "launcher3"):
         assert Path(got[key]).parent == site / "pogofmu" / "_lib", got
     assert got["level_loaded"]
-    assert not (tmp_path / "cache").exists()
+    assert not (tmp_path / "cache").exists() and not (tmp_path / "exporter-cache").exists()

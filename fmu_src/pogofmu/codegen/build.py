@@ -23,6 +23,12 @@ def native_dir() -> Path:
 
 
 NATIVE = native_dir()
+
+
+def fmi_headers() -> Path:
+    """The FMI standard's C headers (2.0 and 3.0) the project carries (``fmu_src/native/fmi``, with
+    their provenance and licence): what the FMUs' C and the tests' C hosts are compiled against."""
+    return NATIVE / "fmi"
 ENGINE = NATIVE / "engine"
 CFLAGS = ("-std=c99", "-O2", "-ffp-contract=off", "-fno-strict-aliasing", "-Wall", "-Wextra")
 
@@ -130,13 +136,13 @@ def prebuilt_dir() -> Path:
     return Path(__file__).resolve().parents[1] / "_lib"
 
 
-def _host_key(sources: Sequence[Path], headers: Iterable[Path], extra: Sequence[str]) -> str:
+def _host_key(sources: Sequence[Path], headers: Iterable[Path], extra: Sequence[str], libs: Sequence[str]) -> str:
     """The digest of a host library's sources, headers, flags and platform (not the compiler):
     the name of the package's prebuilt copy."""
     import hashlib
     import sys
 
-    digest = hashlib.sha256(" ".join([*CFLAGS, "-shared", "-fPIC", *extra, sys.platform]).encode())
+    digest = hashlib.sha256(" ".join([*CFLAGS, "-shared", "-fPIC", *extra, *libs, sys.platform]).encode())
     for path in sorted({*sources, *headers}):
         digest.update(path.name.encode() + b"\0" + path.read_bytes())
     return digest.hexdigest()[:16]
@@ -150,17 +156,19 @@ def _suffix() -> str:
 
 def _host_library(stem: str, sources: Sequence[Path], headers: Iterable[Path], include: Sequence[Path],
                   extra: Sequence[str] = (), cc: Optional[str] = None, why: str = "",
-                  into: Optional[Path] = None) -> Path:
+                  into: Optional[Path] = None, libs: Sequence[str] = ("-lm",),
+                  folder: Optional[Path] = None) -> Path:
     """A shared library of ``sources`` for this machine: the package's prebuilt copy
     (:func:`prebuilt_dir`, same sources and flags) if it has one, else compiled once per version of
-    its sources, headers, flags and compiler into :func:`cache_dir` as ``<stem>_<digest>.so``.
-    ``into``: compile into that folder under the prebuilt name (the package build)."""
+    its sources, headers, flags and compiler into ``folder`` (default :func:`cache_dir`) as
+    ``<stem>_<digest>.so``. ``into``: compile into that folder under the prebuilt name (the
+    package build). ``libs``: what it links."""
     import hashlib
     import sys
 
     headers = list(headers)
     suffix = _suffix()
-    key = _host_key(sources, headers, extra)
+    key = _host_key(sources, headers, extra, libs)
     prebuilt = prebuilt_dir() / f"{stem}_{key}{suffix}"
     if into is None and cc is None and prebuilt.is_file():
         return prebuilt
@@ -169,18 +177,18 @@ def _host_library(stem: str, sources: Sequence[Path], headers: Iterable[Path], i
         raise CompileError(f"{NO_COMPILER}{why}")
     if into is not None:
         into.mkdir(parents=True, exist_ok=True)
-        return compile_c(sources, into / prebuilt.name, include=include, cc=compiler, extra=list(extra))
-    flags = [*CFLAGS, "-shared", "-fPIC", *extra]
+        return compile_c(sources, into / prebuilt.name, include=include, cc=compiler, extra=list(extra), libs=libs)
+    flags = [*CFLAGS, "-shared", "-fPIC", *extra, *libs]
     zig = [f"zig {zig_version()}"] if len(compiler) > 1 else []
     digest = hashlib.sha256(" ".join([*compiler, *zig, *flags, sys.platform]).encode())
     for path in sorted({*sources, *headers}):
         digest.update(path.name.encode() + b"\0" + path.read_bytes())
-    folder = cache_dir()
+    folder = cache_dir() if folder is None else Path(folder)
     out = folder / f"{stem}_{digest.hexdigest()[:16]}{suffix}"
     if not out.exists():
         folder.mkdir(parents=True, exist_ok=True)
         tmp = out.with_name(f"{out.stem}.{os.getpid()}.tmp{suffix}")
-        compile_c(sources, tmp, include=include, cc=compiler, extra=list(extra))
+        compile_c(sources, tmp, include=include, cc=compiler, extra=list(extra), libs=libs)
         os.replace(tmp, out)
     return out
 

@@ -10,7 +10,7 @@ import tempfile
 from pathlib import Path
 
 from .errors import BuildError
-from .python_fmu import fmi_headers
+from pogofmu.codegen.build import fmi_headers
 
 
 def zig_available() -> bool:

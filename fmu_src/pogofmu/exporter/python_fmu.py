@@ -17,7 +17,6 @@ project's launcher (``fmu_src/native``: the FMI entry files with the bridge to C
 from __future__ import annotations
 
 import hashlib
-import os
 import shutil
 import subprocess
 import sys
@@ -31,14 +30,10 @@ from .errors import BuildError
 
 PACKAGE = Path(__file__).resolve().parents[1]  # fmu_src/pogofmu
 RUNTIME = PACKAGE / "runtime"  # the code that goes into every FMU, staged as a whole
-from pogofmu.codegen.build import BINDING_SOURCES, CFLAGS, ENGINE, NATIVE, NO_COMPILER, _run_cc, c_compiler, zig_version  # noqa: E402,F401 (the C layer, in a clone or a wheel; the
-#                                                       system compiler, one lookup for both kinds of FMU)
-
-
-def fmi_headers() -> Path:
-    import fmpy
-
-    return Path(fmpy.__file__).parent / "c-code"
+# the C layer (in a clone or a wheel), the FMI headers it carries, and one way to compile a library
+# for this machine (a prebuilt copy of the package, else the system's compiler or ziglang's)
+from pogofmu.codegen.build import (BINDING_SOURCES, ENGINE, NATIVE, CompileError, _host_library,  # noqa: E402
+                                   fmi_headers)
 
 
 def launcher_sources(fmi_version: int):
@@ -59,36 +54,25 @@ def warn_once(text: str) -> None:
         print(f"WARNING: {text}", file=sys.stderr)
 
 
-def compile_launcher(fmi_version: int, cache: Path):
-    """Compile the Python-hosted FMUs' binary for FMI 2 or 3 (:func:`launcher_sources`) into
-    ``cache``, keyed by the hash of sources, headers and flags.  Returns the library's path.  The
-    launcher carries the engine (the engine's C files with ``pg_binding.c``, compiled with the
-    engine's own flags: no fused multiply-add), so a C compiler is needed."""
-    cc = c_compiler()  # the system's cc, gcc or clang, else the ziglang package's zig cc
+def compile_launcher(fmi_version: int, cache: Optional[Path] = None, into: Optional[Path] = None) -> Path:
+    """The Python-hosted FMUs' binary for FMI 2 or 3 (:func:`launcher_sources`): the installed
+    package's prebuilt copy (``pogofmu/_lib``, compiled when the package was built), else compiled
+    once per version of its sources, headers, flags and compiler into ``cache`` (default: the
+    user's cache folder); ``into``: compile it there under the prebuilt name (the package build,
+    setup.py). Returns the library's path. The launcher carries the engine (the engine's C files
+    with ``pg_binding.c``, compiled with the engine's flags: no fused multiply-add), so where there
+    is no prebuilt copy a C compiler is needed (the system's, else the ziglang package's)."""
     sources = launcher_sources(fmi_version)
-    # absolute paths: zig runs from its own folder
-    flags = ["-std=c11", "-O2", "-ffp-contract=off", "-fno-strict-aliasing", "-fPIC", "-shared",
-             "-fvisibility=hidden", "-Wall", "-Wextra", "-Wno-unused-parameter", f"-I{fmi_headers().resolve()}",
-             f"-I{NATIVE}", f"-I{NATIVE / 'python'}", f"-I{ENGINE}"]
-    libs = ["-ldl", "-lpthread", "-lm"]
-    if cc is None:
-        raise BuildError(f"{NO_COMPILER}: the Python-hosted FMUs' launcher carries the engine, which is C")
-    zig = [f"zig {zig_version()}"] if len(cc) > 1 else []
-    digest = hashlib.sha256(" ".join([*cc, *zig] + flags + libs).encode())
-    for part in sorted({*sources, *NATIVE.glob("*.[ch]"), *(NATIVE / "python").glob("*.[ch]"),
-                        *ENGINE.glob("*.[ch]")}):  # sources, headers
-        digest.update(part.name.encode() + b"\0" + part.read_bytes())
-    for header in sorted(fmi_headers().glob(f"fmi{fmi_version}*.h")):
-        digest.update(header.read_bytes())
-    cache.mkdir(parents=True, exist_ok=True)
-    out = (cache / f"pogofmu_fmi{fmi_version}_{digest.hexdigest()[:16]}.so").resolve()
-    if not out.exists():
-        tmp = out.with_suffix(f".{os.getpid()}.tmp")
-        proc = _run_cc(cc, [*flags, *(str(Path(s).resolve()) for s in sources), "-o", str(tmp), *libs])
-        if proc.returncode:
-            raise BuildError(f"compiling the FMUs' launcher failed ({' '.join(cc)}):\n{proc.stderr}")
-        os.replace(tmp, out)
-    return out
+    headers = {*NATIVE.glob("*.h"), *(NATIVE / "python").glob("*.[ch]"), *ENGINE.glob("*.h"),
+               *fmi_headers().glob(f"fmi{fmi_version}*.h")}
+    include = [fmi_headers(), NATIVE, NATIVE / "python", ENGINE]
+    try:
+        return _host_library(f"pogofmu_launcher_fmi{fmi_version}", sources, headers, include,
+                             ["-std=c11", "-fvisibility=hidden", "-Wno-unused-parameter"], None,
+                             ": the Python-hosted FMUs' launcher carries the engine, which is C", into,
+                             ("-ldl", "-lpthread", "-lm"), cache)
+    except CompileError as exc:
+        raise BuildError(f"compiling the FMUs' launcher failed: {exc}") from None
 
 
 def python_libraries():
