@@ -5,47 +5,11 @@ from __future__ import annotations
 
 from typing import Sequence
 
-from pogofmu.runtime.solver import SOLVER_PARAMETERS
-from pogofmu.runtime.interface import LOG_CATEGORIES, array_table, fmi2_variables, fmi3_variables
+# (the variables' roles: runtime/interface.py variable_rows, which the Python-hosted FMUs use too)
+from pogofmu.runtime.interface import LOG_CATEGORIES, array_table, fmi2_variables, fmi3_variables, variable_rows
 from pogofmu.runtime.model import HybridModel
 
 from .cprint import c_string, literal
-
-CAUSALITY = {"parameter": "p", "input": "i", "output": "o", "local": "l", "independent": "t"}
-
-
-def variable_rows(model: HybridModel, variables) -> list:
-    """``(name, vr, type, causality, role, index, start)`` of each variable."""
-    params = [p.name for p in model.parameters]
-    settings = [p.name for p in SOLVER_PARAMETERS]
-    outputs = [v.name for v in model.outputs]
-    engine = [v.name for v in model.engine_outputs()]
-    states = [v.name for v in model.states]
-    events = [f"guard_{ev.name}" for ev in model.events]
-    rows = []
-    for v in variables:
-        kind, key = v.role
-        if kind == "parameter":
-            role, index = ("m", params.index(key)) if key in params else ("s", settings.index(key))
-        elif kind == "input":
-            role, index = "u", key
-        elif kind == "output" and key in outputs:
-            role, index = "y", outputs.index(key)
-        elif kind == "output" and key in engine:
-            role, index = "e", engine.index(key)
-        elif kind == "output" and key in states:
-            role, index = "x", states.index(key)
-        elif kind == "output" and key == "time":
-            role, index = "t", 0
-        elif kind == "derived" and key.startswith("der("):
-            role, index = "d", states.index(key[4:-1])
-        elif kind == "derived" and key in events:
-            role, index = "g", events.index(key)
-        else:
-            raise ValueError(f"{model.name}: variable {v.name} has a role {v.role} the native FMU does not know")
-        rows.append((v.name, v.vr, "I" if v.type == "Integer" else "R", CAUSALITY[v.causality], role, index,
-                     0.0 if v.start is None else v.start))
-    return rows
 
 
 def generate(model: HybridModel, fmi: int, token: str, build: str, variables: Sequence = None) -> str:

@@ -13,7 +13,7 @@ from typing import Optional, Tuple
 from .model import FALLING, HybridModel
 
 __all__ = ["FmiVariable", "fmi2_variables", "fmi3_variables", "array_table", "discrete_layout", "LOG_CATEGORIES",
-           "rate_unit", "indicator_name"]
+           "rate_unit", "indicator_name", "variable_rows"]
 
 LOG_CATEGORIES = {
     "logStatusWarning": "messages with status Warning",
@@ -123,3 +123,48 @@ def discrete_layout(model: HybridModel, p=None):
     ``q`` (the engine's layout, for the binding and the native generator alike)."""
     _, q = model.initial(model.params() if p is None else p)
     return tuple((k, "i" if isinstance(v, int) and not isinstance(v, (bool, float)) else "f") for k, v in q.items())
+
+
+# a variable's causality as the C adapter's PgVar says it (fmu_src/native/adapter/pg_instance.h)
+CAUSALITY = {"parameter": "p", "input": "i", "output": "o", "local": "l", "independent": "t"}
+
+
+def variable_rows(model: HybridModel, variables) -> list:
+    """The C adapter's variable table (``PgVar`` of pg_instance.h): ``(name, vr, type, causality,
+    role, index, start)`` of each variable, the role naming the array of the adapter the value lives
+    in ('m' model parameter, 's' solver setting, 'u' input, 'y' model output, 'e' engine output,
+    'x' state, 'd' a state's derivative, 'g' event indicator, 't' time). One mapping for the
+    native FMUs' generated C (:mod:`pogofmu.codegen.cfmu`) and the Python-hosted FMUs' table built
+    at run time (:mod:`.hosted`)."""
+    from .solver.settings import SOLVER_PARAMETERS  # (here: the engine's package imports this module)
+
+    params = [p.name for p in model.parameters]
+    settings = [p.name for p in SOLVER_PARAMETERS]
+    outputs = [v.name for v in model.outputs]
+    engine = [v.name for v in model.engine_outputs()]
+    states = [v.name for v in model.states]
+    events = [indicator_name(ev) for ev in model.events]
+    rows = []
+    for v in variables:
+        kind, key = v.role
+        if kind == "parameter":
+            role, index = ("m", params.index(key)) if key in params else ("s", settings.index(key))
+        elif kind == "input":
+            role, index = "u", key
+        elif kind == "output" and key in outputs:
+            role, index = "y", outputs.index(key)
+        elif kind == "output" and key in engine:
+            role, index = "e", engine.index(key)
+        elif kind == "output" and key in states:
+            role, index = "x", states.index(key)
+        elif kind == "output" and key == "time":
+            role, index = "t", 0
+        elif kind == "derived" and key.startswith("der("):
+            role, index = "d", states.index(key[4:-1])
+        elif kind == "derived" and key in events:
+            role, index = "g", events.index(key)
+        else:
+            raise ValueError(f"{model.name}: variable {v.name} has a role {v.role} the C adapter does not know")
+        rows.append((v.name, v.vr, "I" if v.type == "Integer" else "R", CAUSALITY[v.causality], role, index,
+                     0.0 if v.start is None else v.start))
+    return rows
