@@ -14,7 +14,7 @@ int pg_handle_get(PgInstance *in, unsigned mode, void **slot)
     if (!h) h = malloc(sizeof *h);
     if (!h) return PG_ST_ERROR;
     h->magic = PG_HANDLE_MAGIC;
-    h->owner = in->fmu;
+    h->owner = in->fmu->build;
     h->mode = mode;
     h->state = in->st;
     *slot = h;
@@ -24,7 +24,7 @@ int pg_handle_get(PgInstance *in, unsigned mode, void **slot)
 PgHandle *pg_handle_check(PgInstance *in, void *state, const char *what)
 {
     PgHandle *h = state;
-    if (!h || h->magic != PG_HANDLE_MAGIC || h->owner != in->fmu) {
+    if (!h || h->magic != PG_HANDLE_MAGIC || h->owner != in->fmu->build) {
         PgMsg m;
         pg_msg_clear(&m);
         pg_msg_printf(&m, "%s refused: %s", what,
@@ -93,7 +93,7 @@ int pg_handle_deserialize(PgInstance *in, const unsigned char *bytes, size_t siz
         return st;
     }
     h->magic = PG_HANDLE_MAGIC;
-    h->owner = in->fmu;
+    h->owner = in->fmu->build;
     h->mode = mode; /* the call state it was taken in, as serialized */
     if (*slot && ((PgHandle *)*slot)->magic == PG_HANDLE_MAGIC) {
         *(PgHandle *)*slot = *h;

@@ -10,7 +10,9 @@
 
 typedef struct PgHandle {
     unsigned magic;
-    const PgFmu *owner;
+    /* this FMU's build (its PgFmu's build string, by address: one per loaded copy of a build, for
+     * the process's life; a Python-hosted FMU's PgFmu is its instance's, the string its build's) */
+    const char *owner;
     unsigned mode; /* the instance's call state when the state was taken (0: none) */
     PgState state;
 } PgHandle;
