@@ -373,55 +373,48 @@ class EventRecord:
     x_after: list
 
 
-class Simulator:
-    """The engine integrating one :class:`HybridModel` from ``t0`` on.
+class Binding:
+    """One model bound to the engine: the ``PgModel`` whose functions call the model's Python code
+    (the hot ones, flow, guards, activity, outputs and domain, through pg_binding.c's trampolines,
+    given this object's ``PgbPy``; the cold ones through ctypes callbacks into this object), the
+    caches of the discrete state's dict and the inputs' tuple, and the one place a Python exception
+    becomes the engine's result (:meth:`_fail`).
 
-    ``p`` holds the model's parameters (missing ones take their defaults) and may hold solver
-    settings too (an FMU's parameter table holds both); ``solver`` overrides settings
-    (:mod:`.settings`).  ``self.p`` is the model's own parameters, the only ones its functions see;
-    ``self.solver`` the settings.
+    A :class:`Simulator` is one (and drives its own engine). The Python-hosted FMUs' C adapter keeps
+    one per FMU instance (:mod:`..hosted`): the adapter drives the engine, and hands the binding the
+    instance's parameters and settings when they change (:meth:`bind`). ``p`` and ``solver`` are
+    the Python values the model's functions see."""
 
-    Event bookkeeping in constant memory: ``n_events``, ``last_event`` (an :class:`EventRecord` or
-    None); the full history ``events`` only with ``keep_history`` (default: the setting
-    ``log_events = 1``), and then ``new_events`` collects the events a caller has not taken yet (the
-    FMI adapter logs and clears them after every call).  ``new_warnings`` collects warning texts (the
-    work budget) the same way.
-    """
-
-    def __init__(self, model: HybridModel, p=None, u=None, t0: float = 0.0, t_stop: float = math.inf,
-                 zeno_max_events: int = 200, zeno_window: float = 1e-6, keep_history: Optional[bool] = None,
-                 solver=None):
+    def __init__(self, model: HybridModel, p=None, solver=None, u=None):
         p, s = split_parameters(model, {} if p is None else p, solver)
         self.model, self.p, self.solver = model, p, s
         self.u = tuple(float(v.start) for v in model.inputs) if u is None else tuple(float(v) for v in u)
-        keep = bool(s.log_events) if keep_history is None else bool(keep_history)
-        self._history: Optional[List[EventRecord]] = [] if keep else None
-        self.new_events: List[EventRecord] = []
-        self.new_warnings: List[str] = []
         # the solver's messages not yet taken (logSolver): method = 0's switches, and the Jacobian
         # going to differences (a flow that does not run on dual numbers; then jacobian_by_differences)
         self.new_switches: List[str] = []
         self.jacobian_by_differences = False
         # (this run's library for good: its PgModel holds that copy's trampolines, and a process may
         # run FMUs each with its own copy of the library, use_library switching among them)
-        lib = self._lib = library()
-        self._engine = C.create_string_buffer(lib.pgb_sizeof())
-        self._attach()
-        # (a value that is no number goes in as NaN: the rules, called back with the Python values,
-        # refuse it in the engine's order with their own words)
-        svals = [_number_or_nan(s[par.name]) for par in SOLVER_PARAMETERS]
-        pvals = [_number_or_nan(p[par.name]) for par in model.parameters]
-        rc = lib.pgb_init(self._engine, C.byref(self._struct), _doubles(pvals),
-                          _doubles(svals), _doubles(self.u, len(model.inputs)), float(t0), float(t_stop),
-                          int(zeno_max_events), float(zeno_window), int(keep), self._on_event, self._on_warning,
-                          C.addressof(self._py))
-        self._check(rc)
-        self.n_events, self.last_event = -1, None  # (the first read takes the engine's)
-        self._read()
+        self._lib = library()
+        self._bind_model()
+
+    def bind(self, p_addr: int, s_addr: int) -> None:
+        """The model's parameters and the solver's settings from the doubles at ``p_addr`` (the
+        model's parameters in order) and ``s_addr`` (SOLVER_PARAMETERS' order), as the engine has
+        them: an integer parameter's value becomes an int. The trampolines' cache is dropped."""
+        model = self.model
+        pv = (C.c_double * max(len(model.parameters), 1)).from_address(p_addr)
+        sv = (C.c_double * len(SOLVER_PARAMETERS)).from_address(s_addr)
+        values = {par.name: _python_value(par, pv[i]) for i, par in enumerate(model.parameters)}
+        values.update((par.name, _python_value(par, sv[i])) for i, par in enumerate(SOLVER_PARAMETERS))
+        self.p, self.solver = split_parameters(model, values)
+        self._slack = domain_slack(self.solver)
+        self._qkey = self._qdict = self._bound = self._ukey = None
+        self._fill_py()
 
     # ---- the callbacks ------------------------------------------------------------------------
-    def _attach(self):
-        """This run's PgModel: the model's constant description and callbacks into this object."""
+    def _bind_model(self):
+        """This binding's PgModel: the model's constant description and callbacks into this object."""
         model = self.model
         static = _static(model, self.p)
         self._static = static
@@ -435,29 +428,12 @@ class Simulator:
         # the guards as written, and whether each reads the time (pg_binding.c's trampoline calls them)
         self._guards_raw = [ev.guard for ev in model.events]
         self._guard_times = [reads_time(ev.guard) for ev in model.events]
-        n = _READ_HEAD + 2 * self._nx + 2 * self._nq + self._nu
-        self._buf = (C.c_double * n)()
-        # the buffer read in one unpack (native doubles: the bits as they are; a ctypes slice costs
-        # several times as much per item), where pgb_read puts x_out, q_out, x, q and u in it (the
-        # slices built once), and the addresses the calls of every step pass (the engine and the
-        # buffer stay where they are for this object's life: restore copies into the same engine bytes)
-        self._unpack = struct.Struct(f"{n}d").unpack_from
-        a = _READ_HEAD
-        b, c, d, e = a + self._nx, a + self._nx + self._nq, a + 2 * self._nx + self._nq, n - self._nu
-        self._slices = (slice(a, b), slice(b, c), slice(c, d), slice(d, e), slice(e, n))
-        self._eaddr, self._baddr = C.addressof(self._engine), C.addressof(self._buf)
-        self._ubuf = (C.c_double * max(self._nu, 1))()
         self._ne = len(model.events)
-        self._zbuf = (C.c_double * max(self._ne, 1))()
-        self.sloped = False  # the inputs lie on a line (set_inputs with a slope), not held
         self._slack = domain_slack(self.solver)
         self._exc = None
         self._qkey = None
         self._qdict = None
         self._bound = None
-        # the discrete state of the latest read, its dict, and where a float entry's zero could be
-        # -0.0 (equal to 0.0 but other bits: read anew, not served from the cache)
-        self._qlast, self._qlast_dict = None, None
         self._qfloat = tuple(i for i, (_, kind) in enumerate(self._layout) if kind != "i")
         st = self._struct = PgModel()
         C.pointer(st)[0] = static.struct  # the constant fields
@@ -468,12 +444,10 @@ class Simulator:
         cbs.update((name, FN[name](lib.trampolines[name])) for name in _HOT)
         for name, fn in cbs.items():
             setattr(st, name, fn)
-        self._on_event = EVENT_HOOK(self._cb_event)
-        self._on_warning = WARN_HOOK(self._cb_warning)
         self._on_switch = SWITCH_HOOK(self._cb_switch)
         if getattr(self, "_py", None) is None:
             self._py = _new_py(lib)
-            weakref.finalize(self, _forget_py, lib, self._py)  # (the cache's references, with this run)
+            weakref.finalize(self, _forget_py, lib, self._py)  # (the cache's references, with this binding)
         self._fill_py()
         return static
 
@@ -703,6 +677,83 @@ class Simulator:
     def _cb_error_scales(self, p, out, n, m):
         return self._scales(self.model.error_scales, out, n, m)
 
+    def _cb_switch(self, text):
+        self.new_switches.append(text.decode("utf-8", "replace"))
+
+
+def _python_value(par, v: float):
+    """A parameter's value as the model sees it (an integer parameter's an int)."""
+    return int(v) if par.integer and math.isfinite(v) else v
+
+
+class Simulator(Binding):
+    """The engine integrating one :class:`HybridModel` from ``t0`` on.
+
+    ``p`` holds the model's parameters (missing ones take their defaults) and may hold solver
+    settings too (an FMU's parameter table holds both); ``solver`` overrides settings
+    (:mod:`.settings`).  ``self.p`` is the model's own parameters, the only ones its functions see;
+    ``self.solver`` the settings.
+
+    Event bookkeeping in constant memory: ``n_events``, ``last_event`` (an :class:`EventRecord` or
+    None); the full history ``events`` only with ``keep_history`` (default: the setting
+    ``log_events = 1``), and then ``new_events`` collects the events a caller has not taken yet (the
+    FMI adapter logs and clears them after every call).  ``new_warnings`` collects warning texts (the
+    work budget) the same way.
+    """
+
+    def __init__(self, model: HybridModel, p=None, u=None, t0: float = 0.0, t_stop: float = math.inf,
+                 zeno_max_events: int = 200, zeno_window: float = 1e-6, keep_history: Optional[bool] = None,
+                 solver=None):
+        Binding.__init__(self, model, p, solver, u)
+        p, s = self.p, self.solver
+        keep = bool(s.log_events) if keep_history is None else bool(keep_history)
+        self._history: Optional[List[EventRecord]] = [] if keep else None
+        self.new_events: List[EventRecord] = []
+        self.new_warnings: List[str] = []
+        lib = self._lib
+        self._engine = C.create_string_buffer(lib.pgb_sizeof())
+        self._attach_engine()
+        # (a value that is no number goes in as NaN: the rules, called back with the Python values,
+        # refuse it in the engine's order with their own words)
+        svals = [_number_or_nan(s[par.name]) for par in SOLVER_PARAMETERS]
+        pvals = [_number_or_nan(p[par.name]) for par in model.parameters]
+        rc = lib.pgb_init(self._engine, C.byref(self._struct), _doubles(pvals),
+                          _doubles(svals), _doubles(self.u, len(model.inputs)), float(t0), float(t_stop),
+                          int(zeno_max_events), float(zeno_window), int(keep), self._on_event, self._on_warning,
+                          C.addressof(self._py))
+        self._check(rc)
+        self.n_events, self.last_event = -1, None  # (the first read takes the engine's)
+        self._read()
+
+    # ---- the callbacks ------------------------------------------------------------------------
+    def _attach(self):
+        """This run's PgModel (the binding) and the engine's buffers."""
+        static = self._bind_model()
+        self._attach_engine()
+        return static
+
+    def _attach_engine(self):
+        """The buffers of this run's engine calls."""
+        n = _READ_HEAD + 2 * self._nx + 2 * self._nq + self._nu
+        self._buf = (C.c_double * n)()
+        # the buffer read in one unpack (native doubles: the bits as they are; a ctypes slice costs
+        # several times as much per item), where pgb_read puts x_out, q_out, x, q and u in it (the
+        # slices built once), and the addresses the calls of every step pass (the engine and the
+        # buffer stay where they are for this object's life: restore copies into the same engine bytes)
+        self._unpack = struct.Struct(f"{n}d").unpack_from
+        a = _READ_HEAD
+        b, c, d, e = a + self._nx, a + self._nx + self._nq, a + 2 * self._nx + self._nq, n - self._nu
+        self._slices = (slice(a, b), slice(b, c), slice(c, d), slice(d, e), slice(e, n))
+        self._eaddr, self._baddr = C.addressof(self._engine), C.addressof(self._buf)
+        self._ubuf = (C.c_double * max(self._nu, 1))()
+        self._zbuf = (C.c_double * max(self._ne, 1))()
+        self.sloped = False  # the inputs lie on a line (set_inputs with a slope), not held
+        # the discrete state of the latest read, its dict, and where a float entry's zero could be
+        # -0.0 (equal to 0.0 but other bits: read anew, not served from the cache)
+        self._qlast, self._qlast_dict = None, None
+        self._on_event = EVENT_HOOK(self._cb_event)
+        self._on_warning = WARN_HOOK(self._cb_warning)
+
     def _cb_event(self, ctx, engine, ev, number):
         if self._history is None:
             return
@@ -714,9 +765,6 @@ class Simulator:
 
     def _cb_warning(self, ctx, text):
         self.new_warnings.append(text.decode("utf-8", "replace"))
-
-    def _cb_switch(self, text):
-        self.new_switches.append(text.decode("utf-8", "replace"))
 
     # ---- calls ----------------------------------------------------------------------------
     def _check(self, rc):
