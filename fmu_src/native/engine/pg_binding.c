@@ -115,6 +115,15 @@ static __declspec(thread) PgbPy *current;
 static _Thread_local PgbPy *current; /* the run whose engine call is under way on this thread */
 #endif
 
+/* the C adapter hosting a Python model (python/pg_source_py.c): the run of its instance made the
+ * current one of this thread for the length of an FMI call (GIL held); the previous one returned */
+PGB_API void *pgb_py_enter(void *c)
+{
+    PgbPy *old = current;
+    current = (PgbPy *)c;
+    return old;
+}
+
 /* the pending Python exception handed to the binding's fail: its result code */
 static int py_failed(PgbPy *c, PgMsg *m)
 {

@@ -132,3 +132,19 @@ def describe(exc):
     frames = traceback.extract_tb(exc.__traceback__)
     where = f" (at {os.path.basename(frames[-1].filename)}:{frames[-1].lineno})" if frames else ""
     return f"internal error: {type(exc).__name__}: {exc}{where}"
+
+
+def hosted(resources, engine, fmi, instance_name=""):
+    """The model of the FMU whose resources folder is ``resources``, for the C adapter (the launcher's
+    model source, pg_source_py.c): a ``HostedFmu`` of the build's ``hosted`` module, whose
+    ``fmu_address`` is the adapter's PgFmu (variable table and PgModel, built at run time),
+    ``py_address`` the binding's PgbPy and ``bind(p, s)`` takes the instance's parameters and solver
+    settings (addresses of doubles)."""
+    if isinstance(resources, bytes):
+        resources = os.fsdecode(resources)
+    with _process_lock():
+        cls = _load(resources, os.fsdecode(engine) if isinstance(engine, bytes) else engine)
+        conf = read_launch_file(resources)
+        package = conf["package"][0]
+        module = importlib.import_module(package + ".hosted")
+    return module.HostedFmu(cls.model, int(fmi), conf["token"][0], package, instance_name)

@@ -32,16 +32,19 @@ PACKAGE = Path(__file__).resolve().parents[1]  # fmu_src/pogofmu
 RUNTIME = PACKAGE / "runtime"  # the code that goes into every FMU, staged as a whole
 # the C layer (in a clone or a wheel), the FMI headers it carries, and one way to compile a library
 # for this machine (a prebuilt copy of the package, else the system's compiler or ziglang's)
-from pogofmu.codegen.build import (BINDING_SOURCES, ENGINE, NATIVE, CompileError, _host_library,  # noqa: E402
-                                   fmi_headers)
+from pogofmu.codegen.build import (ADAPTER, ADAPTER_SOURCES, BINDING_SOURCES, ENGINE, NATIVE,  # noqa: E402
+                                   CompileError, _host_library, fmi_headers)
 
 
 def launcher_sources(fmi_version: int):
     """The C files of the Python-hosted FMUs' binary: the entry file of that FMI version (the one the
     native FMUs are built from, ``fmu_src/native/fmi2/pg_fmi2.c`` or ``fmi3/pg_fmi3.c``), the log
-    filter, and the Python backend (``native/python/``: the bridge, the embedding of CPython)."""
+    filter, the C adapter of the native FMUs (``native/adapter/``: the FMI rules, the FMU states)
+    whose model comes from Python (``native/python/pg_source_py.c``, with the embedding of CPython),
+    and the engine with its Python binding."""
     return [NATIVE / f"fmi{fmi_version}" / f"pg_fmi{fmi_version}.c", NATIVE / "pg_logging.c",
-            NATIVE / "python" / "pg_bridge.c", NATIVE / "python" / "python_embed.c",
+            *(ADAPTER / s for s in ADAPTER_SOURCES),
+            NATIVE / "python" / "pg_source_py.c", NATIVE / "python" / "python_embed.c",
             *(ENGINE / s for s in BINDING_SOURCES)]
 
 
@@ -63,12 +66,12 @@ def compile_launcher(fmi_version: int, cache: Optional[Path] = None, into: Optio
     with ``pg_binding.c``, compiled with the engine's flags: no fused multiply-add), so where there
     is no prebuilt copy a C compiler is needed (the system's, else the ziglang package's)."""
     sources = launcher_sources(fmi_version)
-    headers = {*NATIVE.glob("*.h"), *(NATIVE / "python").glob("*.[ch]"), *ENGINE.glob("*.h"),
-               *fmi_headers().glob(f"fmi{fmi_version}*.h")}
-    include = [fmi_headers(), NATIVE, NATIVE / "python", ENGINE]
+    headers = {*NATIVE.glob("*.h"), *(NATIVE / "python").glob("*.[ch]"),
+               *ADAPTER.glob("*.h"), *ENGINE.glob("*.h"), *fmi_headers().glob(f"fmi{fmi_version}*.h")}
+    include = [fmi_headers(), NATIVE, NATIVE / "python", ADAPTER, ENGINE]
     try:
         return _host_library(f"pogofmu_launcher_fmi{fmi_version}", sources, headers, include,
-                             ["-std=c11", "-fvisibility=hidden", "-Wno-unused-parameter"], None,
+                             ["-std=c11", "-fvisibility=hidden", "-Wno-unused-parameter", "-DPG_PYTHON_SOURCE"], None,
                              ": the Python-hosted FMUs' launcher carries the engine, which is C", into,
                              ("-ldl", "-lpthread", "-lm"), cache)
     except CompileError as exc:
