@@ -1,10 +1,19 @@
 /* See pg_handles.h. */
 #include "pg_handles.h"
 
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "pg_support.h"
+
+static void own(PgHandle *h, const PgInstance *in)
+{
+    h->owner = in->fmu->build;
+    snprintf(h->owner_model, sizeof h->owner_model, "%s", in->fmu->model->name);
+    snprintf(h->owner_build, sizeof h->owner_build, "%s", in->fmu->build);
+    h->owner_fmi = in->fmu->fmi;
+}
 
 int pg_handle_get(PgInstance *in, unsigned mode, void **slot)
 {
@@ -14,7 +23,7 @@ int pg_handle_get(PgInstance *in, unsigned mode, void **slot)
     if (!h) h = malloc(sizeof *h);
     if (!h) return PG_ST_ERROR;
     h->magic = PG_HANDLE_MAGIC;
-    h->owner = in->fmu->build;
+    own(h, in);
     h->mode = mode;
     h->state = in->st;
     *slot = h;
@@ -24,14 +33,23 @@ int pg_handle_get(PgInstance *in, unsigned mode, void **slot)
 PgHandle *pg_handle_check(PgInstance *in, void *state, const char *what)
 {
     PgHandle *h = state;
-    if (!h || h->magic != PG_HANDLE_MAGIC || h->owner != in->fmu->build) {
+    if (!h || h->magic != PG_HANDLE_MAGIC) {
         PgMsg m;
         pg_msg_clear(&m);
         pg_msg_printf(&m, "%s refused: %s", what,
                       !h ? "no FMU state given (NULL)"
-                      : h->magic != PG_HANDLE_MAGIC ? "not an FMU state of a native pogofmu FMU (or one already freed)"
-                      : "the state belongs to another FMU (another model or build): restore it into an instance of "
-                        "the FMU that saved it");
+                         : "not an FMU state of a native pogofmu FMU (or one already freed)");
+        pg_inst_refuse(in, &m);
+        return NULL;
+    }
+    if (h->owner != in->fmu->build) { /* both named, as a serialized state's refusal names them */
+        PgMsg m;
+        pg_msg_clear(&m);
+        pg_msg_printf(&m, "%s refused: the state belongs to model '%s', build '%s', FMI %s; this instance is model "
+                      "'%s', build '%s', FMI %s%s", what, h->owner_model, h->owner_build, h->owner_fmi == 3 ? "3.0" : "2.0",
+                      in->fmu->model->name, in->fmu->build, in->fmu->fmi == 3 ? "3.0" : "2.0",
+                      strcmp(h->owner_build, in->fmu->build) == 0 ? " (another loaded copy of it: restore the state "
+                      "into an instance of the copy that saved it)" : "");
         pg_inst_refuse(in, &m);
         return NULL;
     }
@@ -93,7 +111,7 @@ int pg_handle_deserialize(PgInstance *in, const unsigned char *bytes, size_t siz
         return st;
     }
     h->magic = PG_HANDLE_MAGIC;
-    h->owner = in->fmu->build;
+    own(h, in);
     h->mode = mode; /* the call state it was taken in, as serialized */
     if (*slot && ((PgHandle *)*slot)->magic == PG_HANDLE_MAGIC) {
         *(PgHandle *)*slot = *h;

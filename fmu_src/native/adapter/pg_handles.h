@@ -13,6 +13,8 @@ typedef struct PgHandle {
     /* this FMU's build (its PgFmu's build string, by address: one per loaded copy of a build, for
      * the process's life; a Python-hosted FMU's PgFmu is its instance's, the string its build's) */
     const char *owner;
+    char owner_model[128], owner_build[128]; /* who it is, for the message of a refusal */
+    int owner_fmi;
     unsigned mode; /* the instance's call state when the state was taken (0: none) */
     PgState state;
 } PgHandle;
