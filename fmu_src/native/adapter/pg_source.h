@@ -25,11 +25,15 @@ const PgFmu *pg_source_open(const PgSetup *setup, PgSource **src);
 void pg_source_close(PgSource *src);
 
 typedef struct PgSourceGuard {
+    PgInstance *in;
     int gil;
     void *outer;
+    int jvp_off; /* the engine took the Jacobian by differences before the call */
 } PgSourceGuard;
 
 void pg_source_enter(PgSource *src, PgInstance *in, PgSourceGuard *g);
+/* the call done: what the Python side noted during it logged (the Jacobian gone to differences:
+ * the binding's text, logSolver), the thread and the GIL as they were */
 void pg_source_leave(PgSource *src, PgSourceGuard *g);
 
 #endif

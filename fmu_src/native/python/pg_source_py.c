@@ -298,6 +298,8 @@ void pg_source_close(PgSource *src)
 
 void pg_source_enter(PgSource *src, PgInstance *in, PgSourceGuard *g)
 {
+    g->in = in;
+    g->jvp_off = in->st.has_sim && in->st.sim.jvp_off;
     g->gil = py.PyGILState_Ensure();
     g->outer = pgb_py_enter(src->py);
     const PgModel *md = in->fmu->model;
@@ -316,9 +318,28 @@ void pg_source_enter(PgSource *src, PgInstance *in, PgSourceGuard *g)
     if (args) py.Py_DecRef(args);
 }
 
+/* the binding's texts of the Jacobian gone to differences (a flow that does not run on dual
+ * numbers), logged as the Python adapter logged them: logSolver */
+static void log_switches(PgSource *src, PgInstance *in)
+{
+    PyObject *fn = py.PyObject_GetAttrString(src->obj, "take_switches");
+    PyObject *texts = fn ? py.PyObject_CallObject(fn, NULL) : NULL;
+    Py_ssize_t_ n = texts ? py.PySequence_Size(texts) : 0;
+    for (Py_ssize_t_ i = 0; i < n; ++i) {
+        PyObject *item = py.PySequence_GetItem(texts, i);
+        char *text = item ? utf8_of(item) : NULL;
+        if (text && in->log) in->log(in->log_env, PG_ST_OK, "logSolver", text);
+        free(text);
+        if (item) py.Py_DecRef(item);
+    }
+    if (texts) py.Py_DecRef(texts);
+    if (fn) py.Py_DecRef(fn);
+    py.PyErr_Clear();
+}
+
 void pg_source_leave(PgSource *src, PgSourceGuard *g)
 {
-    (void)src;
+    if (!g->jvp_off && g->in->st.has_sim && g->in->st.sim.jvp_off) log_switches(src, g->in);
     pgb_py_enter(g->outer);
     py.PyGILState_Release(g->gil);
 }

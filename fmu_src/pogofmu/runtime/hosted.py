@@ -93,3 +93,10 @@ class HostedFmu:
     def bind(self, p_addr: int, s_addr: int) -> None:
         """The instance's parameters and settings (addresses of its doubles) for the model's functions."""
         self.binding.bind(p_addr, s_addr)
+
+    def take_switches(self):
+        """The solver's messages noted since the last call (the Jacobian gone to differences: a flow
+        that does not run on dual numbers), taken: the adapter logs them (logSolver)."""
+        texts = list(self.binding.new_switches)
+        self.binding.new_switches.clear()
+        return texts
