@@ -588,8 +588,8 @@ def test_every_fmi_function_is_defined_once_for_both_backends():
     """The call-state machines above hold for both kinds of FMU because there is one entry file per
     FMI version: every fmi2*/fmi3* function is defined in exactly one C file of fmu_src/native —
     fmi2/pg_fmi2.c or fmi3/pg_fmi3.c, where each checks the call state from call_states.h — and
-    that file is compiled into the Python-hosted FMUs' binary (with the bridge to Python) and into
-    the native FMUs' (with the native backend) alike."""
+    that file is compiled into the Python-hosted FMUs' binary (with the adapter and the Python model source) and into
+    the native FMUs' (with the adapter and their generated model) alike."""
     import re
 
     from pogofmu import exporter as build

@@ -476,45 +476,80 @@ def test_penetration_dipping_below_zero_inside_a_step_is_a_liftoff():
     assert worst <= 1e-5 * E0
 
 
-def test_an_event_storm_inside_an_fmu_step_is_an_error_and_the_instance_is_restorable():
+ZENO_BALL = '''\
+"""A ball with restitution 0.5 that bounces infinitely often before t = 3 sqrt(2 h0/g) (Zeno)."""
+from pogofmu import FALLING, Event, HybridModel, Parameter, Variable
+
+MODEL = HybridModel(
+    name="ZenoBall", description="bouncing ball",
+    states=(Variable("y", "m", "height above the floor"), Variable("v", "m/s", "velocity (up)")),
+    parameters=(Parameter("e", 0.5, "", "coefficient of restitution"), Parameter("h0", 1.0, "m", "initial height")),
+    inputs=(), outputs=(Variable("y", "m", "height above the floor"),),
+    flow=lambda t, x, q, u, p: [x[1], -9.81],
+    events=(Event("impact", FALLING, lambda x, q, u, p: x[0],
+                  lambda x, q, u, p: ([0.0, -p.e * x[1]], dict(q, n=q["n"] + 1))),),
+    initial=lambda p: ([p.h0, 0.0], {"n": 0}), output_fn=lambda t, x, q, u, p: {"y": x[0]})
+'''
+
+
+@pytest.fixture(scope="module")
+def zeno_ball(tmp_path_factory):
+    """ZENO_BALL exported as a user does it (``pogofmu export``, FMI 2.0): {backend: FMU path}."""
+    from support import run_pogofmu
+
+    folder = tmp_path_factory.mktemp("zeno")
+    (folder / "zeno_ball.py").write_text(ZENO_BALL)
+    proc = run_pogofmu("export", "zeno_ball.py", "--out", "out", "--fmi", "2", "--platforms", "x86_64-linux",
+                       cwd=folder, timeout=600)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    return {"python": folder / "out" / "ZenoBall.fmu", "native": folder / "out" / "native" / "ZenoBall.fmu"}
+
+
+@pytest.mark.parametrize("backend", ["python", "native"])
+def test_an_event_storm_inside_an_fmu_step_is_an_error_and_the_instance_is_restorable(zeno_ball, backend, tmp_path):
     """docs/errors.md: an event storm ends fmi2DoStep with fmi2Error naming it and the time, never a
-    hang or Fatal; later steps are refused naming the cause; a state saved before restores. The
-    adapter (runtime/fmi2.py) driven as the launcher drives it, on a ball with restitution 0.5,
-    which bounces infinitely often before t = 3 sqrt(2 h0/g) (Zeno)."""
-    from pogofmu.runtime.fmi2 import FMUError, HybridSlave
-    from pogofmu.runtime.model import FALLING, Event, HybridModel, Parameter, Variable
-    from pogofmu.runtime.status import ERROR
+    hang or Fatal; later steps are refused naming the cause; a state saved before restores and the
+    instance steps on. Both kinds of FMU (one adapter), driven through fmpy's FMI 2.0 functions."""
+    from fmpy import extract, read_model_description
+    from fmpy.fmi1 import FMICallException
+    from fmpy.fmi2 import FMU2Slave
 
-    ball = HybridModel(
-        name="Ball", description="bouncing ball", states=(Variable("y", "m"), Variable("v", "m/s")),
-        parameters=(Parameter("e", 0.5), Parameter("h0", 1.0)), inputs=(), outputs=(Variable("y", "m"),),
-        flow=lambda t, x, q, u, p: [x[1], -G],
-        events=(Event("impact", FALLING, lambda x, q, u, p: x[0],
-                      lambda x, q, u, p: ([0.0, -p.e * x[1]], dict(q, n=q["n"] + 1))),),
-        initial=lambda p: ([p.h0, 0.0], {"n": 0}), output_fn=lambda t, x, q, u, p: {"y": x[0]})
+    from support import fmi2_callbacks
 
-    class BallSlave(HybridSlave):
-        model = ball
-
-    slave = BallSlave(instance_name="ball")
-    slave._launcher_attach()  # as the launcher: errors become statuses
-    slave.setup_experiment(0.0, None, None)
-    slave.enter_initialization_mode()
-    slave.exit_initialization_mode()
-    t_zeno = 3 * math.sqrt(2 * 1.0 / G)
-    assert slave.do_step(0.0, 1.0) is True
-    saved = slave._get_fmu_state()
-    with pytest.raises(FMUError) as exc:
-        slave.do_step(1.0, 1.0)
-    assert exc.value.fmi_status == ERROR, exc.value.fmi_status
-    text = str(exc.value)
-    assert "event storm" in text and "impact" in text, text
-    assert float(re.search(r"t = ([0-9.eE+-]+) s", text).group(1)) == pytest.approx(t_zeno, abs=1e-3), text
-    with pytest.raises(FMUError) as again:
-        slave.do_step(2.0, 0.1)
-    assert "refused" in str(again.value) and "event storm" in str(again.value), str(again.value)
-    slave._set_fmu_state(saved)  # back before the storm: the instance steps again
-    assert slave.do_step(1.0, 0.1) is True
+    path = zeno_ball[backend]
+    md = read_model_description(str(path))
+    y_vr = next(v.valueReference for v in md.modelVariables if v.name == "y")
+    got = []
+    keep = fmi2_callbacks(got)
+    fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(str(path), str(tmp_path / "x")),
+                    modelIdentifier=md.coSimulation.modelIdentifier, instanceName="ball")
+    fmu.instantiate(loggingOn=True, callbacks=keep.struct)
+    try:
+        fmu.setupExperiment(startTime=0.0)
+        fmu.enterInitializationMode()
+        fmu.exitInitializationMode()
+        t_zeno = 3 * math.sqrt(2 * 1.0 / G)
+        fmu.doStep(0.0, 1.0)
+        saved = fmu.getFMUState()
+        with pytest.raises(FMICallException) as exc:
+            fmu.doStep(1.0, 1.0)
+        assert exc.value.status == ERROR, exc.value.status
+        storm = [text for status, _, text in got if status == ERROR and "event storm" in text]
+        assert storm and "impact" in storm[0], got[-3:]
+        at = float(re.search(r"t = ([0-9.eE+-]+) s", storm[0]).group(1))
+        assert at == pytest.approx(t_zeno, abs=1e-3), storm[0]
+        with pytest.raises(FMICallException) as again:
+            fmu.doStep(2.0, 0.1)
+        assert again.value.status == ERROR, again.value.status
+        assert "refused" in got[-1][2] and "event storm" in got[-1][2], got[-1]
+        fmu.setFMUState(saved)  # back before the storm: the instance steps again
+        fmu.doStep(1.0, 0.1)
+        # after its first bounce at sqrt(2/g) s the ball flies up and falls again: above the floor at 1.1 s
+        (y,) = fmu.getReal([y_vr])
+        assert 0.0 < y < 1.0, y
+        fmu.freeFMUState(saved)
+    finally:
+        fmu.freeInstance()
 
 
 @pytest.mark.parametrize("backend", ["", "native/"], ids=["python", "native"])

@@ -9,7 +9,7 @@
  * where the standard allows it; nothing else happens, so the instance stays usable.
  *
  * Included by the FMI entry files fmi2/pg_fmi2.c and fmi3/pg_fmi3.c (one table for both backends
- * of the FMUs: the native engine and the bridge to Python). */
+ * of the FMUs: the adapter with generated C, and with the FMU's Python code). */
 #ifndef POGOFMU_CALL_STATES_H
 #define POGOFMU_CALL_STATES_H
 

@@ -5,10 +5,11 @@
  * checks its arguments, filters the log (pg_logging.h), maps the statuses — and hands the work to
  * the backend the binary was linked with, through the functions below:
  *
- *   - the native engine (adapter/pg_backend.c, over adapter/pg_instance.c and the generated C of
- *     one model): the native FMUs, no Python;
- *   - the bridge to Python (python/pg_bridge.c, over python/python_embed.c): the Python-hosted
- *     FMUs, whose model runs in the slave object of resources/.
+ *   - the one adapter (adapter/pg_backend.c, over adapter/pg_instance.c, pg_instance3.c,
+ *     pg_handles.c, pg_derivatives.c), the FMI rules written once; its model comes from a model
+ *     source (adapter/pg_source.h): the generated C of one model (the native FMUs, no Python) or,
+ *     compiled with PG_PYTHON_SOURCE, the FMU's Python code (python/pg_source_py.c over
+ *     python/python_embed.c: the Python-hosted FMUs).
  *
  * Statuses are PG_ST_* (the numbers of fmi2Status and fmi3Status alike); flags are ints; nothing
  * here depends on the FMI headers. A backend logs through the `log` function it was given (the

@@ -23,8 +23,8 @@ struct PgBackend {
 #define GUARDED(b, expr)                                                                                   \
     do {                                                                                                   \
         PgSourceGuard g_;                                                                                  \
-        pg_source_enter((b)->src, &(b)->inst, &g_);                                                        \
-        int rc_ = (expr);                                                                                  \
+        int rc_ = pg_source_enter((b)->src, &(b)->inst, &g_);                                              \
+        if (rc_ == PG_ST_OK) rc_ = (expr);                                                                 \
         pg_source_leave((b)->src, &g_);                                                                    \
         return rc_;                                                                                        \
     } while (0)

@@ -38,7 +38,7 @@ PgHandle *pg_handle_check(PgInstance *in, void *state, const char *what)
         pg_msg_clear(&m);
         pg_msg_printf(&m, "%s refused: %s", what,
                       !h ? "no FMU state given (NULL)"
-                         : "not an FMU state of a native pogofmu FMU (or one already freed)");
+                         : "not an FMU state of a pogofmu FMU (or one already freed)");
         pg_inst_refuse(in, &m);
         return NULL;
     }
@@ -70,7 +70,7 @@ int pg_handle_free(PgInstance *in, void **slot)
     PgHandle *h = slot ? *slot : NULL;
     if (!h) return PG_ST_OK;
     if (h->magic != PG_HANDLE_MAGIC)
-        return pg_inst_refuse_text(in, "free FMU state refused: not an FMU state of a native pogofmu FMU");
+        return pg_inst_refuse_text(in, "free FMU state refused: not an FMU state of a pogofmu FMU");
     h->magic = 0;
     free(h);
     *slot = NULL;

@@ -6,7 +6,7 @@
 
 #include "pg_instance.h"
 
-#define PG_HANDLE_MAGIC 0x706f6e61u /* 'pona': a state handle of a native pogofmu FMU */
+#define PG_HANDLE_MAGIC 0x706f6e61u /* 'pona': a state handle of a pogofmu FMU (either backend) */
 
 typedef struct PgHandle {
     unsigned magic;

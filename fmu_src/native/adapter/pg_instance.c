@@ -1,4 +1,5 @@
-/* See pg_instance.h. Each function names the method of fmu_src/pogofmu/runtime/fmi2.py it follows. */
+/* See pg_instance.h. Each function names the method of the former Python adapter (runtime/fmi2.py
+ * HybridSlave, before the one adapter) whose rules and messages it keeps. */
 #include "pg_instance.h"
 
 #include <math.h>

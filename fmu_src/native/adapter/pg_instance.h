@@ -1,8 +1,9 @@
-/* pogofmu native FMUs: one adapter from any generated model to FMI — the C twin of the Python
- * adapter fmu_src/pogofmu/runtime/fmi2.py (HybridSlave): the variable table, parameters fixed at
+/* pogofmu FMUs: the one adapter from any model to FMI, of both kinds of FMU (the model generated C,
+ * or Python code: pg_source.h): the variable table, parameters fixed at
  * initialization and checked there, inputs held over a step and checked at the step, outputs
  * refreshed once per step, the step's rules, the event log, FMU states with their owner and seal.
- * The same rules in the same order with the same messages as the Python adapter.
+ * (Comments name the methods of the Python adapter, runtime/fmi2.py, that these functions replaced
+ * and whose messages they keep.)
  *
  * The FMI entry files (fmu_src/native/fmi2/) check the call states and map the statuses; this file
  * knows nothing of the FMI headers. */

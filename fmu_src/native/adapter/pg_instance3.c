@@ -1,9 +1,9 @@
-/* pogofmu native FMUs: the FMI 3.0 extension of the adapter — the C twin of
- * fmu_src/pogofmu/runtime/fmi3.py (Fmi3Slave): model exchange (the importer integrates the states
+/* pogofmu FMUs (both kinds): the FMI 3.0 extension of the adapter, the semantics written down in
+ * fmu_src/pogofmu/runtime/fmi3.py's docstring: model exchange (the importer integrates the states
  * and locates the indicators' sign changes; the engine arms the guards and says which event fires:
- * pg_engine_me_indicators, pg_engine_me_fired), and
- * co-simulation with event mode and early return. Each function names the method it follows; the
- * same rules in the same order with the same messages. */
+ * pg_engine_me_indicators, pg_engine_me_fired), and co-simulation with event mode and early
+ * return. (The names of the Python adapter's methods these functions once followed are kept in
+ * their comments.) */
 #include <math.h>
 #include <stdio.h>
 #include <string.h>

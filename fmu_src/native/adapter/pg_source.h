@@ -31,7 +31,10 @@ typedef struct PgSourceGuard {
     int jvp_off; /* the engine took the Jacobian by differences before the call */
 } PgSourceGuard;
 
-void pg_source_enter(PgSource *src, PgInstance *in, PgSourceGuard *g);
+/* PG_ST_OK, or PG_ST_ERROR with the reason logged when the instance's parameters cannot be handed
+ * to the model's functions (the call must then not run: they would read other values); in either
+ * case pg_source_leave follows */
+int pg_source_enter(PgSource *src, PgInstance *in, PgSourceGuard *g);
 /* the call done: what the Python side noted during it logged (the Jacobian gone to differences:
  * the binding's text, logSolver), the thread and the GIL as they were */
 void pg_source_leave(PgSource *src, PgSourceGuard *g);

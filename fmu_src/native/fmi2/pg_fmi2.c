@@ -1,8 +1,8 @@
 /* The FMI 2.0 co-simulation entry points of every pogofmu FMU, of both backends: every function of
  * the standard exists once here, checks the instance's call state against the one table of
  * call_states.h and its arguments, filters the log (pg_logging.h), and hands the work to the
- * backend the binary is linked with (pg_backend.h): the native engine (adapter/pg_backend.c, no
- * Python) or the bridge to the FMU's Python code (python/pg_bridge.c). */
+ * backend (pg_backend.h): the one adapter (adapter/pg_backend.c), whose model is generated C
+ * (native FMUs) or the FMU's Python code (python/pg_source_py.c: the Python-hosted FMUs). */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>

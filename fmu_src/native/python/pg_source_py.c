@@ -296,7 +296,7 @@ void pg_source_close(PgSource *src)
     free(src);
 }
 
-void pg_source_enter(PgSource *src, PgInstance *in, PgSourceGuard *g)
+int pg_source_enter(PgSource *src, PgInstance *in, PgSourceGuard *g)
 {
     g->in = in;
     g->jvp_off = in->st.has_sim && in->st.sim.jvp_off;
@@ -304,18 +304,26 @@ void pg_source_enter(PgSource *src, PgInstance *in, PgSourceGuard *g)
     g->outer = pgb_py_enter(src->py);
     const PgModel *md = in->fmu->model;
     size_t pb = sizeof(double) * (size_t)md->np, sb = sizeof(double) * (size_t)md->ns;
-    if (src->keyed && memcmp(in->st.par, src->pkey, pb) == 0 && memcmp(in->st.set, src->skey, sb) == 0) return;
+    if (src->keyed && memcmp(in->st.par, src->pkey, pb) == 0 && memcmp(in->st.set, src->skey, sb) == 0)
+        return PG_ST_OK;
     /* the instance's parameters and settings for the binding's Python functions (what they read) */
     PyObject *args = build("(KK)", (unsigned long long)(uintptr_t)in->st.par, (unsigned long long)(uintptr_t)in->st.set);
     PyObject *r = args ? py.PyObject_CallObject(src->bind, args) : NULL;
+    if (args) py.Py_DecRef(args);
     if (r) {
         memcpy(src->pkey, in->st.par, pb), memcpy(src->skey, in->st.set, sb);
         src->keyed = 1;
         py.Py_DecRef(r);
-    } else {
-        py.PyErr_Clear(); /* (not keyed: tried again at the next call) */
+        return PG_ST_OK;
     }
-    if (args) py.Py_DecRef(args);
+    /* not keyed: the next call tries again; this one is refused, never run with other values */
+    char *why = exception_text();
+    char text[PG_MSG_MAX];
+    snprintf(text, sizeof text, "%s: the parameters could not be handed to the model's Python code: %s", md->name,
+             why ? why : "(no reason given)");
+    free(why);
+    if (in->log) in->log(in->log_env, PG_ST_ERROR, "logStatusError", text);
+    return PG_ST_ERROR;
 }
 
 /* the binding's texts of the Jacobian gone to differences (a flow that does not run on dual

@@ -1,7 +1,7 @@
-"""Bootstrap of a pogofmu FMU's Python side, run by the launcher (the bridge pg_bridge.c).
+"""Bootstrap of a pogofmu FMU's Python side, run by the launcher (its model source, pg_source_py.c).
 
 The launcher compiles this file from the FMU's ``resources/`` folder once per process and calls
-``load(resources)`` at each instantiation.  It needs the standard library only.
+``hosted(resources, engine, fmi)`` at each instantiation.  It needs the standard library only.
 
 Isolation: the FMU's code lives in ``resources/`` under names private to one build of one model
 (``_pogofmu_<Model>_<hash>`` for the package, ``<package>_slave`` for the slave module; written to
@@ -87,7 +87,7 @@ class BootError(Exception):
 def load(resources, engine=None):
     """The slave class of the FMU whose resources folder is ``resources`` (a path as str or as the
     file system's bytes: any locale); ``engine``: the library that carries the engine (the launcher
-    itself)."""
+    itself). The export checks with it that the staged code imports on its own."""
     if isinstance(resources, bytes):
         resources = os.fsdecode(resources)
     if isinstance(engine, bytes):
@@ -117,11 +117,7 @@ def _load(resources, engine=None):
     if engine:
         importlib.import_module(package + ".solver.cengine").use_library(engine)
     slave = _import_from_file(module, os.path.join(resources, module + ".py"))
-    cls = getattr(slave, cls)
-    if conf.get("fmi", ["2"])[0] == "3":  # the same slave file, behind the FMI 3.0 adapter
-        fmi3 = importlib.import_module(package + ".fmi3")
-        cls = fmi3.fmi3_class(cls)
-    return cls
+    return getattr(slave, cls)
 
 
 def describe(exc):

@@ -4,7 +4,8 @@
  * link-time dependency on libpython), starts one isolated interpreter per process, however many
  * copies of the launcher are loaded and from however many threads, and loads the FMU's boot code
  * (resources/pogofmu_boot.py). The FMI entry points are fmu_src/native/fmi2/pg_fmi2.c and
- * fmi3/pg_fmi3.c; the bridge to Python is pg_bridge.c beside this file. */
+ * fmi3/pg_fmi3.c, over the adapter (adapter/); the model source that uses this file is
+ * pg_source_py.c beside it. */
 #ifndef POGOFMU_PYTHON_EMBED_H
 #define POGOFMU_PYTHON_EMBED_H
 

@@ -1,5 +1,6 @@
 """The Python-hosted FMUs: the model's Python code staged under private names, behind the
-project's launcher (``fmu_src/native``: the FMI entry files with the bridge to CPython).
+project's launcher (``fmu_src/native``: the FMI entry files and the one adapter, whose model is the
+FMU's Python code: ``python/pg_source_py.c``, :mod:`pogofmu.runtime.hosted`).
 
 1. The FMU's Python code is staged under names private to this build of this model: the folder
    ``pogofmu/runtime/`` (the code that goes into FMUs, as it is) becomes
@@ -151,11 +152,13 @@ def stage(source, stage_dir: Path, fmi_version: int, token_seed: str = ""):
 def check_isolated_import(stage_dir: Path, source):
     """The staged code must import in an isolated interpreter (no pogofmu on the path; no
     site-packages unless the model declares third-party requirements): what the launcher does in a
-    C importer."""
+    C importer (the slave class with its model, and the module that makes it the adapter's model)."""
     res = stage_dir / "resources"
     cls_name = source.model.name
     code = ("import sys; sys.path.insert(0, sys.argv[1]); import pogofmu_boot; "
             f"cls = pogofmu_boot.load(sys.argv[1]); assert cls.__name__ == {cls_name!r}; "
+            "import importlib; pkg = pogofmu_boot.read_launch_file(sys.argv[1])['package'][0]; "
+            "importlib.import_module(pkg + '.hosted'); "
             "bad = sorted(m for m in sys.modules if m.split('.')[0] in ('pogofmu', 'pythonfmu')); "
             "assert not bad, bad")
     flags = ["-I"] if source.requirements else ["-I", "-S"]

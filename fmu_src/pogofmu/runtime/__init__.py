@@ -6,8 +6,10 @@ that build of that model).
   :mod:`.models` — the model variants (the registry);
 * :mod:`.solver` — the solver's Python side: the binding of the one engine (C, exact state-event
   location for any model), the solver's settings and their rules, the Runge–Kutta tableaux;
-* :mod:`.fmi2`, :mod:`.fmi3` — one adapter per FMI version from any model to an FMU;
-  :mod:`.interface` — what an FMU exposes (its variables, arrays, discrete layout), for both generators;
+* :mod:`.fmi2`, :mod:`.fmi3` — the model's FMU class per FMI version (the FMI rules are C, one
+  adapter for both kinds of FMU); :mod:`.hosted` — a Python-hosted FMU's model for that adapter;
+  :mod:`.interface` — what an FMU exposes (its variables and their roles, arrays, discrete
+  layout), for both generators;
   :mod:`.status` — the FMI status table; :mod:`.units` — the unit definitions;
 * :mod:`.fmath` — the mathematical functions and tables a model may call (followed by the native
   generator); :mod:`.dual` — dual numbers, the exact derivatives of a model's functions;
