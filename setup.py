@@ -16,6 +16,9 @@ HERE = Path(__file__).resolve().parent
 
 class BuildPyWithHostLibraries(build_py):
     def run(self):
+        # setuptools keeps build/lib between builds: a file since deleted from the sources (a C file
+        # of the C layer, a module) would go into the wheel again; the package is copied anew
+        shutil.rmtree(Path(self.build_lib) / "pogofmu", ignore_errors=True)
         super().run()
         if self.editable_mode:  # an editable checkout compiles them on first use (the cache)
             return

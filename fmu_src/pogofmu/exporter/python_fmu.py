@@ -67,7 +67,8 @@ def compile_launcher(fmi_version: int, cache: Optional[Path] = None, into: Optio
     with ``pg_binding.c``, compiled with the engine's flags: no fused multiply-add), so where there
     is no prebuilt copy a C compiler is needed (the system's, else the ziglang package's)."""
     sources = launcher_sources(fmi_version)
-    headers = {*NATIVE.glob("*.h"), *(NATIVE / "python").glob("*.[ch]"),
+    # (headers only besides the sources: a stray .c beside them must not change the key)
+    headers = {*NATIVE.glob("*.h"), *(NATIVE / "python").glob("*.h"),
                *ADAPTER.glob("*.h"), *ENGINE.glob("*.h"), *fmi_headers().glob(f"fmi{fmi_version}*.h")}
     include = [fmi_headers(), NATIVE, NATIVE / "python", ADAPTER, ENGINE]
     try:
