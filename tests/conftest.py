@@ -36,6 +36,25 @@ def pytest_collection_modifyitems(config, items):
             item.fixturenames.insert(0, "built_fmus")
 
 
+@pytest.fixture(autouse=True)
+def _cwd_kept(request):
+    """The process's working folder, as it was before the test: restored after it, with a warning
+    naming the test that changed it. fmpy's library loading changes the working folder and does
+    not change it back when the load fails (fmpy/fmi1.py), and a later test's relative paths (a
+    command's default ``dist/``) would then point elsewhere."""
+    import warnings
+
+    before = os.getcwd()
+    yield
+    try:
+        after = os.getcwd()
+    except OSError:  # (a folder since deleted)
+        after = None
+    if after != before:
+        os.chdir(before)
+        warnings.warn(f"{request.node.nodeid} left the working folder at {after} (restored to {before})")
+
+
 @pytest.fixture(scope="session")
 def built_fmus():
     from pogofmu.exporter import Exporter, build_project, load_model_file

@@ -207,7 +207,7 @@ def test_an_interrupted_system_sweep_resumes_with_the_missing_points(tmp_path, s
 def test_study_landing_dispersion(tmp_path, scheduler):
     out = tmp_path / "study"
     status = cli.main(["study", "landing", "--samples", "6", "--stop-time", "4", "--scheduler", scheduler,
-                       "--out", str(out), "--no-progress"])
+                       "--ssp", str(SSP), "--out", str(out), "--no-progress"])
     assert status == 0
     table = pq.read_table(out / "landing.parquet").to_pylist()
     assert len(table) == 6 and all(r["status"] == "ok" for r in table)
