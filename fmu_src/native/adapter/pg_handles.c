@@ -45,11 +45,12 @@ PgHandle *pg_handle_check(PgInstance *in, void *state, const char *what)
     if (h->owner != in->fmu->build) { /* both named, as a serialized state's refusal names them */
         PgMsg m;
         pg_msg_clear(&m);
-        pg_msg_printf(&m, "%s refused: the state belongs to model '%s', build '%s', FMI %s; this instance is model "
-                      "'%s', build '%s', FMI %s%s", what, h->owner_model, h->owner_build, h->owner_fmi == 3 ? "3.0" : "2.0",
-                      in->fmu->model->name, in->fmu->build, in->fmu->fmi == 3 ? "3.0" : "2.0",
-                      strcmp(h->owner_build, in->fmu->build) == 0 ? " (another loaded copy of it: restore the state "
-                      "into an instance of the copy that saved it)" : "");
+        pg_msg_printf(&m, "%s refused: the state belongs to ", what);
+        pg_inst_owner_text(h->owner_model, h->owner_build, h->owner_fmi, &m);
+        pg_msg_str(&m, "; this instance is ");
+        pg_inst_owner_text(in->fmu->model->name, in->fmu->build, in->fmu->fmi, &m);
+        if (strcmp(h->owner_build, in->fmu->build) == 0)
+            pg_msg_str(&m, " (another loaded copy of it: restore the state into an instance of the copy that saved it)");
         pg_inst_refuse(in, &m);
         return NULL;
     }

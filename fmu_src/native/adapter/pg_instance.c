@@ -650,7 +650,7 @@ int pg_inst_do_step(PgInstance *in, double t, double h)
 double pg_inst_last_successful_time(const PgInstance *in) { return in->st.t_ok; }
 
 /* ---- FMU states ---------------------------------------------------------------------------- */
-static void owner_text(const char *model, const char *build, int fmi, PgMsg *m)
+void pg_inst_owner_text(const char *model, const char *build, int fmi, PgMsg *m)
 {
     pg_msg_printf(m, "model '%s', build '%s', FMI %s", model, build, fmi == 3 ? "3.0" : "2.0");
 }
@@ -744,9 +744,9 @@ int pg_inst_deserialize(PgInstance *in, const unsigned char *bytes, size_t size,
             return refuse(in, &m);
         }
         pg_msg_printf(&m, "%s refused: the state belongs to ", fn);
-        owner_text(model, build, fmi, &m);
+        pg_inst_owner_text(model, build, fmi, &m);
         pg_msg_str(&m, "; this instance is ");
-        owner_text(model_name(in), in->fmu->build, in->fmu->fmi, &m);
+        pg_inst_owner_text(model_name(in), in->fmu->build, in->fmu->fmi, &m);
         return refuse(in, &m);
     }
     if (size - 65 - nh != sizeof(PgState)) {

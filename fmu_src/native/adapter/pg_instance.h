@@ -108,6 +108,8 @@ int pg_inst_serialize(PgInstance *in, const PgState *state, unsigned call_state,
 int pg_inst_deserialize(PgInstance *in, const unsigned char *bytes, size_t size, PgState *state,
                         unsigned *call_state);
 void pg_inst_restore(PgInstance *in, const PgState *state);
+/* a state's owner as every refusal names it: "model 'M', build 'B', FMI 2.0" */
+void pg_inst_owner_text(const char *model, const char *build, int fmi, PgMsg *m);
 
 /* directional derivatives (pg_derivatives.c): sensitivity = J seed, J the Jacobian of the unknowns
  * with respect to the knowns at the point the outputs describe; `fn` names the FMI function */
