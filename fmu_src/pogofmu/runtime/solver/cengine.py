@@ -682,16 +682,9 @@ class Binding:
 
 
 def _python_value(par, v: float):
-    """A parameter's value as the model sees it: an integer parameter's an int; a Real one whose
-    default is written as an int (``Parameter("n", 3)``) and which holds that value, the default
-    itself, as the model saw it when the Python adapter kept its defaults (a value set over FMI is a
-    float)."""
-    if par.integer and math.isfinite(v):
-        return int(v)
-    d = par.default
-    if type(d) is int and float(d) == v and (v != 0.0 or math.copysign(1.0, v) == 1.0):  # (not -0.0)
-        return d
-    return v
+    """A parameter's value as the model sees it: an integer parameter's an int, a Real one the
+    double the adapter holds (as the native FMU's generated C sees it)."""
+    return int(v) if par.integer and math.isfinite(v) else v
 
 
 class Simulator(Binding):
