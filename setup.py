@@ -1,9 +1,14 @@
 """The package build compiles the host-side libraries (the engine the host tools run, the SSP
 master's C level) and, on Linux, the Python-hosted FMUs' launchers (FMI 2.0 and 3.0) into
 pogofmu/_lib, so an installed package carries them; the compiler is the system's cc, gcc or
-clang, else the ziglang package's zig cc (a build requirement). It also copies
-the segmented mirror's model files (examples/segmented_mirror/) beside ``pogofmu mirror``'s
-builder.  Everything else is in pyproject.toml."""
+clang, else the ziglang package's zig cc (a build requirement). It also copies the C layer
+(fmu_src/native, which the exporter compiles the FMUs' binaries from) into the package as
+pogofmu/_native, and the segmented mirror's model files (examples/segmented_mirror/) beside
+``pogofmu mirror``'s builder.  Everything else is in pyproject.toml.
+
+The C layer is copied here rather than mapped with ``package-dir``: a second mapping makes
+setuptools' editable install a meta path finder that prints an "Editable installation" warning at
+every ``pip install -e`` (python3 tasks.py's install), and a checkout reads fmu_src/native itself."""
 import shutil
 import sys
 from pathlib import Path
@@ -14,6 +19,22 @@ from setuptools.command.build_py import build_py
 HERE = Path(__file__).resolve().parent
 
 
+# the files of the C layer an installed package carries (codegen/build.py's native_root finds them)
+C_LAYER = ("*.c", "*.h", "python/*.py", "fmi/*.md")
+
+
+def copy_c_layer(into: Path) -> None:
+    native = HERE / "fmu_src" / "native"
+    shutil.rmtree(into, ignore_errors=True)
+    for pattern in C_LAYER:
+        for f in sorted(native.rglob(pattern) if "/" not in pattern else native.glob(pattern)):
+            if "__pycache__" in f.parts:
+                continue
+            target = into / f.relative_to(native)
+            target.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(f, target)
+
+
 class BuildPyWithHostLibraries(build_py):
     def run(self):
         # setuptools keeps build/lib between builds: a file since deleted from the sources (a C file
@@ -22,6 +43,7 @@ class BuildPyWithHostLibraries(build_py):
         super().run()
         if self.editable_mode:  # an editable checkout compiles them on first use (the cache)
             return
+        copy_c_layer(Path(self.build_lib) / "pogofmu" / "_native")
         sys.path.insert(0, str(HERE / "fmu_src"))
         try:
             from pogofmu.codegen import build

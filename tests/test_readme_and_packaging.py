@@ -1,6 +1,7 @@
 """What users read and install: the README's commands run in the
 project's venv and say what fmpy really does with a refused step; pyproject.toml's license in the
-form current setuptools takes without a deprecation banner; the C layer packaged without a warning."""
+form current setuptools takes without a deprecation banner; the C layer packaged file for file, and
+an editable install without a warning."""
 import importlib.metadata
 import re
 import subprocess
@@ -72,24 +73,44 @@ def test_license_is_an_spdx_expression_with_a_setuptools_that_reads_it():
     assert md["License-Expression"] == "MIT" and md.get("License") is None
 
 
-def test_every_folder_of_the_c_layer_is_a_listed_package_with_its_files():
-    """setuptools warns (BuildBackendWarning, on every `pip install`) for a folder under a package
-    that holds importable-looking files but is not in `packages`: each folder of fmu_src/native is
-    listed, and its package data takes every C, header and Python file in it (what the exporter
-    compiles from an installed wheel). Checked by hand as well: `pip wheel --no-deps .` prints no
-    warning of the project's and the wheel holds the same files."""
-    import fnmatch
+def _c_layer_files():
+    """The files of the C layer an installed package needs: every C file and header, the Python-hosted
+    FMUs' boot module, the vendored FMI headers' README (their licence and provenance)."""
+    native = ROOT / "fmu_src" / "native"
+    files = [f for f in native.rglob("*") if f.is_file() and "__pycache__" not in f.parts]
+    return native, sorted(f.relative_to(native).as_posix() for f in files if f.suffix in (".c", ".h", ".py", ".md"))
 
-    cfg = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
-    native = ROOT / cfg["package-dir"]["pogofmu._native"]
-    for folder in [native, *sorted(p for p in native.rglob("*") if p.is_dir() and p.name != "__pycache__")]:
-        files = [f.name for f in folder.iterdir() if f.suffix in (".c", ".h", ".py")]
-        if not files:
-            continue
-        package = ".".join(["pogofmu._native", *folder.relative_to(native).parts])
-        assert package in cfg["packages"], package
-        patterns = cfg["package-data"].get(package, [])
-        assert all(any(fnmatch.fnmatch(f, pat) for pat in patterns) for f in files), (package, files, patterns)
+
+def test_the_wheel_carries_the_c_layer_file_for_file(project_wheel):
+    """setup.py copies fmu_src/native into the package as pogofmu/_native (the exporter compiles an
+    installed package's FMUs from it): the wheel holds every file of it, and nothing else there."""
+    import zipfile
+
+    wheel, site = project_wheel
+    prefix = "pogofmu/_native/"
+    carried = sorted(n[len(prefix):] for n in zipfile.ZipFile(wheel).namelist() if n.startswith(prefix))
+    native, files = _c_layer_files()
+    assert carried == files
+    assert (site / "pogofmu" / "_native" / "pg_backend.h").read_bytes() == (native / "pg_backend.h").read_bytes()
+
+
+def test_pip_install_editable_prints_no_warning_of_the_project(tmp_path):
+    """`pip install -e` (what python3 tasks.py does) prints no setuptools warning: with a second
+    package-dir mapping (the C layer as pogofmu._native) setuptools installed a meta path finder and
+    printed "BuildBackendWarning: Editable installation" at every install. The install here goes to a
+    prefix of its own (no dependencies) and leaves the running venv's install as it was."""
+    # --ignore-installed: without it pip uninstalls the running venv's own pogofmu first
+    proc = subprocess.run([sys.executable, "-m", "pip", "install", "--no-deps", "-q", "-e", str(ROOT),
+                           "--prefix", str(tmp_path / "prefix"), "--ignore-installed"],
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    # (pip's own notes about this machine's index configuration are not the project's)
+    ours = [line for line in (proc.stdout + proc.stderr).splitlines()
+            if "warning" in line.lower() and "WARNING: Location" not in line]
+    assert not ours, ours
+    (pth,) = (tmp_path / "prefix").rglob("__editable__.pogofmu-*.pth")
+    assert pth.read_text().split() == [str(ROOT / "fmu_src")]
+    assert importlib.metadata.distribution("pogofmu") is not None  # (still installed here)
 
 
 def test_readme_is_an_entry_and_every_page_it_names_exists():

@@ -16,7 +16,7 @@ from typing import Iterable, Optional, Sequence
 
 def native_dir() -> Path:
     """The C layer: ``fmu_src/native`` of a clone (or an editable install), else the copy an
-    installed wheel carries as the package data ``pogofmu/_native``."""
+    installed wheel carries as ``pogofmu/_native`` (setup.py copies it there)."""
     package = Path(__file__).resolve().parents[1]
     source = package.parent / "native"
     return source if (source / "pg_backend.h").is_file() else package / "_native"
