@@ -29,13 +29,18 @@ Targets (PogoStick): native y at most 2x the hand-written DOPRI5 per step; pytho
 least 20x per step; native fmpy at most 1.05x floor-io. native C / engine is printed for
 information. The other models are rows for information. Exit status 1 if a target is missed. Builds into a temporary folder, never dist/.
 
+With ``--instructions`` (valgrind's callgrind; counts that do not depend on the machine's load,
+which moves the timed columns by up to 2x on the shared machines here) a line for information
+after the table: the instructions per communication step of the PogoStick's ``native y`` and of the
+hand-written ``dopri5``, each a whole process of the default experiment less one of 10 steps.
+
 With ``--fmusim PATH`` (or ``$POGOFMU_FMUSIM``: the Reference-FMUs' C fmusim, docs/native.md "In
 fmusim") a second table, for information: each FMI 2.0 FMU in fmusim writing its CSV, CPU seconds
 of the fmusim process (a run of the default experiment less a run of 10 steps, per step), every
 output recorded and only ``n_events`` — fmusim's own work per step (reading the variables,
 writing the line) is in every column.
 
-    python benchmarks/bench_native.py [--repeat 7] [--model PogoStick ...] [--fmusim PATH]
+    python benchmarks/bench_native.py [--repeat 7] [--model PogoStick ...] [--instructions] [--fmusim PATH]
 """
 from __future__ import annotations
 
@@ -43,6 +48,7 @@ import argparse
 import os
 import re
 import resource
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -86,6 +92,23 @@ def best_rotated(runs, repeat: int) -> dict:
         for key in keys[i % len(keys):] + keys[:i % len(keys)]:
             times[key].append(runs[key]())
     return {key: min(v) for key, v in times.items()}
+
+
+def instructions(cmd) -> int:
+    """The instructions a whole process executes (callgrind's count)."""
+    proc = subprocess.run(["valgrind", "--tool=callgrind", "--callgrind-out-file=/dev/null", *cmd],
+                          capture_output=True, text=True, env=ENV)
+    found = re.search(r"Collected : (\d+)", proc.stderr)
+    if proc.returncode or not found:
+        raise SystemExit(f"callgrind run of {Path(cmd[0]).name} failed ({proc.returncode}): {proc.stderr[-2000:]}")
+    return int(found.group(1))
+
+
+def instructions_per_step(cmd_of, stop: float) -> float:
+    """Instructions per communication step: a run to ``stop`` less a run of 10 steps (loading,
+    instantiation and the start cancel)."""
+    n = round(stop / STEP)
+    return (instructions(cmd_of(stop)) - instructions(cmd_of(10 * STEP))) / (n - 10)
 
 
 def child_cpu(cmd) -> float:
@@ -173,6 +196,8 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--repeat", type=int, default=7)
     ap.add_argument("--model", action="append", help="only this model (repeatable)")
+    ap.add_argument("--instructions", action="store_true",
+                    help="also count the PogoStick's instructions per step, native y and dopri5 (needs valgrind)")
     ap.add_argument("--fmusim", default=os.environ.get("POGOFMU_FMUSIM"),
                     help="the C fmusim of Reference-FMUs <= v0.0.39: also time the FMUs in it")
     args = ap.parse_args(argv)
@@ -240,6 +265,16 @@ def main(argv=None):
                     f"PogoStick: the native FMU against the hand-written limit, native y / dopri5 "
                     f"{ratios['native y / dopri5']:.2f}x (target <= {TARGETS['native y / dopri5']:g}x: "
                     f"{'holds' if ratios['native y / dopri5'] <= TARGETS['native y / dopri5'] else 'MISSED'})")
+                if args.instructions:
+                    if shutil.which("valgrind") is None:
+                        raise SystemExit("--instructions needs valgrind (Debian package valgrind)")
+                    i_native = instructions_per_step(
+                        lambda t: [str(c_native.exe), str(c_native.dir), *c_native.args, repr(t), repr(STEP), y_vr, "-"],
+                        stop)
+                    i_hand = instructions_per_step(lambda t: [str(hand.exe), repr(t), repr(STEP), "1"], stop)
+                    hand_lines.append(
+                        f"PogoStick: instructions per communication step (callgrind): native y {i_native:.0f}, "
+                        f"dopri5 {i_hand:.0f}, native y / dopri5 {i_native / i_hand:.2f}x (for information)")
                 for what, target in TARGETS.items():
                     ok = ratios[what] >= target if what.startswith("python") else ratios[what] <= target
                     if not ok:

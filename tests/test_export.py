@@ -797,7 +797,7 @@ def test_an_fmu_is_written_whole_or_not_at_all(tmp_path, monkeypatch, failure):
                 raise failure
             return real(self, *a, **kw)
         monkeypatch.setattr(zipfile.ZipFile, "writestr", writestr)
-        expected = (KeyboardInterrupt, "") if failure is KeyboardInterrupt else \
+        expected = (KeyboardInterrupt, None) if failure is KeyboardInterrupt else \
             (OutputError, f"cannot write {out}: No space left on device")
         with pytest.raises(expected[0], match=expected[1]):
             package.write_zip(out, members)
