@@ -19,12 +19,15 @@ from setuptools.command.build_py import build_py
 HERE = Path(__file__).resolve().parent
 
 
-# the files of the C layer an installed package carries (codegen/build.py's native_root finds them)
+# the files of the C layer an installed package carries (codegen/build.py's native_dir finds them;
+# MANIFEST.in puts them in a source distribution)
 C_LAYER = ("*.c", "*.h", "python/*.py", "fmi/*.md")
 
 
 def copy_c_layer(into: Path) -> None:
     native = HERE / "fmu_src" / "native"
+    if not (native / "pg_backend.h").is_file():  # (a package without it could export no FMU)
+        raise SystemExit(f"setup.py: the C layer {native} is missing (MANIFEST.in carries it into an sdist)")
     shutil.rmtree(into, ignore_errors=True)
     for pattern in C_LAYER:
         for f in sorted(native.rglob(pattern) if "/" not in pattern else native.glob(pattern)):
@@ -62,7 +65,10 @@ class BuildPyWithHostLibraries(build_py):
         models = Path(self.build_lib) / "pogofmu" / "studies" / "segmented_mirror"
         shutil.rmtree(models, ignore_errors=True)
         models.mkdir(parents=True)
-        for f in sorted((HERE / "examples" / "segmented_mirror").glob("*.py")):
+        mirror = sorted((HERE / "examples" / "segmented_mirror").glob("*.py"))
+        if not mirror:
+            raise SystemExit("setup.py: examples/segmented_mirror/ is missing (MANIFEST.in carries it into an sdist)")
+        for f in mirror:
             shutil.copy2(f, models / f.name)
 
 

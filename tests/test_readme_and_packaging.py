@@ -3,12 +3,13 @@ project's venv and say what fmpy really does with a refused step; pyproject.toml
 form current setuptools takes without a deprecation banner; the C layer packaged file for file, and
 an editable install without a warning."""
 import importlib.metadata
+import importlib.util
 import re
 import subprocess
 import sys
 import tomllib
 
-from support import DIST, ROOT
+from support import DIST, ROOT, require
 
 README = (ROOT / "README.md").read_text()
 DOCS = {p.name: p.read_text() for p in (ROOT / "docs").glob("*.md")}
@@ -92,6 +93,39 @@ def test_the_wheel_carries_the_c_layer_file_for_file(project_wheel):
     native, files = _c_layer_files()
     assert carried == files
     assert (site / "pogofmu" / "_native" / "pg_backend.h").read_bytes() == (native / "pg_backend.h").read_bytes()
+
+
+def test_a_wheel_built_from_the_source_distribution_carries_the_c_layer(tmp_path):
+    """What a package index gets: ``python -m build`` makes the sdist and builds the wheel from it
+    (not from the checkout). MANIFEST.in carries the C layer and the mirror's model files into the
+    sdist, so that wheel holds them as the checkout's does (setup.py refuses to build without them)."""
+    import tarfile
+    import zipfile
+
+    import shutil
+
+    require(importlib.util.find_spec("build") is not None, "the build package (the test extra)")
+    # a copy of the checkout without what earlier builds left (setuptools puts every file an old
+    # egg-info's SOURCES.txt lists into the sdist, whatever MANIFEST.in says)
+    tree = tmp_path / "tree"
+    shutil.copytree(ROOT, tree, ignore=shutil.ignore_patterns(".venv", ".git", "dist", "build", "results",
+                                                               "*.egg-info", "__pycache__", ".pytest_cache"))
+    out = tmp_path / "out"
+    proc = subprocess.run([sys.executable, "-m", "build", "-o", str(out), str(tree)],
+                          capture_output=True, text=True, timeout=900)
+    assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
+    (sdist,) = out.glob("pogofmu-*.tar.gz")
+    (wheel,) = out.glob("pogofmu-*.whl")
+    native, files = _c_layer_files()
+    top = sdist.name[:-len(".tar.gz")]
+    with tarfile.open(sdist) as tar:
+        members = set(tar.getnames())
+    assert {f"{top}/fmu_src/native/{f}" for f in files} <= members
+    names = zipfile.ZipFile(wheel).namelist()
+    prefix = "pogofmu/_native/"
+    assert sorted(n[len(prefix):] for n in names if n.startswith(prefix)) == files
+    mirror = sorted(f.name for f in (ROOT / "examples" / "segmented_mirror").glob("*.py"))
+    assert sorted(n.rsplit("/", 1)[1] for n in names if n.startswith("pogofmu/studies/segmented_mirror/")) == mirror
 
 
 def test_pip_install_editable_prints_no_warning_of_the_project(tmp_path):
