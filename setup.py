@@ -19,23 +19,14 @@ from setuptools.command.build_py import build_py
 HERE = Path(__file__).resolve().parent
 
 
-# the files of the C layer an installed package carries (codegen/build.py's native_dir finds them;
-# MANIFEST.in puts them in a source distribution)
-C_LAYER = ("*.c", "*.h", "python/*.py", "fmi/*.md")
-
-
 def copy_c_layer(into: Path) -> None:
+    """The whole C layer, as MANIFEST.in grafts it into a source distribution (codegen/build.py's
+    native_dir finds it in an installed package)."""
     native = HERE / "fmu_src" / "native"
     if not (native / "pg_backend.h").is_file():  # (a package without it could export no FMU)
         raise SystemExit(f"setup.py: the C layer {native} is missing (MANIFEST.in carries it into an sdist)")
     shutil.rmtree(into, ignore_errors=True)
-    for pattern in C_LAYER:
-        for f in sorted(native.rglob(pattern) if "/" not in pattern else native.glob(pattern)):
-            if "__pycache__" in f.parts:
-                continue
-            target = into / f.relative_to(native)
-            target.parent.mkdir(parents=True, exist_ok=True)
-            shutil.copy2(f, target)
+    shutil.copytree(native, into, ignore=shutil.ignore_patterns("__pycache__", "*.py[cod]"))
 
 
 class BuildPyWithHostLibraries(build_py):

@@ -109,18 +109,12 @@ VARIANTS = {  # name: (package, simulate keywords as Python source), peer
 
 
 def _callgrind(dist, package, keywords, stop, step):
-    import re
-    import subprocess
+    from bench_fmu import callgrind_instructions
 
     code = (f"import sys; sys.path.insert(0, {str(ROOT / 'fmu_src')!r}); from pogofmu.ssp import simulate; "
             f"simulate({str(dist / package)!r}, parameters='moon', stop_time={stop!r}, step={step!r}, "
             f"echo_log=False, {keywords})")
-    proc = subprocess.run(["valgrind", "--tool=callgrind", "--callgrind-out-file=/dev/null", sys.executable, "-c",
-                           code], capture_output=True, text=True)
-    found = re.search(r"Collected : (\d+)", proc.stderr)
-    if proc.returncode or not found:
-        raise SystemExit(f"callgrind run failed ({proc.returncode}): {proc.stderr[-2000:]}")
-    return int(found.group(1))
+    return callgrind_instructions([sys.executable, "-c", code])
 
 
 def _event_instants(dist, stop, step):

@@ -81,6 +81,21 @@ FLOOR_STEP = """
 """
 
 
+def callgrind_instructions(cmd, env=None) -> int:
+    """The instructions a whole process executes, valgrind's callgrind count (repeatable whatever
+    the machine's load): benchmarks (f) and (g) count with it."""
+    import re
+    import subprocess
+
+    proc = subprocess.run(["valgrind", "--tool=callgrind", "--callgrind-out-file=/dev/null", *map(str, cmd)],
+                          capture_output=True, text=True, env=env)
+    found = re.search(r"Collected : (\d+)", proc.stderr)
+    if proc.returncode or not found:
+        raise SystemExit(f"callgrind run of {Path(str(cmd[0])).name} failed ({proc.returncode}): "
+                         f"{proc.stderr[-2000:]}")
+    return int(found.group(1))
+
+
 def build(dest: Path, names):
     """Build the cases' FMUs (FMI 2.0) into ``dest``; return {name: path}."""
     from pogofmu.exporter import build_project

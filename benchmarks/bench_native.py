@@ -94,21 +94,12 @@ def best_rotated(runs, repeat: int) -> dict:
     return {key: min(v) for key, v in times.items()}
 
 
-def instructions(cmd) -> int:
-    """The instructions a whole process executes (callgrind's count)."""
-    proc = subprocess.run(["valgrind", "--tool=callgrind", "--callgrind-out-file=/dev/null", *cmd],
-                          capture_output=True, text=True, env=ENV)
-    found = re.search(r"Collected : (\d+)", proc.stderr)
-    if proc.returncode or not found:
-        raise SystemExit(f"callgrind run of {Path(cmd[0]).name} failed ({proc.returncode}): {proc.stderr[-2000:]}")
-    return int(found.group(1))
-
-
 def instructions_per_step(cmd_of, stop: float) -> float:
     """Instructions per communication step: a run to ``stop`` less a run of 10 steps (loading,
     instantiation and the start cancel)."""
     n = round(stop / STEP)
-    return (instructions(cmd_of(stop)) - instructions(cmd_of(10 * STEP))) / (n - 10)
+    count = lambda t: bench_fmu.callgrind_instructions(cmd_of(t), env=ENV)  # noqa: E731
+    return (count(stop) - count(10 * STEP)) / (n - 10)
 
 
 def child_cpu(cmd) -> float:

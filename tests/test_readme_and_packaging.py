@@ -75,11 +75,16 @@ def test_license_is_an_spdx_expression_with_a_setuptools_that_reads_it():
 
 
 def _c_layer_files():
-    """The files of the C layer an installed package needs: every C file and header, the Python-hosted
-    FMUs' boot module, the vendored FMI headers' README (their licence and provenance)."""
+    """The C layer as an installed package carries it: every file of fmu_src/native (its C files and
+    headers, the Python-hosted FMUs' boot module, the vendored FMI headers' README)."""
     native = ROOT / "fmu_src" / "native"
-    files = [f for f in native.rglob("*") if f.is_file() and "__pycache__" not in f.parts]
-    return native, sorted(f.relative_to(native).as_posix() for f in files if f.suffix in (".c", ".h", ".py", ".md"))
+    files = [f for f in native.rglob("*") if f.is_file() and "__pycache__" not in f.parts and f.suffix != ".pyc"]
+    return native, sorted(f.relative_to(native).as_posix() for f in files)
+
+
+def _native_in_wheel(names):
+    prefix = "pogofmu/_native/"
+    return sorted(n[len(prefix):] for n in names if n.startswith(prefix))
 
 
 def test_the_wheel_carries_the_c_layer_file_for_file(project_wheel):
@@ -88,10 +93,8 @@ def test_the_wheel_carries_the_c_layer_file_for_file(project_wheel):
     import zipfile
 
     wheel, site = project_wheel
-    prefix = "pogofmu/_native/"
-    carried = sorted(n[len(prefix):] for n in zipfile.ZipFile(wheel).namelist() if n.startswith(prefix))
     native, files = _c_layer_files()
-    assert carried == files
+    assert _native_in_wheel(zipfile.ZipFile(wheel).namelist()) == files
     assert (site / "pogofmu" / "_native" / "pg_backend.h").read_bytes() == (native / "pg_backend.h").read_bytes()
 
 
@@ -99,10 +102,9 @@ def test_a_wheel_built_from_the_source_distribution_carries_the_c_layer(tmp_path
     """What a package index gets: ``python -m build`` makes the sdist and builds the wheel from it
     (not from the checkout). MANIFEST.in carries the C layer and the mirror's model files into the
     sdist, so that wheel holds them as the checkout's does (setup.py refuses to build without them)."""
+    import shutil
     import tarfile
     import zipfile
-
-    import shutil
 
     require(importlib.util.find_spec("build") is not None, "the build package (the test extra)")
     # a copy of the checkout without what earlier builds left (setuptools puts every file an old
@@ -122,8 +124,7 @@ def test_a_wheel_built_from_the_source_distribution_carries_the_c_layer(tmp_path
         members = set(tar.getnames())
     assert {f"{top}/fmu_src/native/{f}" for f in files} <= members
     names = zipfile.ZipFile(wheel).namelist()
-    prefix = "pogofmu/_native/"
-    assert sorted(n[len(prefix):] for n in names if n.startswith(prefix)) == files
+    assert _native_in_wheel(names) == files
     mirror = sorted(f.name for f in (ROOT / "examples" / "segmented_mirror").glob("*.py"))
     assert sorted(n.rsplit("/", 1)[1] for n in names if n.startswith("pogofmu/studies/segmented_mirror/")) == mirror
 
