@@ -17,16 +17,9 @@
 #ifndef PG_BACKEND_H
 #define PG_BACKEND_H
 
-/* a function of the rare path (a refusal's message), kept out of the callers' hot code */
-#if defined(__GNUC__) || defined(__clang__)
-#define PG_NOINLINE __attribute__((noinline))
-#elif defined(_MSC_VER)
-#define PG_NOINLINE __declspec(noinline)
-#else
-#define PG_NOINLINE
-#endif
-
 #include <stddef.h>
+
+#include "pg_model.h" /* PG_NOINLINE */
 
 enum { PG_ST_OK = 0, PG_ST_WARNING = 1, PG_ST_DISCARD = 2, PG_ST_ERROR = 3, PG_ST_FATAL = 4 };
 

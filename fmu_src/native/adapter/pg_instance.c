@@ -203,10 +203,13 @@ int pg_inst_get_real(PgInstance *in, const unsigned vr[], size_t n, double out[]
         int rc = pg3_refresh(in);
         if (rc) return rc;
     }
+    const PgState *st = &in->st;
     for (size_t i = 0; i < n; ++i) {
         const PgVar *v = variable(in, vr[i], 'R');
         if (!v) return PG_ST_ERROR;
-        out[i] = value_of(in, v);
+        /* a model output once served (what an importer reads after every step): straight from the
+         * outputs; every other role as value_of says */
+        out[i] = v->role == 'y' && st->has_out ? st->out[v->index] : value_of(in, v);
     }
     return PG_ST_OK;
 }

@@ -9,6 +9,17 @@
 
 #include "pg_support.h"
 
+/* the model's numbers of states, discrete entries and outputs: constants in a native FMU (PG_N,
+ * pg_pairs.h) */
+#define NX(e) PG_N((e)->nx)
+#if defined(PG_NQ) && defined(PG_NY)
+#define NQ(e) PG_NQ
+#define NY(e) PG_NY
+#else
+#define NQ(e) ((e)->nq)
+#define NY(e) ((e)->model->ny)
+#endif
+
 #define EPS 2.220446049250313e-16
 #define SAFETY 0.9
 #define MIN_FACTOR 0.2
@@ -162,13 +173,13 @@ static void function_failed_at(const PgEngine *e, PgMsg *m, const char *function
     pg_msg_str(m, " failed at t = ");
     pg_msg_value(m, t, 'f', "r");
     pg_msg_str(m, " s");
-    for (int i = 0; i < e->nx; ++i) {
+    for (int i = 0; i < NX(e); ++i) {
         pg_msg_str(m, i ? ", " : " (state ");
         pg_msg_str(m, e->model->state_names[i]);
         pg_msg_str(m, " = ");
         pg_msg_value(m, x[i], 'f', "r");
     }
-    pg_msg_str(m, e->nx ? "): " : ": ");
+    pg_msg_str(m, NX(e) ? "): " : ": ");
 }
 
 /* every v[i] finite: the plain sum is finite if they all are (a non-finite value makes it inf or NaN),
@@ -217,7 +228,7 @@ static int model_failed(const PgEngine *e, PgMsg *m, int rc, const char *functio
     if (rc == PG_OK) {
         bad = first_non_finite(v, n);
         if (bad < 0) return PG_OK;
-        for (int i = 0; i < e->nx; ++i)
+        for (int i = 0; i < NX(e); ++i)
             if (!isfinite(x[i])) return PG_OK;
     }
     char cause[PG_MSG_MAX];
@@ -254,11 +265,11 @@ static int model_failed(const PgEngine *e, PgMsg *m, int rc, const char *functio
 #define NOTE_NEAR 1e-3 /* a stage this near the step's start state (relative to 1 + its magnitude) */
 static void note_flow(PgEngine *e, double t, const double *y, const double *dy)
 {
-    int bad = first_non_finite(dy, e->nx);
+    int bad = first_non_finite(dy, NX(e));
     if (bad < 0) return;
     /* only at a state near the step's start: a wild trial of a stiff or singular step (a state far out,
      * the rate overflowing) is the step size's problem, told by the collapse's own message */
-    for (int i = 0; i < e->nx; ++i)
+    for (int i = 0; i < NX(e); ++i)
         if (!isfinite(y[i]) || fabs(y[i] - e->x[i]) > NOTE_NEAR * (1.0 + fabs(e->x[i]))) return;
     PgMsg *m = &e->note;
     pg_msg_clear(m);
@@ -279,17 +290,27 @@ static const double *u_at(PgEngine *e, double t)
     return e->u_t;
 }
 
+static PG_NOINLINE int model_fun_checked(PgEngine *e, double t, const double *y, double *dy, PgMsg *m);
+
 static int model_fun(void *ctx, double t, const double *y, double *dy, PgMsg *m)
 {
     PgEngine *e = ctx;
+    /* the steps with held inputs: the flow as it is, a tail call (6 to 12 a step) */
+    if (!e->probe && !e->has_du) return e->model->flow(t, y, e->q, e->u, e->p, dy, m);
+    return model_fun_checked(e, t, y, dy, m);
+}
+
+/* model_fun with inputs on their line, or in probe_step */
+static PG_NOINLINE int model_fun_checked(PgEngine *e, double t, const double *y, double *dy, PgMsg *m)
+{
     if (!e->probe) return e->model->flow(t, y, e->q, u_at(e, t), e->p, dy, m); /* the steps: as it is */
     /* probe_step: the same step again, each value of the flow checked, a failure named */
     int rc = e->model->flow(t, y, e->q, u_at(e, t), e->p, dy, m);
     if (rc == PG_OK) {
-        if (!all_finite(dy, e->nx)) note_flow(e, t, y, dy);
+        if (!all_finite(dy, NX(e))) note_flow(e, t, y, dy);
         return PG_OK;
     }
-    return model_failed(e, m, rc, "the flow", -1, t, y, dy, e->nx, "d%s/dt", e->model->state_names);
+    return model_failed(e, m, rc, "the flow", -1, t, y, dy, NX(e), "d%s/dt", e->model->state_names);
 }
 
 /* guard i at the state x of time t (with the inputs of t) */
@@ -309,7 +330,7 @@ static const double NO_INPUT_MOVE[PG_MAX_U];
  * forward difference (exactly 0 for a flow that does not read t) */
 static int jacobian(PgEngine *e, double t, const double *y, const double *f)
 {
-    int n = e->nx;
+    int n = NX(e);
     size_t nb = sizeof(double) * (size_t)n;
     if (e->jac_ok && e->jac_t == t && memcmp(e->jac_y, y, nb) == 0) return PG_OK;
     double col[PG_MAX_X], yp[PG_MAX_X];
@@ -361,13 +382,13 @@ static int jacobian(PgEngine *e, double t, const double *y, const double *f)
 static int pair_step_of(PgEngine *e, int method, double t, const double *y, const double *f, double h,
                         double *y_new, double *f_new, double *K)
 {
-    if (method == M_DOP853) return pg_dop853_step(model_fun, e, t, y, f, h, e->nx, y_new, f_new, K, &e->msg);
+    if (method == M_DOP853) return pg_dop853_step(model_fun, e, t, y, f, h, NX(e), y_new, f_new, K, &e->msg);
     if (method == M_RODAS) {
         int singular = 0;
         TRY(jacobian(e, t, y, f));
-        return pg_rodas_step(model_fun, e, t, y, f, h, e->nx, e->J, e->dT, y_new, f_new, K, &singular, &e->msg);
+        return pg_rodas_step(model_fun, e, t, y, f, h, NX(e), e->J, e->dT, y_new, f_new, K, &singular, &e->msg);
     }
-    return pg_dopri5_step(model_fun, e, t, y, f, h, e->nx, y_new, f_new, K, &e->msg);
+    return pg_dopri5_step(model_fun, e, t, y, f, h, NX(e), y_new, f_new, K, &e->msg);
 }
 
 static int pair_step(PgEngine *e, double t, const double *y, const double *f, double h, double *y_new,
@@ -378,13 +399,13 @@ static int pair_step(PgEngine *e, double t, const double *y, const double *f, do
 
 static double error_norm(const PgEngine *e, const double *K, double h, const double *y, const double *y_new)
 {
-    if (e->cur == M_DOP853) return pg_dop853_error_norm(K, h, y, y_new, e->atol, e->rtol, e->nx);
+    if (e->cur == M_DOP853) return pg_dop853_error_norm(K, h, y, y_new, e->atol, e->rtol, NX(e));
     if (e->cur == M_RODAS) {
-        for (int i = 0; i < e->nx; ++i)
+        for (int i = 0; i < NX(e); ++i)
             if (!isfinite(y_new[i])) return INFINITY; /* W singular at this h: a smaller step */
-        return pg_rodas_error_norm(K, y, y_new, e->atol, e->rtol, e->nx);
+        return pg_rodas_error_norm(K, y, y_new, e->atol, e->rtol, NX(e));
     }
-    return pg_dopri5_error_norm(K, h, y, y_new, e->atol, e->rtol, e->nx);
+    return pg_dopri5_error_norm(K, h, y, y_new, e->atol, e->rtol, NX(e));
 }
 
 static double error_exponent(const PgEngine *e) { return e->cur == M_DOP853 ? -1.0 / 8.0 : -1.0 / 5.0; }
@@ -397,7 +418,7 @@ static double dopri5_h_rho(const PgEngine *e, const double *K, double h)
     static const double bma[6] = {35.0 / 384 - 9017.0 / 3168, 355.0 / 33, 500.0 / 1113 - 46732.0 / 5247,
                                   125.0 / 192 - 49.0 / 176, -2187.0 / 6784 + 5103.0 / 18656, 11.0 / 84};
     double num = 0.0, den = 0.0;
-    for (int i = 0; i < e->nx; ++i) {
+    for (int i = 0; i < NX(e); ++i) {
         double dk = K[6 * PG_MAX_X + i] - K[5 * PG_MAX_X + i], dy = 0.0;
         for (int j = 0; j < 6; ++j) dy += bma[j] * K[j * PG_MAX_X + i];
         dy *= h;
@@ -445,34 +466,34 @@ static void make_switch(PgEngine *e)
 static int seg_at(PgEngine *e, PgSeg *seg, double t, double *out)
 {
     if (t == seg->t1) {
-        memcpy(out, seg->y1, sizeof(double) * (size_t)e->nx);
+        memcpy(out, seg->y1, sizeof(double) * (size_t)NX(e));
         return PG_OK;
     }
     if (t == seg->t0) {
-        memcpy(out, seg->y0, sizeof(double) * (size_t)e->nx);
+        memcpy(out, seg->y0, sizeof(double) * (size_t)NX(e));
         return PG_OK;
     }
     double h = seg->t1 - seg->t0;
     if (!seg->dense_built) {
         if (seg->method == M_DOP853) {
-            TRY(pg_dop853_dense(model_fun, e, seg->t0, seg->y0, seg->y1, h, seg->K, e->nx, seg->Q, &e->msg));
+            TRY(pg_dop853_dense(model_fun, e, seg->t0, seg->y0, seg->y1, h, seg->K, NX(e), seg->Q, &e->msg));
         } else if (seg->method == M_RODAS) {
-            pg_rodas_dense(seg->K, e->nx, seg->Q);
+            pg_rodas_dense(seg->K, NX(e), seg->Q);
         } else {
-            pg_dopri5_dense(seg->K, e->nx, seg->Q);
+            pg_dopri5_dense(seg->K, NX(e), seg->Q);
         }
         seg->dense_built = 1;
     }
-    if (seg->method == M_DOP853) pg_dop853_eval(seg->Q, seg->t0, h, seg->y0, t, e->nx, out);
-    else if (seg->method == M_RODAS) pg_rodas_eval(seg->Q, seg->t0, h, seg->y0, seg->y1, t, e->nx, out);
-    else pg_dopri5_eval(seg->Q, seg->t0, h, seg->y0, t, e->nx, out);
+    if (seg->method == M_DOP853) pg_dop853_eval(seg->Q, seg->t0, h, seg->y0, t, NX(e), out);
+    else if (seg->method == M_RODAS) pg_rodas_eval(seg->Q, seg->t0, h, seg->y0, seg->y1, t, NX(e), out);
+    else pg_dopri5_eval(seg->Q, seg->t0, h, seg->y0, t, NX(e), out);
     return PG_OK;
 }
 
 static void make_seg(PgEngine *e, PgSeg *seg, double t0, double t1, const double *y0, const double *y1,
                      const double *f0, const double *K)
 {
-    size_t n = sizeof(double) * (size_t)e->nx;
+    size_t n = sizeof(double) * (size_t)NX(e);
     seg->t0 = t0, seg->t1 = t1;
     memmove(seg->y0, y0, n);
     memmove(seg->y1, y1, n);
@@ -587,7 +608,7 @@ static int check_abs_tol(PgEngine *e)
     }
     if (!n) {
         double big = 0.0;
-        for (int i = 0; i < e->nx; ++i) {
+        for (int i = 0; i < NX(e); ++i) {
             double a = fabs(e->x[i]);
             if (i == 0 || a > big) big = a;
         }
@@ -635,7 +656,7 @@ static int domain_violation(PgEngine *e, double t, const double *x, PgSeg *seg, 
     }
     if (r == PG_OK) {
         int bad = 0;
-        for (int i = 0; i < e->nx; ++i) bad |= !isfinite(x[i]);
+        for (int i = 0; i < NX(e); ++i) bad |= !isfinite(x[i]);
         if (bad) {
             PgMsg *m = &e->msg;
             pg_msg_clear(m);
@@ -643,7 +664,7 @@ static int domain_violation(PgEngine *e, double t, const double *x, PgSeg *seg, 
             pg_msg_value(m, t, 'f', ".15g");
             pg_msg_str(m, " s (");
             int first = 1;
-            for (int i = 0; i < e->nx; ++i) {
+            for (int i = 0; i < NX(e); ++i) {
                 if (isfinite(x[i])) continue;
                 if (!first) pg_msg_str(m, ", ");
                 first = 0;
@@ -738,7 +759,7 @@ static int initial_step(PgEngine *e, double *out)
 {
     double t = e->t;
     const double *y = e->x, *f = e->f;
-    int n = e->nx;
+    int n = NX(e);
     double floor_ = pmin(START_STEP_ULPS * EPS * pmax(fabs(t), 1.0), e->max_step);
     if (!n) {
         *out = isfinite(e->max_step) ? e->max_step : 1.0;
@@ -775,7 +796,7 @@ static int initial_step(PgEngine *e, double *out)
 
 static int check_initial_rates(PgEngine *e)
 {
-    for (int i = 0; i < e->nx; ++i) {
+    for (int i = 0; i < NX(e); ++i) {
         if (!isfinite(e->f[i])) {
             PgMsg *m = &e->msg;
             pg_msg_clear(m);
@@ -826,6 +847,15 @@ int pg_engine_init(PgEngine *e, const PgModel *model, const double *p, const dou
                           sizes[i].limit, sizes[i].name);
             return PG_RAISE;
         }
+#if defined(PG_NX) && defined(PG_NQ) && defined(PG_NY)
+    if (model->nx != PG_NX || model->nq != PG_NQ || model->ny != PG_NY) { /* (a native FMU's sizes are its model's) */
+        pg_msg_clear(&e->msg);
+        pg_msg_printf(&e->msg, "the model has %d states, %d discrete state entries and %d outputs; this engine was "
+                      "built for exactly %d, %d and %d (PG_NX, PG_NQ, PG_NY)", model->nx, model->nq, model->ny, PG_NX,
+                      PG_NQ, PG_NY);
+        return PG_RAISE;
+    }
+#endif
     if (model->ns != PG_NS) {
         pg_msg_clear(&e->msg);
         pg_msg_printf(&e->msg, "the model has %d solver settings; the engine takes exactly %d (PG_NS)", model->ns, PG_NS);
@@ -853,7 +883,7 @@ int pg_engine_init(PgEngine *e, const PgModel *model, const double *p, const dou
     e->warn_n = BUDGET_WARN_FRACTION * e->budget;
     memcpy(e->x_out, e->x, sizeof e->x);
     memcpy(e->q_out, e->q, sizeof e->q);
-    e->stateless = e->nx == 0;
+    e->stateless = NX(e) == 0;
     rc = check_domain(e, e->t, e->x);
     if (!rc) rc = bind(e);
     if (!rc) rc = check_initial_rates(e);
@@ -993,8 +1023,8 @@ static int collapse_error(PgEngine *e, double t, double h)
 static int guard_band(PgEngine *e, int i, double t, const double *x, double g, double rate, double *z)
 {
     double xp[PG_MAX_X], gp, acc = 0.0;
-    memcpy(xp, x, sizeof(double) * (size_t)e->nx);
-    for (int j = 0; j < e->nx; ++j) {
+    memcpy(xp, x, sizeof(double) * (size_t)NX(e));
+    for (int j = 0; j < NX(e); ++j) {
         if (x[j] == 0.0) continue;
         xp[j] = x[j] + BAND_ULPS * EPS * x[j];
         TRY(guard_at(e, i, t, xp, &gp));
@@ -1011,9 +1041,9 @@ static int guard_band(PgEngine *e, int i, double t, const double *x, double g, d
 static int guard_change(PgEngine *e, int i, double t, const double *x, const double *f, double *dg, double *d_out)
 {
     double d = RATE_STEP * pmax(fabs(t), 1.0), xp[PG_MAX_X], gp, gm;
-    for (int j = 0; j < e->nx; ++j) xp[j] = x[j] + d * f[j];
+    for (int j = 0; j < NX(e); ++j) xp[j] = x[j] + d * f[j];
     TRY(guard_at(e, i, t + d, xp, &gp));
-    for (int j = 0; j < e->nx; ++j) xp[j] = x[j] - d * f[j];
+    for (int j = 0; j < NX(e); ++j) xp[j] = x[j] - d * f[j];
     TRY(guard_at(e, i, t - d, xp, &gm));
     *dg = sgn_of(e, i) * (gp - gm);
     *d_out = d;
@@ -1256,11 +1286,11 @@ static int turning_point(PgEngine *e, PgSeg *seg, int i, double sgn, double g0, 
     double eps = 1e-6 * h, y[PG_MAX_X], ga, gb;
     *found = 0;
     if (eps == 0.0) return pg_arith(&e->msg, PG_ZERO_DIVISION);
-    for (int k = 0; k < e->nx; ++k) y[k] = seg->y0[k] + eps * seg->f0[k];
+    for (int k = 0; k < NX(e); ++k) y[k] = seg->y0[k] + eps * seg->f0[k];
     TRY(guard_at(e, i, t0 + eps, y, &ga));
     double d0 = sgn * (ga - g0) / eps * h;
     if (!(d0 > 0.0)) return PG_OK;
-    for (int k = 0; k < e->nx; ++k) y[k] = seg->y1[k] + eps * f1[k];
+    for (int k = 0; k < NX(e); ++k) y[k] = seg->y1[k] + eps * f1[k];
     TRY(guard_at(e, i, seg->t1 + eps, y, &gb));
     double d1 = sgn * (gb - g1) / eps * h;
     if (!(d1 < 0.0)) return PG_OK;
@@ -1317,7 +1347,7 @@ static int land_on_event(PgEngine *e, PgSeg *seg, int i, double level, double te
     double t0 = seg->t0, t1 = seg->t1;
     double y_a[PG_MAX_X], f_a[PG_MAX_X], y_b[PG_MAX_X], f_b[PG_MAX_X], yd[PG_MAX_X];
     double K_a_local[PG_MAX_STAGES * PG_MAX_X], K_b_local[PG_MAX_STAGES * PG_MAX_X];
-    size_t n = sizeof(double) * (size_t)e->nx;
+    size_t n = sizeof(double) * (size_t)NX(e);
     double g_a, g_b, g_te, g_d;
     TRY(pair_step(e, t0, seg->y0, seg->f0, te - t0, y_a, f_a, K_a_local));
     TRY(guard_at(e, i, te, y_a, &g_a));
@@ -1498,7 +1528,7 @@ static int step(PgEngine *e, double t_target)
         int rc = e->model->domain(t_new, y_new, e->q, u_at(e, t_new), e->p, e->s, &e->msg);
         if (rc == PG_ARITH) return rc;
         int finite = 1;
-        for (int i = 0; i < e->nx; ++i) finite &= isfinite(y_new[i]) != 0;
+        for (int i = 0; i < NX(e); ++i) finite &= isfinite(y_new[i]) != 0;
         int cut = 0;
         if (!(rc == PG_OK && finite)) TRY(end_step(e, &seg, t_target, &cut));
         if (!cut) {
@@ -1598,15 +1628,15 @@ static int apply_pending_event(PgEngine *e)
     if (i < ne) {
         if (e->pending_located) TRY(guard_at(e, i, e->t, e->x, &own_g));
         TRY(model_call(e, &e->msg, e->model->jump(i, e->t, e->x, e->q, u_at(e, e->t), e->p, x_new, q_new, &e->msg),
-                       "the jump", i, e->t, e->x, x_new, e->nx, "%s", e->model->state_names));
+                       "the jump", i, e->t, e->x, x_new, NX(e), "%s", e->model->state_names));
     } else {
         int k = i - ne;
         TRY(model_call(e, &e->msg, e->model->time_jump(k, e->t, e->x, e->q, u_at(e, e->t), e->p, x_new, q_new, &e->msg),
-                       "the jump", i, e->t, e->x, x_new, e->nx, "%s", e->model->state_names));
+                       "the jump", i, e->t, e->x, x_new, NX(e), "%s", e->model->state_names));
         e->te_count[k] += 1; /* the next instant counted from the first: no drift over many periods */
         e->te_next[k] = e->te_every[k] > 0.0 ? e->te_at[k] + (double)e->te_count[k] * e->te_every[k] : INFINITY;
     }
-    size_t nx = sizeof(double) * (size_t)e->nx;
+    size_t nx = sizeof(double) * (size_t)NX(e);
     e->last.time = e->t, e->last.index = i;
     memcpy(e->last.x_before, e->pending_x, nx);
     memcpy(e->last.x_after, x_new, nx);
@@ -1619,7 +1649,7 @@ static int apply_pending_event(PgEngine *e)
     e->has_pending = 0;
     TRY(zero_storm(e, i));
     int same = 1;
-    for (int k = 0; k < e->nx; ++k) same &= x_new[k] == e->x[k];
+    for (int k = 0; k < NX(e); ++k) same &= x_new[k] == e->x[k];
     for (int k = 0; k < e->nq; ++k) same &= q_new[k] == e->q[k];
     memcpy(e->x, x_new, nx);
     memcpy(e->q, q_new, sizeof(double) * (size_t)e->nq);
@@ -1682,7 +1712,7 @@ static int run(PgEngine *e, double t_target, int apply_events)
 /* ---- public ---------------------------------------------------------------------------------- */
 int pg_engine_advance(PgEngine *e, double t_target)
 {
-    size_t nx = sizeof(double) * (size_t)e->nx, nq = sizeof(double) * (size_t)e->nq;
+    size_t nx = sizeof(double) * (size_t)NX(e), nq = sizeof(double) * (size_t)NQ(e);
     if (e->t_out <= t_target && t_target < e->t) {
         if (t_target == e->seg.t0) {
             memcpy(e->x_out, e->seg.y0, nx);
@@ -1846,7 +1876,7 @@ int pg_engine_set_inputs(PgEngine *e, const double *u, const double *du)
 int pg_engine_apply_event(PgEngine *e, int index, double t, const double *x)
 {
     e->t = e->t_out = t;
-    memcpy(e->x, x, sizeof(double) * (size_t)e->nx);
+    memcpy(e->x, x, sizeof(double) * (size_t)NX(e));
     e->has_seg = 0;
     /* (e->zero_hit: as pg_engine_me_fired found this event, from zero or not: the storm rule counts it) */
     e->has_pending = 1, e->pending_index = index, e->pending_located = 1;
@@ -1968,8 +1998,8 @@ int pg_engine_restart_at(PgEngine *e, double t, const double *x, const double *u
     int pending = e->has_pending && e->t == t, pending_index = e->pending_index;
     memcpy(pending_x, e->pending_x, sizeof pending_x);
     e->t = e->t_out = t;
-    memcpy(e->x, x, sizeof(double) * (size_t)e->nx);
-    memcpy(e->x_out, x, sizeof(double) * (size_t)e->nx);
+    memcpy(e->x, x, sizeof(double) * (size_t)NX(e));
+    memcpy(e->x_out, x, sizeof(double) * (size_t)NX(e));
     e->has_seg = 0, e->has_pending = 0;
     /* set_input with the same inputs returns at once in Python: the rebinding happens only for a change */
     int rc = pg_engine_set_input(e, u);
@@ -1998,7 +2028,7 @@ int pg_engine_guard(PgEngine *e, int k, const double *x, double *g) { return gua
 int pg_engine_outputs(PgEngine *e, double t, const double *x, const double *q, double *y)
 {
     int rc = e->model->outputs(t, x, q, u_at(e, t), e->p, y, &e->msg);
-    return model_call(e, &e->msg, rc, "the outputs", -1, t, x, y, e->model->ny, "%s", e->model->output_names);
+    return model_call(e, &e->msg, rc, "the outputs", -1, t, x, y, NY(e), "%s", e->model->output_names);
 }
 
 size_t pg_engine_sizeof(void) { return sizeof(PgEngine); }
@@ -2007,7 +2037,7 @@ const char *pg_engine_message(const PgEngine *e) { return e->msg.text; }
 void pg_engine_served(const PgEngine *e, double *t_out, double *x_out, double *q_out, long *n_events)
 {
     *t_out = e->t_out;
-    memcpy(x_out, e->x_out, sizeof(double) * (size_t)e->nx);
+    memcpy(x_out, e->x_out, sizeof(double) * (size_t)NX(e));
     memcpy(q_out, e->q_out, sizeof(double) * (size_t)e->nq);
     *n_events = e->n_events;
 }

@@ -21,6 +21,15 @@
 
 #include <stddef.h>
 
+/* a function of the rare path (a refusal's message, a checked call), kept out of the callers' hot code */
+#if defined(__GNUC__) || defined(__clang__)
+#define PG_NOINLINE __attribute__((noinline))
+#elif defined(_MSC_VER)
+#define PG_NOINLINE __declspec(noinline)
+#else
+#define PG_NOINLINE
+#endif
+
 #define PG_MSG_MAX 2048
 
 enum { PG_OK = 0, PG_RAISE = 1, PG_ARITH = 2, PG_NO_JVP = 3 };

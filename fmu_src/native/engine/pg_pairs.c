@@ -8,6 +8,7 @@
 int pg_dopri5_step(PgFun fun, void *ctx, double t, const double *y, const double *f, double h, int n,
                    double *y_new, double *f_new, double *K, PgMsg *m)
 {
+    n = PG_N(n);
     double tmp[PG_MAX_X] = {0};
     int rc;
     double *k0 = K + 0 * PG_MAX_X;
@@ -37,6 +38,7 @@ int pg_dopri5_step(PgFun fun, void *ctx, double t, const double *y, const double
 double pg_dopri5_error_norm(const double *K, double h, const double *y, const double *y_new, double atol,
                             double rtol, int n)
 {
+    n = PG_N(n);
     const double *k0 = K + 0 * PG_MAX_X;
     const double *k2 = K + 2 * PG_MAX_X;
     const double *k3 = K + 3 * PG_MAX_X;
@@ -54,8 +56,9 @@ double pg_dopri5_error_norm(const double *K, double h, const double *y, const do
 }
 
 /* the four coefficient vectors of the continuous extension, from the stages */
-void pg_dopri5_dense(const double *K, int n, double *Q)
+void pg_dopri5_dense(const double *restrict K, int n, double *restrict Q)
 {
+    n = PG_N(n);
     const double *k0 = K + 0 * PG_MAX_X;
     const double *k2 = K + 2 * PG_MAX_X;
     const double *k3 = K + 3 * PG_MAX_X;
@@ -70,8 +73,10 @@ void pg_dopri5_dense(const double *K, int n, double *Q)
     }
 }
 
-void pg_dopri5_eval(const double *Q, double t0, double h, const double *y0, double t, int n, double *out)
+void pg_dopri5_eval(const double *restrict Q, double t0, double h, const double *restrict y0, double t, int n,
+                    double *restrict out)
 {
+    n = PG_N(n);
     const double x = (t - t0) / h;
     const double hx = h * x;
     for (int i = 0; i < n; ++i)
@@ -82,6 +87,7 @@ void pg_dopri5_eval(const double *Q, double t0, double h, const double *y0, doub
 int pg_dop853_step(PgFun fun, void *ctx, double t, const double *y, const double *f, double h, int n,
                    double *y_new, double *f_new, double *K, PgMsg *m)
 {
+    n = PG_N(n);
     double tmp[PG_MAX_X] = {0};
     int rc;
     double *k0 = K + 0 * PG_MAX_X;
@@ -129,6 +135,7 @@ int pg_dop853_step(PgFun fun, void *ctx, double t, const double *y, const double
 double pg_dop853_error_norm(const double *K, double h, const double *y, const double *y_new, double atol,
                             double rtol, int n)
 {
+    n = PG_N(n);
     const double *k0 = K + 0 * PG_MAX_X;
     const double *k5 = K + 5 * PG_MAX_X;
     const double *k6 = K + 6 * PG_MAX_X;
@@ -155,6 +162,7 @@ double pg_dop853_error_norm(const double *K, double h, const double *y, const do
 int pg_dop853_dense(PgFun fun, void *ctx, double t0, const double *y0, const double *y1, double h,
                     const double *K, int n, double *Q, PgMsg *m)
 {
+    n = PG_N(n);
     double tmp[PG_MAX_X] = {0}, X[3][PG_MAX_X];
     int rc;
     const double *k0 = K + 0 * PG_MAX_X;
@@ -188,8 +196,10 @@ int pg_dop853_dense(PgFun fun, void *ctx, double t0, const double *y0, const dou
     return PG_OK;
 }
 
-void pg_dop853_eval(const double *Q, double t0, double h, const double *y0, double t, int n, double *out)
+void pg_dop853_eval(const double *restrict Q, double t0, double h, const double *restrict y0, double t, int n,
+                    double *restrict out)
 {
+    n = PG_N(n);
     const double x = (t - t0) / h;
     const double w = 1.0 - x;
     for (int i = 0; i < n; ++i) {

@@ -14,6 +14,10 @@ from pogofmu.runtime.solver import tableaux as tab
 from .cprint import literal
 
 
+# the first line of every function: the number of states, a constant in a native FMU (pg_pairs.h)
+N = "    n = PG_N(n);"
+
+
 def _sum(coefs, stage, i="i"):
     """``c0*k0[i] + c2*k2[i] + ...`` (zero coefficients skipped, as pairs._lincomb)."""
     return " + ".join(f"{literal(c)}*{stage(j)}[{i}]" for j, c in enumerate(coefs) if c != 0.0)
@@ -51,7 +55,7 @@ def _step_function(title, name, A, B, C, ns):
     the last stage (FSAL) at the step's end."""
     lines = [f"/* {title} */",
              f"int pg_{name}_step(PgFun fun, void *ctx, double t, const double *y, const double *f, double h, int n,",
-             "                   double *y_new, double *f_new, double *K, PgMsg *m)", "{",
+             "                   double *y_new, double *f_new, double *K, PgMsg *m)", "{", N,
              "    double tmp[PG_MAX_X] = {0};", "    int rc;", *_stage_names(ns + 1),
              "    for (int i = 0; i < n; ++i) k0[i] = f[i];"]
     lines += _stage_lines(A, C, 1, ns, "y", "t", "return rc;")
@@ -66,7 +70,7 @@ def dopri5() -> str:
     ns = len(B)
     lines = _step_function("DOPRI5: Dormand-Prince 5(4) with Shampine's dense output", "dopri5", A, B, C, ns)
     lines += ["double pg_dopri5_error_norm(const double *K, double h, const double *y, const double *y_new, double atol,",
-              "                            double rtol, int n)", "{",
+              "                            double rtol, int n)", "{", N,
               *_const_stages(ns + 1, E),
               "    double acc = 0.0;", "    if (n == 0) return 0.0;",
               "    for (int i = 0; i < n; ++i) {",
@@ -75,14 +79,14 @@ def dopri5() -> str:
               "        acc += e*e;", "    }", "    return sqrt(acc/n);", "}", ""]
     rows = [[P[j][r] for j in range(ns + 1)] for r in range(4)]
     lines += ["/* the four coefficient vectors of the continuous extension, from the stages */",
-              "void pg_dopri5_dense(const double *K, int n, double *Q)", "{",
+              "void pg_dopri5_dense(const double *restrict K, int n, double *restrict Q)", "{", N,
               *_const_stages(ns + 1, *rows),
               "    for (int i = 0; i < n; ++i) {"]
     for r in range(4):
         lines.append(f"        Q[{r} * PG_MAX_X + i] = {_sum(rows[r], lambda j: f'k{j}')};")
     lines += ["    }", "}", "",
-              "void pg_dopri5_eval(const double *Q, double t0, double h, const double *y0, double t, int n, double *out)",
-              "{", "    const double x = (t - t0) / h;", "    const double hx = h * x;",
+              "void pg_dopri5_eval(const double *restrict Q, double t0, double h, const double *restrict y0, double t, int n,",
+              "                    double *restrict out)", "{", N, "    const double x = (t - t0) / h;", "    const double hx = h * x;",
               "    for (int i = 0; i < n; ++i)",
               "        out[i] = y0[i] + hx * (Q[i] + x * (Q[PG_MAX_X + i] + x * (Q[2 * PG_MAX_X + i] + x * "
               "Q[3 * PG_MAX_X + i])));", "}", ""]
@@ -95,7 +99,7 @@ def dop853() -> str:
     lines = _step_function("DOP853: Prince-Dormand 8(5,3) with the 7th-order dense output of Hairer, Norsett & Wanner",
                            "dop853", A, B, C, ns)
     lines += ["double pg_dop853_error_norm(const double *K, double h, const double *y, const double *y_new, double atol,",
-              "                            double rtol, int n)", "{",
+              "                            double rtol, int n)", "{", N,
               *_const_stages(ns + 1, tab.DOP853_E5, tab.DOP853_E3),
               "    double n5 = 0.0, n3 = 0.0;", "    if (n == 0) return 0.0;",
               "    for (int i = 0; i < n; ++i) {",
@@ -108,7 +112,7 @@ def dop853() -> str:
     # dense output (Hairer's contd8): three more stages from (t0, y0), then seven coefficient vectors
     lines += ["/* the seven coefficient vectors of the continuous extension (three more stages) */",
               "int pg_dop853_dense(PgFun fun, void *ctx, double t0, const double *y0, const double *y1, double h,",
-              "                    const double *K, int n, double *Q, PgMsg *m)", "{",
+              "                    const double *K, int n, double *Q, PgMsg *m)", "{", N,
               "    double tmp[PG_MAX_X] = {0}, X[3][PG_MAX_X];", "    int rc;",
               *_const_stages(ns + 1, *(row[:ns + 1] for row in A[ns + 1:nx]), *(d[:ns + 1] for d in tab.DOP853_D),
                              always=(0, ns)),
@@ -122,8 +126,8 @@ def dop853() -> str:
     for r in range(4):
         lines.append(f"        Q[{3 + r} * PG_MAX_X + i] = h*({_sum(tab.DOP853_D[r], lambda j: f'k{j}')});")
     lines += ["    }", "    return PG_OK;", "}", "",
-              "void pg_dop853_eval(const double *Q, double t0, double h, const double *y0, double t, int n, double *out)",
-              "{", "    const double x = (t - t0) / h;", "    const double w = 1.0 - x;",
+              "void pg_dop853_eval(const double *restrict Q, double t0, double h, const double *restrict y0, double t, int n,",
+              "                    double *restrict out)", "{", N, "    const double x = (t - t0) / h;", "    const double w = 1.0 - x;",
               "    for (int i = 0; i < n; ++i) {",
               "        const double *q = Q + i;",
               "        out[i] = y0[i] + x * (q[0] + w * (q[PG_MAX_X] + x * (q[2 * PG_MAX_X] + w * (q[3 * PG_MAX_X]"
