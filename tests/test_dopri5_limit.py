@@ -3,12 +3,15 @@ Dormand-Prince 5(4) of the basic pogo stick, no code of the project's engine), c
 native PogoStick FMU computes: the same 19 events of the default experiment, each within 1e-6 s of
 the FMU's (what rel_tol = 1e-6 allows; both locate the events on DOPRI5's continuous extension),
 the same y on the 1 ms grid, and both near the closed-form event times. A limit that solves another
-problem, or solves it less accurately, would measure nothing."""
+problem, or solves it less accurately, would measure nothing. The same holds for its FMU_DUTIES
+build (the FMU's seven states, every state and output served at every point), which the benchmark
+prints for information."""
 import csv
 import subprocess
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from pogofmu.codegen.build import _run_cc, c_compiler
 from support import fmu_path, require
@@ -19,11 +22,14 @@ CLOSED_FORM = HERE / "data" / "pogo_basic_events.csv"
 STOP, STEP = 10.0, 1e-3
 
 
-def _dopri5(tmp_path):
+BUILDS = pytest.mark.parametrize("defines", [[], ["-DFMU_DUTIES"]], ids=["limit", "fmu-duties"])
+
+
+def _dopri5(tmp_path, defines=()):
     cc = c_compiler()
     require(cc is not None, "a C compiler (gcc, or the ziglang package)")
     exe = tmp_path / "dopri5_pogostick"
-    r = _run_cc(cc, ["-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", str(SOURCE), "-o", str(exe), "-lm"])
+    r = _run_cc(cc, ["-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", *defines, str(SOURCE), "-o", str(exe), "-lm"])
     assert r.returncode == 0, r.stderr[-3000:]
     return exe
 
@@ -44,8 +50,9 @@ def _fmu_run():
     return res, [(kinds[int(res["last_event"][i])], float(res["t_last_event"][i])) for i in changed]
 
 
-def test_the_hand_written_dopri5_finds_the_fmus_events(tmp_path):
-    exe = _dopri5(tmp_path)
+@BUILDS
+def test_the_hand_written_dopri5_finds_the_fmus_events(tmp_path, defines):
+    exe = _dopri5(tmp_path, defines)
     out = subprocess.run([str(exe), repr(STOP), repr(STEP), "1"], capture_output=True, text=True, check=True).stdout
     mine = _events(out)
     res, theirs = _fmu_run()
@@ -60,10 +67,11 @@ def test_the_hand_written_dopri5_finds_the_fmus_events(tmp_path):
     assert max(abs(a - e) for (_, a), e in zip(mine, exact)) <= 1e-6
 
 
-def test_the_hand_written_dopri5_records_the_fmus_y(tmp_path):
+@BUILDS
+def test_the_hand_written_dopri5_records_the_fmus_y(tmp_path, defines):
     """The checksum of its y on the grid is the FMU's: the same 10001 points, to the accuracy of
     the tolerance (and the same y at the stop time)."""
-    exe = _dopri5(tmp_path)
+    exe = _dopri5(tmp_path, defines)
     out = subprocess.run([str(exe), repr(STOP), repr(STEP), "2"], capture_output=True, text=True, check=True).stdout
     line = next(line for line in out.splitlines() if line.startswith("y checksum"))
     checksum = float(line.split()[2].rstrip(","))

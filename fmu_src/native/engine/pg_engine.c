@@ -9,6 +9,11 @@
 
 #include "pg_support.h"
 
+/* the last step's segment, and the one the next step builds (the two change places when it is taken:
+ * no copy of a segment a step) */
+#define SEG(e) (&(e)->segs[(e)->seg_i])
+#define NEXT_SEG(e) (&(e)->segs[!(e)->seg_i])
+
 /* the model's numbers of states, discrete entries and outputs: constants in a native FMU (PG_N,
  * pg_pairs.h) */
 #define NX(e) PG_N((e)->nx)
@@ -500,7 +505,8 @@ static void make_seg(PgEngine *e, PgSeg *seg, double t0, double t1, const double
     memmove(seg->f0, f0, n);
     /* the stages the method has (its dense output reads no other) */
     int stages = e->cur == M_DOP853 ? PG_MAX_STAGES : e->cur == M_RODAS ? PG_RODAS_STAGES : 7;
-    for (int j = 0; j < stages; ++j) memmove(seg->K + j * PG_MAX_X, K + j * PG_MAX_X, n);
+    if (K != seg->K) /* (a step's stages are computed in its segment) */
+        for (int j = 0; j < stages; ++j) memmove(seg->K + j * PG_MAX_X, K + j * PG_MAX_X, n);
     seg->dense_built = 0;
     seg->method = e->cur;
 }
@@ -1395,7 +1401,7 @@ static int end_step(PgEngine *e, PgSeg *seg, double t_target, int *cut)
         double t = seg->t0, y0[PG_MAX_X], f0[PG_MAX_X];
         memcpy(y0, seg->y0, sizeof y0), memcpy(f0, seg->f0, sizeof f0);
         TRY(pair_step(e, t, y0, f0, t_target - t, y_c, f_c, K_c));
-        make_seg(e, &e->seg, t, t_target, y0, y_c, f0, K_c);
+        make_seg(e, SEG(e), t, t_target, y0, y_c, f0, K_c);
         e->has_seg = 1;
         e->t = t_target;
         memcpy(e->x, y_c, sizeof y_c), memcpy(e->f, f_c, sizeof f_c);
@@ -1432,7 +1438,7 @@ static int step(PgEngine *e, double t_target)
     double h = pmin(pmin(e->h, e->max_step), UNBOUNDED_STEP_FACTOR * pmax(fabs(t), 1.0));
     int rejected = 0;
     double t_new, y_new[PG_MAX_X], f_new[PG_MAX_X];
-    double K[PG_MAX_STAGES * PG_MAX_X];
+    double *K = NEXT_SEG(e)->K; /* the stages, where the step's segment keeps them */
     double t_time = pg_engine_next_time_event(e); /* the steps land on it exactly */
     if (t_time > t_target && t_time <= reach_of(t_target)) t_time = t_target; /* (at the point asked for) */
     double h_prop = h;                               /* the step the error control asked for */
@@ -1483,8 +1489,8 @@ static int step(PgEngine *e, double t_target)
     e->n_steps += 1;
     e->has_note = 0; /* (a trial's non-finite rate that a smaller step avoided) */
     stiffness_test(e, K, h);
-    PgSeg seg;
-    make_seg(e, &seg, t, t_new, y, y_new, f, K);
+    PgSeg *seg = NEXT_SEG(e);
+    make_seg(e, seg, t, t_new, y, y_new, f, K);
     double g_new[PG_MAX_EVENTS];
     for (int k = 0; k < e->n_active; ++k) TRY(guard_at(e, e->active[k], t_new, y_new, &g_new[k]));
     int hit = -1;
@@ -1500,26 +1506,26 @@ static int step(PgEngine *e, double t_target)
             int leaves = e->zarm[i] == 2 && sgn * g1 > 0.0 && sgn * g1 > sgn * g0;
             if (!(sgn * g1 > z) && !leaves) continue;
             /* a dip to the before side resolved inside the step: the crossing is the return's */
-            TRY(hidden_return(e, &seg, i, sgn, g0, g1, f_new, z, &te, &found));
+            TRY(hidden_return(e, seg, i, sgn, g0, g1, f_new, z, &te, &found));
             if (!found) { /* it left zero without a dip floating point resolves */
                 level = z;
                 if (e->zarm[i] == 2) te = t; /* no first-order direction: it leaves zero where it was */
-                else TRY(locate_level(e, &seg, i, z, t, g0, g1, NULL, &te)); /* after a jump: the return */
+                else TRY(locate_level(e, seg, i, z, t, g0, g1, NULL, &te)); /* after a jump: the return */
             }
         } else if (sgn * g1 < 0.0) {
             if (sgn * g0 >= 0.0 || (e->has_g_prev && sgn * (g0 - e->g_prev[k]) < 0.0)) continue;
-            TRY(hidden_crossing(e, &seg, i, sgn, g0, g1, f_new, &te, &found));
+            TRY(hidden_crossing(e, seg, i, sgn, g0, g1, f_new, &te, &found));
             if (!found) continue;
         } else if (sgn * g0 < 0.0) {
             /* disarmed within its band: the crossing its own jump continued (located a rounding short of
              * zero), not a new one */
             if (!e->armed[i] && sgn * g0 >= -e->zband[i]) continue;
-            TRY(locate(e, &seg, i, t, g0, g1, NULL, &te));
+            TRY(locate(e, seg, i, t, g0, g1, NULL, &te));
         } else if (g0 == 0.0) {
-            TRY(locate_from_zero(e, &seg, i, g1, 0, &te, &found));
+            TRY(locate_from_zero(e, seg, i, g1, 0, &te, &found));
             if (!found) continue;
         } else {
-            TRY(hidden_return(e, &seg, i, sgn, g0, g1, f_new, 0.0, &te, &found));
+            TRY(hidden_return(e, seg, i, sgn, g0, g1, f_new, 0.0, &te, &found));
             if (!found) continue;
         }
         if (hit < 0 || te < hit_t) hit = k, hit_t = te, hit_level = level;
@@ -1530,9 +1536,9 @@ static int step(PgEngine *e, double t_target)
         int finite = 1;
         for (int i = 0; i < NX(e); ++i) finite &= isfinite(y_new[i]) != 0;
         int cut = 0;
-        if (!(rc == PG_OK && finite)) TRY(end_step(e, &seg, t_target, &cut));
+        if (!(rc == PG_OK && finite)) TRY(end_step(e, seg, t_target, &cut));
         if (!cut) {
-            e->seg = seg, e->has_seg = 1;
+            e->seg_i = !e->seg_i, e->has_seg = 1;
             e->t = t_new;
             memcpy(e->x, y_new, sizeof y_new), memcpy(e->f, f_new, sizeof f_new);
             memcpy(e->g_prev, e->g, sizeof e->g), e->has_g_prev = 1;
@@ -1555,15 +1561,15 @@ static int step(PgEngine *e, double t_target)
     double y_e[PG_MAX_X], f_e[PG_MAX_X];
     if (te < t_new) {
         double K_e[PG_MAX_STAGES * PG_MAX_X];
-        TRY(land_on_event(e, &seg, i, hit_level, te, &te, y_e, f_e, K_e));
-        make_seg(e, &seg, t, te, y, y_e, f, K_e);
+        TRY(land_on_event(e, seg, i, hit_level, te, &te, y_e, f_e, K_e));
+        make_seg(e, seg, t, te, y, y_e, f, K_e);
     } else {
         memcpy(y_e, y_new, sizeof y_e), memcpy(f_e, f_new, sizeof f_e);
     }
     int cut = 0;
-    TRY(end_step(e, &seg, t_target, &cut));
+    TRY(end_step(e, seg, t_target, &cut));
     if (!cut) {
-        e->seg = seg, e->has_seg = 1;
+        e->seg_i = !e->seg_i, e->has_seg = 1;
         e->t = te;
         memcpy(e->x, y_e, sizeof y_e), memcpy(e->f, f_e, sizeof f_e);
         e->has_pending = 1, e->pending_index = i, e->pending_located = 1;
@@ -1714,10 +1720,10 @@ int pg_engine_advance(PgEngine *e, double t_target)
 {
     size_t nx = sizeof(double) * (size_t)NX(e), nq = sizeof(double) * (size_t)NQ(e);
     if (e->t_out <= t_target && t_target < e->t) {
-        if (t_target == e->seg.t0) {
-            memcpy(e->x_out, e->seg.y0, nx);
+        if (t_target == SEG(e)->t0) {
+            memcpy(e->x_out, SEG(e)->y0, nx);
         } else {
-            int rc = seg_at(e, &e->seg, t_target, e->x_out);
+            int rc = seg_at(e, SEG(e), t_target, e->x_out);
             if (rc) return at_time(e, rc, "t = ", e->t, " s");
         }
         e->t_out = t_target;
@@ -1753,7 +1759,7 @@ int pg_engine_advance(PgEngine *e, double t_target)
     if (t_target == e->t) {
         memcpy(e->x_out, e->x, nx);
     } else {
-        int rc = seg_at(e, &e->seg, t_target, e->x_out);
+        int rc = seg_at(e, SEG(e), t_target, e->x_out);
         if (rc) return at_time(e, rc, "t = ", e->t, " s");
     }
     memcpy(e->q_out, e->q, nq);
@@ -1781,7 +1787,7 @@ int pg_engine_event_due(const PgEngine *e) { return e->has_pending && e->t == e-
 /* _crossed_in: the first active event whose guard went from its before side to its after side */
 static int crossed_in(PgEngine *e, double t0, const double *y0, double t1, const double *y1, int *index)
 {
-    int disarmed = e->has_last && e->last.time == e->seg.t0 ? e->last.index : -1;
+    int disarmed = e->has_last && e->last.time == SEG(e)->t0 ? e->last.index : -1;
     *index = -1;
     for (int k = 0; k < e->n_active; ++k) {
         int i = e->active[k];
@@ -1816,14 +1822,14 @@ int pg_engine_set_inputs(PgEngine *e, const double *u, const double *du)
     int crossed = -1;
     if (e->t > e->t_out) {
         double x[PG_MAX_X];
-        if (e->t_out == e->seg.t0) {
-            memcpy(x, e->seg.y0, sizeof x);
+        if (e->t_out == SEG(e)->t0) {
+            memcpy(x, SEG(e)->y0, sizeof x);
         } else {
             double f_c[PG_MAX_X];
             double K_c[PG_MAX_STAGES * PG_MAX_X];
-            int rc = pair_step_of(e, e->seg.method, e->seg.t0, e->seg.y0, e->seg.f0, e->t_out - e->seg.t0, x,
+            int rc = pair_step_of(e, SEG(e)->method, SEG(e)->t0, SEG(e)->y0, SEG(e)->f0, e->t_out - SEG(e)->t0, x,
                                   f_c, K_c);
-            if (!rc) rc = crossed_in(e, e->seg.t0, e->seg.y0, e->t_out, x, &crossed);
+            if (!rc) rc = crossed_in(e, SEG(e)->t0, SEG(e)->y0, e->t_out, x, &crossed);
             if (rc) return at_time(e, rc, "the input change at t = ", e->t_out, " s");
         }
         e->t = e->t_out;

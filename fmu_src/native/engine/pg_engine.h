@@ -95,7 +95,8 @@ struct PgEngine {
     int recent_i[PG_RECENT];
     int recent_n, recent_head; /* ring buffer of the latest events' (time, index) */
     int has_seg;
-    PgSeg seg;
+    PgSeg segs[2]; /* the last step's segment, segs[seg_i]; the other: the next step's, built in place */
+    int seg_i;
     int has_pending, pending_index;
     double pending_x[PG_MAX_X];
     long n_steps, n_rejected;
