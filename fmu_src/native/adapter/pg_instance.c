@@ -197,21 +197,38 @@ static double value_of(PgInstance *in, const PgVar *v)
     }
 }
 
-int pg_inst_get_real(PgInstance *in, const unsigned vr[], size_t n, double out[])
+static PG_NOINLINE int get_real(PgInstance *in, const unsigned vr[], size_t n, double out[])
 {
     if (in->fmu->fmi == 3) {
         int rc = pg3_refresh(in);
         if (rc) return rc;
     }
-    const PgState *st = &in->st;
     for (size_t i = 0; i < n; ++i) {
         const PgVar *v = variable(in, vr[i], 'R');
         if (!v) return PG_ST_ERROR;
-        /* a model output once served (what an importer reads after every step): straight from the
-         * outputs; every other role as value_of says */
-        out[i] = v->role == 'y' && st->has_out ? st->out[v->index] : value_of(in, v);
+        out[i] = value_of(in, v);
     }
     return PG_ST_OK;
+}
+
+int pg_inst_get_real(PgInstance *in, const unsigned vr[], size_t n, double out[])
+{
+    /* what an importer reads after every step of FMI 2.0, the model's outputs once served: straight
+     * from them, a loop that calls nothing; anything else (another role, FMI 3.0, a value reference
+     * that is not a Real) by get_real, from the start (reading is idempotent) */
+    const PgFmu *fmu = in->fmu;
+    if (fmu->fmi == 2 && in->st.has_out) {
+        size_t i = 0;
+        for (; i < n; ++i) {
+            unsigned r = vr[i];
+            if (r >= (unsigned)fmu->n_vars) break;
+            const PgVar *v = &fmu->vars[r];
+            if (v->vr != r || v->type != 'R' || v->role != 'y') break;
+            out[i] = in->st.out[v->index];
+        }
+        if (i == n) return PG_ST_OK;
+    }
+    return get_real(in, vr, n, out);
 }
 
 int pg_inst_get_integer(PgInstance *in, const unsigned vr[], size_t n, int out[])
@@ -366,6 +383,7 @@ static void notes_end(PgInstance *in, Notes *nt)
 {
     PgEngine *e = &in->st.sim;
     e->on_event = NULL, e->on_warning = NULL, e->on_switch = NULL, e->hook_ctx = NULL;
+    if (!nt->items) return; /* (nothing noted: most calls) */
     for (size_t i = 0; i < nt->n; ++i) {
         say(in, nt->items[i].status, nt->items[i].category, nt->items[i].text);
         free(nt->items[i].text);

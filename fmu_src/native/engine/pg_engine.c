@@ -1716,20 +1716,31 @@ static int run(PgEngine *e, double t_target, int apply_events)
 }
 
 /* ---- public ---------------------------------------------------------------------------------- */
+/* a point inside the last step: served from its segment (most points: the steps run ahead of them) */
+static int serve_in_step(PgEngine *e, double t_target)
+{
+    if (t_target == SEG(e)->t0) {
+        memcpy(e->x_out, SEG(e)->y0, sizeof(double) * (size_t)NX(e));
+    } else {
+        int rc = seg_at(e, SEG(e), t_target, e->x_out);
+        if (rc) return at_time(e, rc, "t = ", e->t, " s");
+    }
+    e->t_out = t_target;
+    memcpy(e->q_out, e->q, sizeof(double) * (size_t)NQ(e));
+    return PG_OK;
+}
+
+static PG_NOINLINE int advance(PgEngine *e, double t_target);
+
 int pg_engine_advance(PgEngine *e, double t_target)
 {
+    if (e->t_out <= t_target && t_target < e->t) return serve_in_step(e, t_target);
+    return advance(e, t_target);
+}
+
+static PG_NOINLINE int advance(PgEngine *e, double t_target)
+{
     size_t nx = sizeof(double) * (size_t)NX(e), nq = sizeof(double) * (size_t)NQ(e);
-    if (e->t_out <= t_target && t_target < e->t) {
-        if (t_target == SEG(e)->t0) {
-            memcpy(e->x_out, SEG(e)->y0, nx);
-        } else {
-            int rc = seg_at(e, SEG(e), t_target, e->x_out);
-            if (rc) return at_time(e, rc, "t = ", e->t, " s");
-        }
-        e->t_out = t_target;
-        memcpy(e->q_out, e->q, nq);
-        return PG_OK;
-    }
     if (t_target < e->t_out) {
         pg_msg_clear(&e->msg);
         pg_msg_str(&e->msg, "cannot go back in time: t = ");
