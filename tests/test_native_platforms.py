@@ -180,8 +180,11 @@ def test_the_windows_binary_needs_only_windows_own_libraries(name, fmi, tmp_path
     folder = _extract(name, tmp_path, lambda m: m.startswith(f"binaries/{platform_dir}/"), fmi=fmi)
     dll = folder / "binaries" / platform_dir / f"{name}.dll"
     assert dll.exists(), "every native FMU carries the Windows binary"
-    objdump = shutil.which("x86_64-w64-mingw32-objdump") or shutil.which("llvm-objdump") or "objdump"
+    # GNU objdump (mingw's, or Debian's, which reads PE too) prints the export table that is read below;
+    # llvm-objdump -p prints no exports
+    objdump = shutil.which("x86_64-w64-mingw32-objdump") or "objdump"
     text = subprocess.run([objdump, "-p", str(dll)], capture_output=True, text=True, check=True).stdout
+    assert "[Ordinal/Name Pointer] Table" in text, f"{objdump} -p printed no export table of {dll.name}"
     imported = {line.split(":", 1)[1].strip() for line in text.splitlines() if "DLL Name:" in line}
     assert imported and all(d == "KERNEL32.dll" or d.startswith("api-ms-win-crt-") for d in imported), imported
     table = text[text.index("[Ordinal/Name Pointer] Table"):].splitlines()[1:]
