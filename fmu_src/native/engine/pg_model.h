@@ -30,6 +30,13 @@
 #define PG_NOINLINE
 #endif
 
+/* C99's restrict (MSVC, which may compile the C sources an FMU carries, spells it __restrict) */
+#if defined(_MSC_VER) && !defined(__clang__)
+#define PG_RESTRICT __restrict
+#else
+#define PG_RESTRICT restrict
+#endif
+
 #define PG_MSG_MAX 2048
 
 enum { PG_OK = 0, PG_RAISE = 1, PG_ARITH = 2, PG_NO_JVP = 3 };

@@ -56,7 +56,7 @@ double pg_dopri5_error_norm(const double *K, double h, const double *y, const do
 }
 
 /* the four coefficient vectors of the continuous extension, from the stages */
-void pg_dopri5_dense(const double *restrict K, int n, double *restrict Q)
+void pg_dopri5_dense(const double *PG_RESTRICT K, int n, double *PG_RESTRICT Q)
 {
     n = PG_N(n);
     const double *k0 = K + 0 * PG_MAX_X;
@@ -73,8 +73,8 @@ void pg_dopri5_dense(const double *restrict K, int n, double *restrict Q)
     }
 }
 
-void pg_dopri5_eval(const double *restrict Q, double t0, double h, const double *restrict y0, double t, int n,
-                    double *restrict out)
+void pg_dopri5_eval(const double *PG_RESTRICT Q, double t0, double h, const double *PG_RESTRICT y0, double t, int n,
+                    double *PG_RESTRICT out)
 {
     n = PG_N(n);
     const double x = (t - t0) / h;
@@ -196,8 +196,8 @@ int pg_dop853_dense(PgFun fun, void *ctx, double t0, const double *y0, const dou
     return PG_OK;
 }
 
-void pg_dop853_eval(const double *restrict Q, double t0, double h, const double *restrict y0, double t, int n,
-                    double *restrict out)
+void pg_dop853_eval(const double *PG_RESTRICT Q, double t0, double h, const double *PG_RESTRICT y0, double t, int n,
+                    double *PG_RESTRICT out)
 {
     n = PG_N(n);
     const double x = (t - t0) / h;

@@ -27,9 +27,9 @@ int pg_dopri5_step(PgFun fun, void *ctx, double t, const double *y, const double
                    double *y_new, double *f_new, double *K, PgMsg *m);
 double pg_dopri5_error_norm(const double *K, double h, const double *y, const double *y_new, double atol,
                             double rtol, int n);
-void pg_dopri5_dense(const double *restrict K, int n, double *restrict Q);
-void pg_dopri5_eval(const double *restrict Q, double t0, double h, const double *restrict y0, double t, int n,
-                    double *restrict out);
+void pg_dopri5_dense(const double *PG_RESTRICT K, int n, double *PG_RESTRICT Q);
+void pg_dopri5_eval(const double *PG_RESTRICT Q, double t0, double h, const double *PG_RESTRICT y0, double t, int n,
+                    double *PG_RESTRICT out);
 
 int pg_dop853_step(PgFun fun, void *ctx, double t, const double *y, const double *f, double h, int n,
                    double *y_new, double *f_new, double *K, PgMsg *m);
@@ -37,7 +37,7 @@ double pg_dop853_error_norm(const double *K, double h, const double *y, const do
                             double rtol, int n);
 int pg_dop853_dense(PgFun fun, void *ctx, double t0, const double *y0, const double *y1, double h,
                     const double *K, int n, double *Q, PgMsg *m);
-void pg_dop853_eval(const double *restrict Q, double t0, double h, const double *restrict y0, double t, int n,
-                    double *restrict out);
+void pg_dop853_eval(const double *PG_RESTRICT Q, double t0, double h, const double *PG_RESTRICT y0, double t, int n,
+                    double *PG_RESTRICT out);
 
 #endif

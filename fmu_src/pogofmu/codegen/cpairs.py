@@ -79,14 +79,14 @@ def dopri5() -> str:
               "        acc += e*e;", "    }", "    return sqrt(acc/n);", "}", ""]
     rows = [[P[j][r] for j in range(ns + 1)] for r in range(4)]
     lines += ["/* the four coefficient vectors of the continuous extension, from the stages */",
-              "void pg_dopri5_dense(const double *restrict K, int n, double *restrict Q)", "{", N,
+              "void pg_dopri5_dense(const double *PG_RESTRICT K, int n, double *PG_RESTRICT Q)", "{", N,
               *_const_stages(ns + 1, *rows),
               "    for (int i = 0; i < n; ++i) {"]
     for r in range(4):
         lines.append(f"        Q[{r} * PG_MAX_X + i] = {_sum(rows[r], lambda j: f'k{j}')};")
     lines += ["    }", "}", "",
-              "void pg_dopri5_eval(const double *restrict Q, double t0, double h, const double *restrict y0, double t, int n,",
-              "                    double *restrict out)", "{", N, "    const double x = (t - t0) / h;", "    const double hx = h * x;",
+              "void pg_dopri5_eval(const double *PG_RESTRICT Q, double t0, double h, const double *PG_RESTRICT y0, double t, int n,",
+              "                    double *PG_RESTRICT out)", "{", N, "    const double x = (t - t0) / h;", "    const double hx = h * x;",
               "    for (int i = 0; i < n; ++i)",
               "        out[i] = y0[i] + hx * (Q[i] + x * (Q[PG_MAX_X + i] + x * (Q[2 * PG_MAX_X + i] + x * "
               "Q[3 * PG_MAX_X + i])));", "}", ""]
@@ -126,8 +126,8 @@ def dop853() -> str:
     for r in range(4):
         lines.append(f"        Q[{3 + r} * PG_MAX_X + i] = h*({_sum(tab.DOP853_D[r], lambda j: f'k{j}')});")
     lines += ["    }", "    return PG_OK;", "}", "",
-              "void pg_dop853_eval(const double *restrict Q, double t0, double h, const double *restrict y0, double t, int n,",
-              "                    double *restrict out)", "{", N, "    const double x = (t - t0) / h;", "    const double w = 1.0 - x;",
+              "void pg_dop853_eval(const double *PG_RESTRICT Q, double t0, double h, const double *PG_RESTRICT y0, double t, int n,",
+              "                    double *PG_RESTRICT out)", "{", N, "    const double x = (t - t0) / h;", "    const double w = 1.0 - x;",
               "    for (int i = 0; i < n; ++i) {",
               "        const double *q = Q + i;",
               "        out[i] = y0[i] + x * (q[0] + w * (q[PG_MAX_X] + x * (q[2 * PG_MAX_X] + w * (q[3 * PG_MAX_X]"
