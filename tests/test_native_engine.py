@@ -212,3 +212,39 @@ def test_the_pairs_c_file_is_what_the_generator_writes():
 
     assert (ENGINE / "pg_pairs.c").read_text() == generate(), \
         "regenerate it: python -m pogofmu.codegen.cpairs > fmu_src/native/engine/pg_pairs.c"
+
+
+def _engine_loop(tmp_path, counts):
+    """benchmarks/c/engine_loop.c with the PogoStick's generated C and the engine, built with the
+    constant counts ``counts`` (as a native FMU's sizes header gives them), run over 1 s at 1 ms."""
+    import subprocess
+    from pathlib import Path
+
+    from pogofmu.codegen.build import ENGINE, ENGINE_SOURCES, compile_c, write_model_source
+    from pogofmu.runtime.models import get
+
+    model = get("PogoStick")
+    loop = Path(__file__).resolve().parent.parent / "benchmarks" / "c" / "engine_loop.c"
+    sources = [write_model_source(model, tmp_path), *(ENGINE / s for s in ENGINE_SOURCES), loop]
+    exe = compile_c(sources, tmp_path / "engine_loop", shared=False, include=[ENGINE],
+                    defines=[f"{k}={n}" for k, n in counts.items()])
+    p = model.defaults()
+    s = [par.default for par in SOLVER_PARAMETERS]
+    args = [str(len(p)), *(repr(float(v)) for v in p.values()), str(len(s)), *(repr(float(v)) for v in s)]
+    return subprocess.run([str(exe), "1.0", "0.001", *args], capture_output=True, text=True)
+
+
+def test_an_engine_built_for_other_counts_refuses_the_model(tmp_path):
+    """A native FMU's engine is built for its model's exact counts (PG_NX, PG_NQ, PG_NY): with other
+    counts its loops would run over the wrong number of values, so it refuses the model, naming both."""
+    from pogofmu.codegen.cmodel import exact_counts
+    from pogofmu.runtime.models import get
+
+    counts = exact_counts(get("PogoStick"))
+    assert counts == {"PG_NX": 7, "PG_NQ": 1, "PG_NY": 11}
+    right = _engine_loop(tmp_path / "right", counts)
+    assert right.returncode == 0, right.stderr
+    wrong = _engine_loop(tmp_path / "wrong", dict(counts, PG_NX=6))
+    assert wrong.returncode == 1
+    assert "the model has 7 states, 1 discrete state entries and 11 outputs; this engine was built for exactly 6, " \
+           "1 and 11 (PG_NX, PG_NQ, PG_NY)" in wrong.stderr, wrong.stderr
