@@ -77,9 +77,17 @@ void pg_inst_init(PgInstance *in, const PgFmu *fmu, PgLogFn log, void *log_env)
     pg_inst_reset(in);
 }
 
+/* the variable of value reference vr where the table keeps it, at index vr (every variable of the
+ * project's FMUs), else NULL */
+static inline const PgVar *indexed_variable(const PgFmu *fmu, unsigned vr)
+{
+    return vr < (unsigned)fmu->n_vars && fmu->vars[vr].vr == vr ? &fmu->vars[vr] : NULL;
+}
+
 const PgVar *pg_inst_variable(const PgFmu *fmu, unsigned vr)
 {
-    if (vr < (unsigned)fmu->n_vars && fmu->vars[vr].vr == vr) return &fmu->vars[vr];
+    const PgVar *v = indexed_variable(fmu, vr);
+    if (v) return v;
     for (int k = 0; k < fmu->n_vars; ++k)
         if (fmu->vars[k].vr == vr) return &fmu->vars[k];
     return NULL;
@@ -97,8 +105,8 @@ static PG_NOINLINE const PgVar *no_variable(PgInstance *in, unsigned vr, char ty
 /* _variable: the variable of value reference vr, of the type asked (the message only when not) */
 static inline const PgVar *variable(PgInstance *in, unsigned vr, char type)
 {
-    const PgFmu *fmu = in->fmu;
-    const PgVar *v = vr < (unsigned)fmu->n_vars && fmu->vars[vr].vr == vr ? &fmu->vars[vr] : pg_inst_variable(fmu, vr);
+    const PgVar *v = indexed_variable(in->fmu, vr);
+    if (!v) v = pg_inst_variable(in->fmu, vr);
     return v && v->type == type ? v : no_variable(in, vr, type, v);
 }
 
@@ -220,10 +228,8 @@ int pg_inst_get_real(PgInstance *in, const unsigned vr[], size_t n, double out[]
     if (fmu->fmi == 2 && in->st.has_out) {
         size_t i = 0;
         for (; i < n; ++i) {
-            unsigned r = vr[i];
-            if (r >= (unsigned)fmu->n_vars) break;
-            const PgVar *v = &fmu->vars[r];
-            if (v->vr != r || v->type != 'R' || v->role != 'y') break;
+            const PgVar *v = indexed_variable(fmu, vr[i]);
+            if (!v || v->type != 'R' || v->role != 'y') break;
             out[i] = in->st.out[v->index];
         }
         if (i == n) return PG_ST_OK;
