@@ -1806,6 +1806,9 @@ static int crossed_in(PgEngine *e, double t0, const double *y0, double t1, const
         TRY(guard_at(e, i, t0, y0, &a));
         TRY(guard_at(e, i, t1, y1, &b));
         double g0 = sgn * a, g1 = sgn * b;
+        /* (as step: a disarmed guard within its band on its before side is the crossing its own jump
+         * continued, located a rounding short of zero, not a new one) */
+        if (g0 < 0.0 && !e->armed[i] && g0 >= -e->zband[i]) continue;
         if (g1 >= 0.0 && (g0 < 0.0 || (g0 == 0.0 && 0.0 < g1 && i != disarmed))) {
             *index = i;
             return PG_OK;
