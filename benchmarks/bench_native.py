@@ -173,8 +173,8 @@ class Limit:
     """The engine loop of one model, compiled from the generated C and the engine's files."""
 
     def __init__(self, name: str, dest: Path):
-        from pogofmu.codegen.build import ENGINE, ENGINE_SOURCES, compile_c, write_model_source
-        from pogofmu.codegen.cmodel import exact_counts
+        from pogofmu.codegen.build import ENGINE, ENGINE_SOURCES, LTO, compile_c, write_model_source
+        from pogofmu.codegen.cmodel import ONE_MODEL, exact_counts
         from pogofmu.runtime.solver import SOLVER_PARAMETERS
         from pogofmu.runtime.models import get
 
@@ -182,9 +182,11 @@ class Limit:
         folder = dest / f"limit_{name}"
         sources = [write_model_source(name, folder), *(ENGINE / s for s in ENGINE_SOURCES),
                    HERE / "c" / "engine_loop.c"]
-        # the model's exact counts, as its native FMU's sizes header gives them
+        # the model's exact counts and its one model, as its native FMU's sizes header gives them, link-time
+        # optimized as its Linux binary is
         self.exe = compile_c(sources, folder / "engine_loop", shared=False, include=[ENGINE],
-                             defines=[f"{k}={n}" for k, n in exact_counts(model).items()])
+                             defines=[*(f"{k}={n}" for k, n in exact_counts(model).items()), f"PG_ONE_MODEL={ONE_MODEL}"],
+                             extra=LTO)
         p = model.defaults()
         s = [par.default for par in SOLVER_PARAMETERS]
         self.args = [str(len(p)), *(repr(float(v)) for v in p.values()), str(len(s)), *(repr(float(v)) for v in s)]

@@ -248,3 +248,42 @@ def test_an_engine_built_for_other_counts_refuses_the_model(tmp_path):
     assert wrong.returncode == 1
     assert "the model has 7 states, 1 discrete state entries and 11 outputs; this engine was built for exactly 6, " \
            "1 and 11 (PG_NX, PG_NQ, PG_NY)" in wrong.stderr, wrong.stderr
+
+
+ONE_MODEL_PROBE = r"""
+#include <stdio.h>
+#include <stdlib.h>
+#include "pg_engine.h"
+extern const PgModel PG_MODEL;
+int main(void)
+{
+    double p[PG_MAX_P] = {0}, s[PG_NS] = {0}, u[PG_MAX_U] = {0};
+    PgModel copy = PG_MODEL; /* the same functions and counts, another model to the engine */
+    copy.name = "Copy";
+    PgEngine *e = malloc(pg_engine_sizeof());
+    int rc = pg_engine_init(e, &copy, p, s, u, 0.0, 1.0);
+    printf("%d %s\n", rc, pg_engine_message(e));
+    return 0;
+}
+"""
+
+
+def test_an_engine_built_for_one_model_refuses_another(tmp_path):
+    """A native FMU's engine calls its one model's functions by name (PG_ONE_MODEL, its pg_sizes.h):
+    given any other model it would run that one's counts with this one's functions, so it refuses it,
+    naming both, before anything else is read."""
+    import subprocess
+
+    from pogofmu.codegen.build import ENGINE, ENGINE_SOURCES, compile_c, write_model_source
+    from pogofmu.codegen.cmodel import ONE_MODEL, exact_counts, sizes_header
+    from pogofmu.runtime.models import get
+
+    model = get("PogoStick")
+    assert f"#define PG_ONE_MODEL {ONE_MODEL}" in sizes_header(model)
+    probe = tmp_path / "probe.c"
+    probe.write_text(ONE_MODEL_PROBE)
+    sources = [write_model_source(model, tmp_path), *(ENGINE / s for s in ENGINE_SOURCES), probe]
+    exe = compile_c(sources, tmp_path / "probe", shared=False, include=[ENGINE],
+                    defines=[*(f"{k}={n}" for k, n in exact_counts(model).items()), f"PG_ONE_MODEL={ONE_MODEL}"])
+    out = subprocess.run([str(exe)], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "1 the model Copy is not the one this engine was built for (PogoStick, PG_ONE_MODEL)", out

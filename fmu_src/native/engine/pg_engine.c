@@ -25,6 +25,17 @@
 #define NY(e) ((e)->model->ny)
 #endif
 
+/* the model: in a native FMU (PG_ONE_MODEL, its pg_sizes.h) the one it is built for, by name, so that
+ * the compiler calls its functions directly and inlines them (a link-time optimized build: the flow
+ * into the stages, the outputs into the serving; the same operations, the same bits); else any
+ * model, through the engine's pointer */
+#ifdef PG_ONE_MODEL
+extern const PgModel PG_ONE_MODEL;
+#define MODEL(e) (&PG_ONE_MODEL)
+#else
+#define MODEL(e) ((e)->model)
+#endif
+
 #define EPS 2.220446049250313e-16
 #define SAFETY 0.9
 #define MIN_FACTOR 0.2
@@ -71,7 +82,7 @@ static double pmin(double a, double b) { return b < a ? b : a; } /* Python's min
 
 static const char *event_name(const PgEngine *e, int i)
 {
-    return i < e->model->ne ? e->model->event_names[i] : e->model->time_event_names[i - e->model->ne];
+    return i < MODEL(e)->ne ? MODEL(e)->event_names[i] : MODEL(e)->time_event_names[i - MODEL(e)->ne];
 }
 
 /* ---- messages ------------------------------------------------------------------------------ */
@@ -84,13 +95,13 @@ static int raise_text(PgEngine *e, const char *text)
 
 static void param_repr(const PgEngine *e, int i, PgMsg *m)
 {
-    pg_msg_value(m, e->p[i], e->model->parameter_kinds[i], "r");
+    pg_msg_value(m, e->p[i], MODEL(e)->parameter_kinds[i], "r");
 }
 
 static int param_index(const PgEngine *e, const char *name)
 {
     for (int i = 0; i < e->np; ++i)
-        if (strcmp(e->model->parameter_names[i], name) == 0) return i;
+        if (strcmp(MODEL(e)->parameter_names[i], name) == 0) return i;
     return -1;
 }
 
@@ -122,7 +133,7 @@ static void extreme_parameters(const PgEngine *e, PgMsg *m)
         for (int b = a; b > 0; --b) {
             int i = idx[b - 1], j = idx[b];
             double mi = mag[b - 1], mj = mag[b];
-            int c = strcmp(e->model->parameter_names[i], e->model->parameter_names[j]);
+            int c = strcmp(MODEL(e)->parameter_names[i], MODEL(e)->parameter_names[j]);
             int less = mi < mj || (mi == mj && (c < 0 || (c == 0 && e->p[i] < e->p[j])));
             if (!less) break;
             idx[b - 1] = j, idx[b] = i, mag[b - 1] = mj, mag[b] = mi;
@@ -132,7 +143,7 @@ static void extreme_parameters(const PgEngine *e, PgMsg *m)
     if (n) pg_msg_str(m, "; parameters of the most extreme magnitude: ");
     for (int k = 0; k < n && k < 3; ++k) {
         if (k) pg_msg_str(m, ", ");
-        pg_msg_str(m, e->model->parameter_names[idx[k]]);
+        pg_msg_str(m, MODEL(e)->parameter_names[idx[k]]);
         pg_msg_str(m, " = ");
         param_repr(e, idx[k], m);
     }
@@ -180,7 +191,7 @@ static void function_failed_at(const PgEngine *e, PgMsg *m, const char *function
     pg_msg_str(m, " s");
     for (int i = 0; i < NX(e); ++i) {
         pg_msg_str(m, i ? ", " : " (state ");
-        pg_msg_str(m, e->model->state_names[i]);
+        pg_msg_str(m, MODEL(e)->state_names[i]);
         pg_msg_str(m, " = ");
         pg_msg_value(m, x[i], 'f', "r");
     }
@@ -279,7 +290,7 @@ static void note_flow(PgEngine *e, double t, const double *y, const double *dy)
     PgMsg *m = &e->note;
     pg_msg_clear(m);
     function_failed_at(e, m, "the flow", -1, t, y);
-    pg_msg_printf(m, "it returned d%s/dt = ", e->model->state_names[bad]);
+    pg_msg_printf(m, "it returned d%s/dt = ", MODEL(e)->state_names[bad]);
     pg_msg_value(m, dy[bad], 'f', "r");
     pg_msg_str(m, " (a model function must return finite numbers)");
     e->has_note = 1;
@@ -301,27 +312,27 @@ static int model_fun(void *ctx, double t, const double *y, double *dy, PgMsg *m)
 {
     PgEngine *e = ctx;
     /* the steps with held inputs: the flow as it is, a tail call (6 to 12 a step) */
-    if (!e->probe && !e->has_du) return e->model->flow(t, y, e->q, e->u, e->p, dy, m);
+    if (!e->probe && !e->has_du) return MODEL(e)->flow(t, y, e->q, e->u, e->p, dy, m);
     return model_fun_checked(e, t, y, dy, m);
 }
 
 /* model_fun with inputs on their line, or in probe_step */
 static PG_NOINLINE int model_fun_checked(PgEngine *e, double t, const double *y, double *dy, PgMsg *m)
 {
-    if (!e->probe) return e->model->flow(t, y, e->q, u_at(e, t), e->p, dy, m); /* the steps: as it is */
+    if (!e->probe) return MODEL(e)->flow(t, y, e->q, u_at(e, t), e->p, dy, m); /* the steps: as it is */
     /* probe_step: the same step again, each value of the flow checked, a failure named */
-    int rc = e->model->flow(t, y, e->q, u_at(e, t), e->p, dy, m);
+    int rc = MODEL(e)->flow(t, y, e->q, u_at(e, t), e->p, dy, m);
     if (rc == PG_OK) {
         if (!all_finite(dy, NX(e))) note_flow(e, t, y, dy);
         return PG_OK;
     }
-    return model_failed(e, m, rc, "the flow", -1, t, y, dy, NX(e), "d%s/dt", e->model->state_names);
+    return model_failed(e, m, rc, "the flow", -1, t, y, dy, NX(e), "d%s/dt", MODEL(e)->state_names);
 }
 
 /* guard i at the state x of time t (with the inputs of t) */
 static int guard_at(PgEngine *e, int i, double t, const double *x, double *g)
 {
-    int rc = e->model->guard(i, t, x, e->q, u_at(e, t), e->p, g, &e->msg);
+    int rc = MODEL(e)->guard(i, t, x, e->q, u_at(e, t), e->p, g, &e->msg);
     return model_call(e, &e->msg, rc, "the guard", i, t, x, g, 1, "%s", NULL);
 }
 
@@ -340,10 +351,10 @@ static int jacobian(PgEngine *e, double t, const double *y, const double *f)
     if (e->jac_ok && e->jac_t == t && memcmp(e->jac_y, y, nb) == 0) return PG_OK;
     double col[PG_MAX_X], yp[PG_MAX_X];
     for (int j = 0; j < n; ++j) {
-        if (e->model->flow_jvp && !e->jvp_off) {
+        if (MODEL(e)->flow_jvp && !e->jvp_off) {
             double sx[PG_MAX_X] = {0};
             sx[j] = 1.0;
-            int rc = e->model->flow_jvp(t, y, e->q, u_at(e, t), e->p, sx, NO_INPUT_MOVE, col, &e->msg);
+            int rc = MODEL(e)->flow_jvp(t, y, e->q, u_at(e, t), e->p, sx, NO_INPUT_MOVE, col, &e->msg);
             if (rc == PG_NO_JVP) {
                 e->jvp_off = 1;
                 j = -1; /* every column again, by differences */
@@ -511,14 +522,14 @@ static void make_seg(PgEngine *e, PgSeg *seg, double t0, double t1, const double
     seg->method = e->cur;
 }
 
-static double sgn_of(const PgEngine *e, int i) { return e->model->event_direction[i] == PG_FALLING ? -1.0 : 1.0; }
+static double sgn_of(const PgEngine *e, int i) { return MODEL(e)->event_direction[i] == PG_FALLING ? -1.0 : 1.0; }
 
 /* ---- time scales and tolerances (prepare, _stiffness_text) -------------------------------- */
 static int time_scales(PgEngine *e, PgScale *out, int *n, int filtered)
 {
     *n = 0;
-    if (!e->model->has_time_scales) return PG_OK;
-    TRY(e->model->time_scales(e->p, out, n, &e->msg));
+    if (!MODEL(e)->has_time_scales) return PG_OK;
+    TRY(MODEL(e)->time_scales(e->p, out, n, &e->msg));
     if (filtered) {
         int k = 0;
         for (int i = 0; i < *n; ++i)
@@ -586,7 +597,7 @@ static int check_finite_inputs(PgEngine *e, const double *u, int slopes)
     for (int i = 0; i < e->nu; ++i) {
         if (!isfinite(u[i])) {
             PgMsg *m = &e->msg;
-            const char *name = e->model->input_names[i];
+            const char *name = MODEL(e)->input_names[i];
             pg_msg_clear(m);
             pg_msg_printf(m, slopes ? "input derivative d%s/dt = " : "input %s = ", name);
             pg_msg_value(m, u[i], 'f', "r");
@@ -605,8 +616,8 @@ static int check_abs_tol(PgEngine *e)
 {
     PgScale sc[PG_MAX_SCALES];
     int n = 0;
-    if (e->model->has_error_scales) {
-        TRY(e->model->error_scales(e->p, sc, &n, &e->msg));
+    if (MODEL(e)->has_error_scales) {
+        TRY(MODEL(e)->error_scales(e->p, sc, &n, &e->msg));
         int k = 0;
         for (int i = 0; i < n; ++i)
             if (sc[i].value > 0 && isfinite(sc[i].value)) sc[k++] = sc[i];
@@ -655,7 +666,7 @@ static int check_abs_tol(PgEngine *e)
 static int domain_violation(PgEngine *e, double t, const double *x, PgSeg *seg, double *t_v, int *rc)
 {
     *rc = PG_OK;
-    int r = e->model->domain(t, x, e->q, u_at(e, t), e->p, e->s, &e->msg);
+    int r = MODEL(e)->domain(t, x, e->q, u_at(e, t), e->p, e->s, &e->msg);
     if (r == PG_ARITH) {
         *rc = r;
         return 0;
@@ -674,7 +685,7 @@ static int domain_violation(PgEngine *e, double t, const double *x, PgSeg *seg, 
                 if (isfinite(x[i])) continue;
                 if (!first) pg_msg_str(m, ", ");
                 first = 0;
-                pg_msg_str(m, e->model->state_names[i]);
+                pg_msg_str(m, MODEL(e)->state_names[i]);
                 pg_msg_str(m, " = ");
                 pg_msg_value(m, x[i], 'f', "r");
             }
@@ -694,7 +705,7 @@ static int domain_violation(PgEngine *e, double t, const double *x, PgSeg *seg, 
                 *rc = s1;
                 return 0;
             }
-            int d = e->model->domain(c, y, e->q, u_at(e, c), e->p, e->s, &e->scratch);
+            int d = MODEL(e)->domain(c, y, e->q, u_at(e, c), e->p, e->s, &e->scratch);
             if (d == PG_ARITH) {
                 e->msg = e->scratch;
                 *rc = d;
@@ -734,9 +745,9 @@ static int check_domain(PgEngine *e, double t, const double *x)
 static int rebind(PgEngine *e)
 {
     e->n_active = 0;
-    for (int i = 0; i < e->model->ne; ++i) {
+    for (int i = 0; i < MODEL(e)->ne; ++i) {
         int on = 0;
-        TRY(e->model->active(i, e->q, &on, &e->msg));
+        TRY(MODEL(e)->active(i, e->q, &on, &e->msg));
         if (on) e->active[e->n_active++] = i;
     }
     return PG_OK;
@@ -746,7 +757,7 @@ static int bind(PgEngine *e)
 {
     TRY(rebind(e));
     e->jac_ok = 0; /* a new mode or new inputs: another flow */
-    TRY(e->model->flow(e->t, e->x, e->q, u_at(e, e->t), e->p, e->f, &e->msg));
+    TRY(MODEL(e)->flow(e->t, e->x, e->q, u_at(e, e->t), e->p, e->f, &e->msg));
     for (int k = 0; k < e->n_active; ++k) TRY(guard_at(e, e->active[k], e->t, e->x, &e->g[k]));
     e->has_g_prev = 0;
     return PG_OK;
@@ -806,7 +817,7 @@ static int check_initial_rates(PgEngine *e)
         if (!isfinite(e->f[i])) {
             PgMsg *m = &e->msg;
             pg_msg_clear(m);
-            pg_msg_printf(m, "the rate d%s/dt = ", e->model->state_names[i]);
+            pg_msg_printf(m, "the rate d%s/dt = ", MODEL(e)->state_names[i]);
             pg_msg_value(m, e->f[i], 'f', "r");
             pg_msg_str(m, " at the start (t = ");
             pg_msg_value(m, e->t, 'f', "r");
@@ -821,7 +832,7 @@ static int check_initial_rates(PgEngine *e)
 /* ---- Simulator.__init__ -------------------------------------------------------------------- */
 static int prepare(PgEngine *e)
 {
-    const PgModel *md = e->model;
+    const PgModel *md = MODEL(e);
     TRY(md->check_settings(e->s, &e->msg));
     TRY(md->check(e->p, &e->msg));
     TRY(check_inputs(e, e->u));
@@ -859,6 +870,14 @@ int pg_engine_init(PgEngine *e, const PgModel *model, const double *p, const dou
         pg_msg_printf(&e->msg, "the model has %d states, %d discrete state entries and %d outputs; this engine was "
                       "built for exactly %d, %d and %d (PG_NX, PG_NQ, PG_NY)", model->nx, model->nq, model->ny, PG_NX,
                       PG_NQ, PG_NY);
+        return PG_RAISE;
+    }
+#endif
+#ifdef PG_ONE_MODEL
+    if (model != &PG_ONE_MODEL) { /* (a native FMU's engine calls its one model's functions by name) */
+        pg_msg_clear(&e->msg);
+        pg_msg_printf(&e->msg, "the model %s is not the one this engine was built for (%s, PG_ONE_MODEL)",
+                      model->name ? model->name : "(unnamed)", PG_ONE_MODEL.name ? PG_ONE_MODEL.name : "(unnamed)");
         return PG_RAISE;
     }
 #endif
@@ -1101,7 +1120,7 @@ static int arm_guards(PgEngine *e, const signed char *was, int own, double own_g
 /* what each event's guard was before a restart (arm_guards' was): 1 armed, 0 active and not, -1 inactive */
 static void arming_before(const PgEngine *e, signed char *was)
 {
-    for (int i = 0; i < e->model->ne; ++i) was[i] = -1;
+    for (int i = 0; i < MODEL(e)->ne; ++i) was[i] = -1;
     for (int k = 0; k < e->n_active; ++k) was[e->active[k]] = e->armed[e->active[k]];
 }
 
@@ -1159,7 +1178,7 @@ static void armed_after_step(PgEngine *e, const double *g)
 /* each time event's instants from the parameters, the first at or after t0 */
 static int time_events_init(PgEngine *e, double t0)
 {
-    const PgModel *md = e->model;
+    const PgModel *md = MODEL(e);
     if (md->nte > PG_MAX_TIME_EVENTS) {
         pg_msg_clear(&e->msg);
         pg_msg_printf(&e->msg, "the model has %d time events; the engine takes at most %d (PG_MAX_TIME_EVENTS)",
@@ -1191,15 +1210,15 @@ static int time_events_init(PgEngine *e, double t0)
 double pg_engine_next_time_event(const PgEngine *e)
 {
     double t = INFINITY;
-    for (int k = 0; k < e->model->nte; ++k) t = pmin(t, e->te_next[k]);
+    for (int k = 0; k < MODEL(e)->nte; ++k) t = pmin(t, e->te_next[k]);
     return t;
 }
 
 /* the first time event whose instant is at or before `reach` */
 static int time_event_by(const PgEngine *e, double reach)
 {
-    for (int k = 0; k < e->model->nte; ++k)
-        if (e->te_next[k] <= reach) return e->model->ne + k;
+    for (int k = 0; k < MODEL(e)->nte; ++k)
+        if (e->te_next[k] <= reach) return MODEL(e)->ne + k;
     return -1;
 }
 
@@ -1531,7 +1550,7 @@ static int step(PgEngine *e, double t_target)
         if (hit < 0 || te < hit_t) hit = k, hit_t = te, hit_level = level;
     }
     if (hit < 0) {
-        int rc = e->model->domain(t_new, y_new, e->q, u_at(e, t_new), e->p, e->s, &e->msg);
+        int rc = MODEL(e)->domain(t_new, y_new, e->q, u_at(e, t_new), e->p, e->s, &e->msg);
         if (rc == PG_ARITH) return rc;
         int finite = 1;
         for (int i = 0; i < NX(e); ++i) finite &= isfinite(y_new[i]) != 0;
@@ -1630,15 +1649,15 @@ static int apply_pending_event(PgEngine *e)
     /* its guard at the located crossing, before the jump: its zero (NaN, no zero to keep, for an event
      * fired beyond it by an input change or a jump) */
     double own_g = NAN;
-    int ne = e->model->ne;
+    int ne = MODEL(e)->ne;
     if (i < ne) {
         if (e->pending_located) TRY(guard_at(e, i, e->t, e->x, &own_g));
-        TRY(model_call(e, &e->msg, e->model->jump(i, e->t, e->x, e->q, u_at(e, e->t), e->p, x_new, q_new, &e->msg),
-                       "the jump", i, e->t, e->x, x_new, NX(e), "%s", e->model->state_names));
+        TRY(model_call(e, &e->msg, MODEL(e)->jump(i, e->t, e->x, e->q, u_at(e, e->t), e->p, x_new, q_new, &e->msg),
+                       "the jump", i, e->t, e->x, x_new, NX(e), "%s", MODEL(e)->state_names));
     } else {
         int k = i - ne;
-        TRY(model_call(e, &e->msg, e->model->time_jump(k, e->t, e->x, e->q, u_at(e, e->t), e->p, x_new, q_new, &e->msg),
-                       "the jump", i, e->t, e->x, x_new, NX(e), "%s", e->model->state_names));
+        TRY(model_call(e, &e->msg, MODEL(e)->time_jump(k, e->t, e->x, e->q, u_at(e, e->t), e->p, x_new, q_new, &e->msg),
+                       "the jump", i, e->t, e->x, x_new, NX(e), "%s", MODEL(e)->state_names));
         e->te_count[k] += 1; /* the next instant counted from the first: no drift over many periods */
         e->te_next[k] = e->te_every[k] > 0.0 ? e->te_at[k] + (double)e->te_count[k] * e->te_every[k] : INFINITY;
     }
@@ -1781,7 +1800,7 @@ int pg_engine_advance_to_event(PgEngine *e, double t_target, int *stopped)
 {
     *stopped = 0;
     if (t_target < e->t_out) return pg_engine_advance(e, t_target); /* (the same refusal) */
-    if ((e->model->ne == 0 && e->model->nte == 0) || e->stateless) return pg_engine_advance(e, t_target);
+    if ((MODEL(e)->ne == 0 && MODEL(e)->nte == 0) || e->stateless) return pg_engine_advance(e, t_target);
     TRY(run(e, t_target, 0));
     if (e->has_pending && e->t <= t_target) {
         e->t_out = e->t;
@@ -1941,7 +1960,7 @@ static int me_decline_storm(PgEngine *e, int i, double t)
 
 int pg_engine_me_indicators(PgEngine *e, double t, const double *x, double *z)
 {
-    for (int i = 0; i < e->model->ne; ++i) z[i] = 1.0; /* inactive: a value that cannot cross zero */
+    for (int i = 0; i < MODEL(e)->ne; ++i) z[i] = 1.0; /* inactive: a value that cannot cross zero */
     for (int k = 0; k < e->n_active; ++k) {
         int i = e->active[k];
         double g, sgn = sgn_of(e, i);
@@ -1986,7 +2005,7 @@ int pg_engine_me_fired(PgEngine *e, double t, const double *x, int *index)
          * importer's interpolant, whose error is its tolerance, met the threshold where the motion
          * leaves it (a mass leaving a wall at 1e-7 m/s seen 1e-13 m inside it) */
         double f[PG_MAX_X], dg, d;
-        TRY(e->model->flow(t, x, e->q, u_at(e, t), e->p, f, &e->msg));
+        TRY(MODEL(e)->flow(t, x, e->q, u_at(e, t), e->p, f, &e->msg));
         TRY(guard_change(e, i, t, x, f, &dg, &d));
         if (dg < 0.0) {
             TRY(me_decline_storm(e, i, t));
@@ -2034,21 +2053,21 @@ const double *pg_engine_inputs_at(PgEngine *e, double t) { return u_at(e, t); }
 
 int pg_engine_domain_problem(PgEngine *e, double t, const double *x)
 {
-    int rc = e->model->domain(t, x, e->q, u_at(e, t), e->p, e->s, &e->msg);
+    int rc = MODEL(e)->domain(t, x, e->q, u_at(e, t), e->p, e->s, &e->msg);
     return rc == PG_RAISE;
 }
 
 int pg_engine_flow(PgEngine *e, double t, const double *x, double *dx)
 {
-    return e->model->flow(t, x, e->q, u_at(e, t), e->p, dx, &e->msg);
+    return MODEL(e)->flow(t, x, e->q, u_at(e, t), e->p, dx, &e->msg);
 }
 
 int pg_engine_guard(PgEngine *e, int k, const double *x, double *g) { return guard_at(e, k, e->t_out, x, g); }
 
 int pg_engine_outputs(PgEngine *e, double t, const double *x, const double *q, double *y)
 {
-    int rc = e->model->outputs(t, x, q, u_at(e, t), e->p, y, &e->msg);
-    return model_call(e, &e->msg, rc, "the outputs", -1, t, x, y, NY(e), "%s", e->model->output_names);
+    int rc = MODEL(e)->outputs(t, x, q, u_at(e, t), e->p, y, &e->msg);
+    return model_call(e, &e->msg, rc, "the outputs", -1, t, x, y, NY(e), "%s", MODEL(e)->output_names);
 }
 
 size_t pg_engine_sizeof(void) { return sizeof(PgEngine); }

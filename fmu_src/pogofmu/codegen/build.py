@@ -243,9 +243,15 @@ FMI_HEADERS = {2: ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.
 # linux64 / darwin64 on aarch64 too; darwin64 therefore holds a universal (fat) Mach-O of both
 # macOS architectures, as the Reference-FMUs' FMI 2.0 builds do, and aarch64 Linux, which cannot
 # share linux64 with x86-64, gets the FMI 3.0 tuple's folder aarch64-linux (docs/native.md).
+# Linux: link-time optimized (-flto), so that the engine calls the model's functions inlined (its
+# PG_ONE_MODEL) and the FMI calls run into the adapter and the engine without a call per layer; the
+# same operations in the same order (no fast-math, no contraction), the same bits. zig 0.17 cannot do
+# it for the other targets: Windows fails its link (an undefined nanl in zig's C runtime), and its
+# Mach-O linker has no LTO. Those binaries keep one object per file.
+LTO = ("-flto",)
 PLATFORMS = {
-    "x86_64-linux": ("linux64", "x86_64-linux-gnu.2.17", ".so", ("-fPIC", "-fvisibility=hidden", "-s")),
-    "aarch64-linux": ("aarch64-linux", "aarch64-linux-gnu.2.17", ".so", ("-fPIC", "-fvisibility=hidden", "-s")),
+    "x86_64-linux": ("linux64", "x86_64-linux-gnu.2.17", ".so", ("-fPIC", "-fvisibility=hidden", "-s", *LTO)),
+    "aarch64-linux": ("aarch64-linux", "aarch64-linux-gnu.2.17", ".so", ("-fPIC", "-fvisibility=hidden", "-s", *LTO)),
     "x86_64-windows": ("win64", "x86_64-windows-gnu", ".dll", ("-s", "-DPOGOFMU_CRT_MATH")),
     "x86_64-darwin": ("darwin64", "x86_64-macos.10.13", ".dylib", ("-fPIC", "-fvisibility=hidden", "-s")),
     "aarch64-darwin": ("darwin64", "aarch64-macos.11.0", ".dylib", ("-fPIC", "-fvisibility=hidden", "-s")),
@@ -429,7 +435,9 @@ def compile_units(units: Sequence[Path], out: Path, include: Sequence[Path], cc=
 
     with ThreadPoolExecutor(max_workers=max(1, min(len(units), os.cpu_count() or 1))) as pool:
         objects = list(pool.map(one, units))
-    cmd = [*command, "-shared", *extra, *(str(o) for o in objects), "-o", str(out), "-lm"]
+    # (the optimization level again: a link-time optimized build compiles the program at the link)
+    cmd = [*command, "-shared", *(f for f in CFLAGS if f.startswith("-O")), *extra, *(str(o) for o in objects),
+           "-o", str(out), "-lm"]
     proc = subprocess.run(cmd, capture_output=True, text=True, cwd=cwd)
     if proc.returncode != 0:
         lines = (proc.stderr or proc.stdout).strip().splitlines()
