@@ -174,7 +174,7 @@ class Limit:
 
     def __init__(self, name: str, dest: Path):
         from pogofmu.codegen.build import ENGINE, ENGINE_SOURCES, LTO, compile_c, write_model_source
-        from pogofmu.codegen.cmodel import ONE_MODEL, exact_counts
+        from pogofmu.codegen.cmodel import specialization
         from pogofmu.runtime.solver import SOLVER_PARAMETERS
         from pogofmu.runtime.models import get
 
@@ -185,7 +185,7 @@ class Limit:
         # the model's exact counts and its one model, as its native FMU's sizes header gives them, link-time
         # optimized as its Linux binary is
         self.exe = compile_c(sources, folder / "engine_loop", shared=False, include=[ENGINE],
-                             defines=[*(f"{k}={n}" for k, n in exact_counts(model).items()), f"PG_ONE_MODEL={ONE_MODEL}"],
+                             defines=[f"{k}={v}" for k, v in specialization(model).items()],
                              extra=LTO)
         p = model.defaults()
         s = [par.default for par in SOLVER_PARAMETERS]

@@ -214,20 +214,27 @@ def test_the_pairs_c_file_is_what_the_generator_writes():
         "regenerate it: python -m pogofmu.codegen.cpairs > fmu_src/native/engine/pg_pairs.c"
 
 
-def _engine_loop(tmp_path, counts):
-    """benchmarks/c/engine_loop.c with the PogoStick's generated C and the engine, built with the
-    constant counts ``counts`` (as a native FMU's sizes header gives them), run over 1 s at 1 ms."""
-    import subprocess
-    from pathlib import Path
-
+def _engine_program(tmp_path, main, defines):
+    """A C program ``main`` built with the PogoStick's generated C and the engine's files, with the
+    ``-D`` ``defines`` (a native FMU's sizes header gives them: cmodel.specialization)."""
     from pogofmu.codegen.build import ENGINE, ENGINE_SOURCES, compile_c, write_model_source
     from pogofmu.runtime.models import get
 
+    sources = [write_model_source(get("PogoStick"), tmp_path), *(ENGINE / s for s in ENGINE_SOURCES), main]
+    return compile_c(sources, tmp_path / main.stem, shared=False, include=[ENGINE],
+                     defines=[f"{k}={v}" for k, v in defines.items()])
+
+
+def _engine_loop(tmp_path, counts):
+    """benchmarks/c/engine_loop.c built with the constant counts ``counts``, run over 1 s at 1 ms."""
+    import subprocess
+    from pathlib import Path
+
+    from pogofmu.runtime.models import get
+
     model = get("PogoStick")
-    loop = Path(__file__).resolve().parent.parent / "benchmarks" / "c" / "engine_loop.c"
-    sources = [write_model_source(model, tmp_path), *(ENGINE / s for s in ENGINE_SOURCES), loop]
-    exe = compile_c(sources, tmp_path / "engine_loop", shared=False, include=[ENGINE],
-                    defines=[f"{k}={n}" for k, n in counts.items()])
+    exe = _engine_program(tmp_path, Path(__file__).resolve().parent.parent / "benchmarks" / "c" / "engine_loop.c",
+                          counts)
     p = model.defaults()
     s = [par.default for par in SOLVER_PARAMETERS]
     args = [str(len(p)), *(repr(float(v)) for v in p.values()), str(len(s)), *(repr(float(v)) for v in s)]
@@ -274,16 +281,13 @@ def test_an_engine_built_for_one_model_refuses_another(tmp_path):
     naming both, before anything else is read."""
     import subprocess
 
-    from pogofmu.codegen.build import ENGINE, ENGINE_SOURCES, compile_c, write_model_source
-    from pogofmu.codegen.cmodel import ONE_MODEL, exact_counts, sizes_header
+    from pogofmu.codegen.cmodel import ONE_MODEL, sizes_header, specialization
     from pogofmu.runtime.models import get
 
     model = get("PogoStick")
     assert f"#define PG_ONE_MODEL {ONE_MODEL}" in sizes_header(model)
     probe = tmp_path / "probe.c"
     probe.write_text(ONE_MODEL_PROBE)
-    sources = [write_model_source(model, tmp_path), *(ENGINE / s for s in ENGINE_SOURCES), probe]
-    exe = compile_c(sources, tmp_path / "probe", shared=False, include=[ENGINE],
-                    defines=[*(f"{k}={n}" for k, n in exact_counts(model).items()), f"PG_ONE_MODEL={ONE_MODEL}"])
+    exe = _engine_program(tmp_path, probe, specialization(model))
     out = subprocess.run([str(exe)], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "1 the model Copy is not the one this engine was built for (PogoStick, PG_ONE_MODEL)", out

@@ -57,17 +57,17 @@ def test_the_binary_needs_only_the_c_library(name, folder, platform, unzipped):
                                check=True).stdout.split()
     assert not [s for s in undefined if s.startswith(("Py", "_Py", "dlopen"))], undefined
     # every math function the model calls (itself or through pg_support.c's checked pg_<f>), and pow
-    # (the engine's step control, when the model has states to step), comes from the C library, as in the Python-hosted FMU: none bundled
-    # by the compiler's runtime (zig's, linked for a 128-bit division, carries its own exp and log,
-    # whose last bits differ). (Not every function pg_support.c wraps: the link-time optimized binary
-    # keeps only what is called.)
+    # (the engine's step control, when the model has states to step), comes from the C library, as in
+    # the Python-hosted FMU: none bundled by the compiler's runtime (zig's, linked for a 128-bit
+    # division, carries its own exp and log, whose last bits differ). (Not every function pg_support.c
+    # wraps: the link-time optimized binary keeps only what is called.)
     import re
+
+    from pogofmu.runtime.models import get
 
     code = (unzipped(f"{folder}/{name}") / "sources" / f"{name}_model.c").read_text()
     code = re.sub(r'"(\\.|[^"\\])*"', '""', re.sub(r"/\*.*?\*/|//[^\n]*", " ", code, flags=re.S))
     called = {f for f in ("exp", "log", "sin", "cos", "sqrt", "floor", "fmod") if re.search(rf"\b(pg_)?{f}\(", code)}
-    from pogofmu.runtime.models import get
-
     if get(name).states:
         called.add("pow")
     imported = {s.split("@")[0] for s in undefined}

@@ -1162,6 +1162,13 @@ static int zero_storm(PgEngine *e, int i)
 
 /* after a step committed without an event, the guards g (at its end): armed on the before side;
  * at zero still while within the band */
+/* guard i, at G < 0 (its before side) at a step's start, is the crossing its own jump continued
+ * (located a rounding short of zero), not a new one: disarmed, and within its band */
+static int continues_own_crossing(const PgEngine *e, int i, double G)
+{
+    return G < 0.0 && !e->armed[i] && G >= -e->zband[i];
+}
+
 static void armed_after_step(PgEngine *e, const double *g)
 {
     for (int k = 0; k < e->n_active; ++k) {
@@ -1536,9 +1543,7 @@ static int step(PgEngine *e, double t_target)
             TRY(hidden_crossing(e, seg, i, sgn, g0, g1, f_new, &te, &found));
             if (!found) continue;
         } else if (sgn * g0 < 0.0) {
-            /* disarmed within its band: the crossing its own jump continued (located a rounding short of
-             * zero), not a new one */
-            if (!e->armed[i] && sgn * g0 >= -e->zband[i]) continue;
+            if (continues_own_crossing(e, i, sgn * g0)) continue;
             TRY(locate(e, seg, i, t, g0, g1, NULL, &te));
         } else if (g0 == 0.0) {
             TRY(locate_from_zero(e, seg, i, g1, 0, &te, &found));
@@ -1825,9 +1830,7 @@ static int crossed_in(PgEngine *e, double t0, const double *y0, double t1, const
         TRY(guard_at(e, i, t0, y0, &a));
         TRY(guard_at(e, i, t1, y1, &b));
         double g0 = sgn * a, g1 = sgn * b;
-        /* (as step: a disarmed guard within its band on its before side is the crossing its own jump
-         * continued, located a rounding short of zero, not a new one) */
-        if (g0 < 0.0 && !e->armed[i] && g0 >= -e->zband[i]) continue;
+        if (continues_own_crossing(e, i, g0)) continue; /* (as in step) */
         if (g1 >= 0.0 && (g0 < 0.0 || (g0 == 0.0 && 0.0 < g1 && i != disarmed))) {
             *index = i;
             return PG_OK;
