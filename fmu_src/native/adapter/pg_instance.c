@@ -638,7 +638,7 @@ static int step_problem(PgInstance *in, double t, double h, PgMsg *m)
 }
 
 /* _model_failed: remember why, so that later steps are refused */
-int pg_inst_model_failed(PgInstance *in)
+PG_NOINLINE int pg_inst_model_failed(PgInstance *in)
 {
     PgState *st = &in->st;
     st->failed = 1;
@@ -649,6 +649,16 @@ int pg_inst_model_failed(PgInstance *in)
     return refuse(in, &m);
 }
 
+/* the checks of a step off the fast path (pg_inst_do_step), out of line: its message buffer stays off
+ * the fast path's stack; 1 when the step is refused (said) */
+static PG_NOINLINE int step_refused(PgInstance *in, double t, double h)
+{
+    PgMsg m;
+    if (!step_problem(in, t, h, &m)) return 0;
+    refuse(in, &m);
+    return 1;
+}
+
 int pg_inst_do_step(PgInstance *in, double t, double h)
 {
     PgState *st = &in->st;
@@ -656,8 +666,7 @@ int pg_inst_do_step(PgInstance *in, double t, double h)
     double end = t + h;
     if (!(!st->failed && st->has_sim && !in->inputs_changed && t == e->t_out && 0.0 <= h && h <= in->h_fast &&
           end <= st->t_stop)) {
-        PgMsg m;
-        if (step_problem(in, t, h, &m)) return refuse(in, &m);
+        if (step_refused(in, t, h)) return PG_ST_ERROR;
         if (end < e->t_out) end = e->t_out;
     }
     Notes nt;

@@ -84,7 +84,7 @@ static PG_NOINLINE int refused(Inst *in, int rule, const char *function)
 
 /* A NULL where the standard wants an argument: Error naming it (as the Reference-FMUs'
  * ASSERT_NOT_NULL does) */
-static fmi2Status null_argument(Inst *in, const char *function, const char *argument)
+static PG_NOINLINE fmi2Status null_argument(Inst *in, const char *function, const char *argument)
 {
     char msg[300];
     snprintf(msg, sizeof msg, "%s refused: the argument %s must not be NULL", function, argument);
@@ -92,7 +92,7 @@ static fmi2Status null_argument(Inst *in, const char *function, const char *argu
     return fmi2Error;
 }
 
-static fmi2Status unsupported(Inst *in, const char *what)
+static PG_NOINLINE fmi2Status unsupported(Inst *in, const char *what)
 {
     char msg[300];
     snprintf(msg, sizeof msg, "%s is not supported by this FMU", what);
