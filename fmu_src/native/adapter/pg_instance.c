@@ -166,9 +166,10 @@ int pg_inst_update_outputs_at(PgInstance *in, double t, const double *x, const d
     PgEngine *e = &st->sim;
     int ny = n_model_outputs(in);
     int rc = pg_engine_outputs(e, t, x, q, st->out);
-    if (in->fmu->fmi == 3) {
-        for (int i = 0; i < e->nx; ++i) st->out[ny + 3 + i] = x[i];
-        st->out[ny + 3 + e->nx] = t;
+    if (in->fmu->fmi == 3) { /* (PG_N: a native FMU's count of states, a constant) */
+        int nx = PG_N(e->nx);
+        memcpy(st->out + ny + 3, x, sizeof(double) * (size_t)nx);
+        st->out[ny + 3 + nx] = t;
     }
     st->out[ny] = (double)e->n_events;
     st->out[ny + 1] = e->has_last ? e->last.time : st->t_start;

@@ -44,9 +44,16 @@ void pg3_set_event_mode(PgInstance *in, int on) { in->event_mode = on; }
 static void stale(PgInstance *in) { in->me_stale = 1; }
 
 /* _require_mode */
+static PG_NOINLINE int wrong_mode(PgInstance *in, char mode, const char *what);
+
 static int require_mode(PgInstance *in, char mode, const char *what)
 {
-    if (in->mode == mode) return PG_ST_OK;
+    return in->mode == mode ? PG_ST_OK : wrong_mode(in, mode, what);
+}
+
+/* (out of line: its message buffer stays off the calling step's stack) */
+static PG_NOINLINE int wrong_mode(PgInstance *in, char mode, const char *what)
+{
     PgMsg m;
     pg_msg_clear(&m);
     pg_msg_printf(&m, "%s is a %s function: this instance is a %s instance", what,

@@ -82,7 +82,7 @@ static PG_NOINLINE int refused(Inst *in, int rule, const char *function)
 
 /* A NULL where the standard wants an argument: Error naming it (as the Reference-FMUs'
  * ASSERT_NOT_NULL does) */
-static fmi3Status null_argument(Inst *in, const char *function, const char *argument)
+static PG_NOINLINE fmi3Status null_argument(Inst *in, const char *function, const char *argument)
 {
     char msg[300];
     snprintf(msg, sizeof msg, "%s refused: the argument %s must not be NULL", function, argument);
@@ -175,7 +175,7 @@ static const unsigned *expand(Inst *in, const char *function, const char *count,
     return out;
 }
 
-static fmi3Status unsupported(Inst *in, const char *what)
+static PG_NOINLINE fmi3Status unsupported(Inst *in, const char *what)
 {
     char msg[300];
     snprintf(msg, sizeof msg, "%s is not supported by this FMU", what);
