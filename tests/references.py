@@ -80,8 +80,22 @@ def _ev(fun, direction, name):
     return fun
 
 
+def _ballistic_touchdown(z0, v0, g):
+    """Time to touchdown of a flight from height z0 >= 0 over the ground with upward speed v0: the
+    root tau > 0 of z0 + v0 tau - g tau^2 / 2 (0 when z0 = 0 and v0 <= 0), in the form without
+    cancellation for either sign of v0."""
+    s = math.sqrt(v0 * v0 + 2.0 * g * z0)
+    return (v0 + s) / g if v0 >= 0 else 2.0 * z0 / (s - v0)
+
+
 def reference_stick(name, p, t_end):
-    """[(event name, time)] of a free (unforced) run of the stick with parameters ``p``."""
+    """[(event name, time)] of a free (unforced) run of the stick with parameters ``p``; None where
+    it cannot judge (chattering, a reload, or a contact shorter than its first step).
+
+    The flight is ballistic (the leg at rest, z' = ydot, ydot' = -g), so its touchdown is the closed
+    form: an integrator's event search cannot see a flight that lifts off and lands inside its first
+    step (z = 0 at both ends of the bracket: scipy returns the flight's own start). The contact is
+    integrated by scipy's DOP853 with terminal events."""
     from scipy.integrate import solve_ivp
 
     m, g, x_i, c = p["m"], p["g"], p["x_i"], p["c"]
@@ -100,10 +114,6 @@ def reference_stick(name, p, t_end):
             return [xdot, acc, ydot, acc, 0.0, x]
         return f
 
-    def flight(t, X):
-        return [0.0, 0.0, X[3], -g, X[3], 0.0]
-
-    touchdown = _ev(lambda t, X: X[4], -1, "touchdown")
     liftoff = _ev(lambda t, X: X[0] - x_i, 1, "liftoff")
     r_upper = lambda x: k1 * x1 + k2 * (x - x1)  # noqa: E731  (the SMA's plateaus)
     r_lower = lambda x: k1 * x3 + k2 * (x - x3)  # noqa: E731
@@ -115,8 +125,15 @@ def reference_stick(name, p, t_end):
         if len(out) > 400:
             return None  # chattering (a model for the engine's storm rules, not for this reference)
         if mode == "flight":
-            f, evs = flight, [touchdown]
-        elif name != "PogoStickSMA":
+            tau = _ballistic_touchdown(X[4], X[3], g)
+            if t + tau >= t_end:
+                break
+            t = t + tau
+            X[2], X[3], X[4] = X[2] + X[3] * tau - 0.5 * g * tau * tau, X[3] - g * tau, 0.0
+            out.append(("touchdown", t))
+            X[1], mode = X[3], "contact"
+            continue
+        if name != "PogoStickSMA":
             f, evs = contact(lambda x, xdot, a: k_of(a) * x + c * (1 + gamma * x * x) * xdot), [liftoff]
         elif mode == "contact":  # the SMA's virgin (elastic) line
             f = contact(lambda x, xdot, a: k1 * x + c * xdot)
@@ -136,6 +153,8 @@ def reference_stick(name, p, t_end):
         if sol.status == 0:
             break
         j = next(i for i, te in enumerate(sol.t_events) if len(te))
+        if sol.t_events[j][0] == t:
+            return None  # at the segment's own start: a contact over inside the first step, or none
         t, X, event = sol.t_events[j][0], list(sol.y_events[j][0]), evs[j].__name__
         out.append((event, t))
         if event == "touchdown":
