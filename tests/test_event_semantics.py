@@ -90,6 +90,37 @@ MODEL = HybridModel(
 )
 '''
 
+# A ball bouncing on a floor that moves with time (a guard that reads t), restitution relative to
+# the floor: the bounces accumulate where the ball comes to rest on it (found by a user's model
+# written from the docs, 2026-12-06: the ball fell through the floor after its last bounce with no
+# error, because the rounding band ignored how t's rounding blurs a guard that reads t).
+FLOOR = '''
+from pogofmu import FALLING, Event, HybridModel, Parameter, Variable, fmath
+
+
+def floor(t, p):
+    return p.A * fmath.sin(p.w * t)
+
+
+def bounce(t, x, q, u, p):
+    vf = p.A * p.w * fmath.cos(p.w * t)
+    return [x[0], vf - p.e * (x[1] - vf)], q
+
+
+MODEL = HybridModel(
+    name="Floor", description="a ball on a moving floor",
+    states=(Variable("y", "m", "height"), Variable("v", "m/s", "velocity")),
+    parameters=(Parameter("g", 9.81, "m/s2", "gravity"), Parameter("e", 0.5, "", "restitution"),
+                Parameter("A", 0.1, "m", "floor amplitude"), Parameter("w", 5.0, "rad/s", "floor frequency")),
+    inputs=(),
+    outputs=(Variable("y", "m", "height"), Variable("gap", "m", "height above the floor")),
+    flow=lambda t, x, q, u, p: [x[1], -p.g],
+    events=(Event("bounce", FALLING, guard=lambda t, x, q, u, p: x[0] - floor(t, p), jump=bounce),),
+    initial=lambda p: ([1.0, 0.0], {}),
+    output_fn=lambda t, x, q, u, p: {"y": x[0], "gap": x[0] - floor(t, p)},
+)
+'''
+
 KINDS = ("{n}.fmu", "fmi3/{n}.fmu", "native/{n}.fmu", "native/fmi3/{n}.fmu")
 
 
@@ -101,8 +132,9 @@ def user_folder(tmp_path_factory):
     (folder / "wall0.py").write_text(WALL.format(name="Wall0", shift="p.d", wall="0.0"))
     (folder / "rest.py").write_text(REST)
     (folder / "toggle.py").write_text(TOGGLE)
-    proc = run_pogofmu("export", "wall.py", "wall0.py", "rest.py", "toggle.py", "--out", "out", cwd=folder,
-                       timeout=600)
+    (folder / "floor.py").write_text(FLOOR)
+    proc = run_pogofmu("export", "wall.py", "wall0.py", "rest.py", "toggle.py", "floor.py", "--out", "out",
+                       cwd=folder, timeout=600)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     return folder
 
@@ -182,6 +214,64 @@ def test_the_accumulation_time_matches_the_impact_law(user_folder):
         total += dt
     storm, _ = _storm(user_folder / "out" / "native" / "Wall.fmu", 1e-10)
     assert abs(_storm_time(storm[0]) - total) < 1e-6, (storm[0], total)
+
+
+def _floor_accumulation(g=9.81, e=0.5, A=0.1, w=5.0):
+    """Independent reference of FLOOR: the flights are parabolas, the floor a sine; each bounce is
+    the one root of the (concave) gap after the last, by brentq on its cancellation-free form; once
+    the relative speed is below 1e-5 m/s the flights are a geometric series (the floor's acceleration
+    constant over them), whose sum ends the bounces. Returns (the bounce times, the accumulation)."""
+    from scipy.optimize import brentq
+
+    t = brentq(lambda s: 1.0 - 0.5 * g * s * s - A * math.sin(w * s), 0.0, 0.5)  # the drop
+    v = -g * t
+    times = [t]
+    while True:
+        vf = A * w * math.cos(w * t)
+        v = vf - e * (v - vf)  # the bounce
+        rel = v - vf
+        if rel < 1e-5:
+            a = g - A * w * w * math.sin(w * t)  # the ball's deceleration against the floor
+            return times, t + 2.0 * rel / a / (1.0 - e)
+
+        def gap(s, t=t, v=v):  # height above the floor s after the bounce at t
+            return v * s - 0.5 * g * s * s - 2.0 * A * math.cos(w * t + 0.5 * w * s) * math.sin(0.5 * w * s)
+
+        s = brentq(gap, 0.99 * 2 * rel / (g + A * w * w), 1.01 * 2 * rel / (g - A * w * w), xtol=1e-15, rtol=1e-15)
+        t, v = t + s, v - g * s
+        times.append(t)
+
+
+def test_an_accumulation_on_a_moving_floor_ends_in_the_storm_never_through_the_floor(user_folder):
+    """A guard that reads t: the ball bouncing to rest on a moving floor fell through it after its
+    last bounce (42 bounces, then 2.3 m below the floor at t = 2 s) with no error, in every kind.
+    Now each kind ends with the storm naming the bounce at the reference's accumulation time, every
+    bounce before it at the reference's time, the ball never below the floor by more than the
+    solver's tolerance."""
+    from fmpy import simulate_fmu
+    from fmpy.fmi1 import FMICallException
+
+    from pogofmu.runtime.eventlog import parse_event_log
+
+    bounces, t_acc = _floor_accumulation()
+    for kind in KINDS:
+        path = user_folder / "out" / kind.format(n="Floor")
+        messages, rows = [], []
+        kw = {} if "fmi3" not in kind else dict(fmi_type="CoSimulation")
+        with pytest.raises(FMICallException):
+            simulate_fmu(str(path), stop_time=2.0, output_interval=1e-3, debug_logging=True,
+                         start_values={"log_events": 1, "rel_tol": 1e-10},
+                         logger=lambda *a: messages.append((a[-3], *(b.decode() if b else "" for b in a[-2:]))),
+                         step_finished=lambda t, recorder: rows.append(recorder.rows[-1]) or True, **kw)
+        texts = [m for *_, m in messages]
+        storm = [m for m in texts if "event storm" in m]
+        assert storm and "bounce" in storm[0], (path, texts[-3:])
+        assert abs(_storm_time(storm[0]) - t_acc) < 1e-6, (path, storm[0], t_acc)
+        got = [ev["time"] for ev in parse_event_log(messages)]
+        n = len(bounces) - 5  # (the last few are within the storm's rounding)
+        assert len(got) >= n and max(abs(a - b) for a, b in zip(got[:n], bounces[:n])) < 1e-6, (path, got, bounces)
+        gap = np.array([r[2] for r in rows])
+        assert gap.min() > -1e-6, (path, gap.min())
 
 
 def _force_table(stop=7.0, dt=1e-3):

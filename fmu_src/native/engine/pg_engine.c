@@ -1046,12 +1046,15 @@ static int collapse_error(PgEngine *e, double t, double h)
 
 /* ---- arming the guards (docs/solver.md, "Event semantics") --------------------------------- */
 /* The rounding band of guard i at (t, x): how far the guard moves when each state moves by
- * BAND_ULPS of its own magnitude, and time by as many ulps at the guard's rate (the rate dg over
- * 2 d). A guard within its band after a jump, a start or an input change is "at zero": the
- * offset of a guard (x - d against x) changes the band, never the outcome. */
+ * BAND_ULPS of its own magnitude, and time by as many ulps at the guard's rate along the flow (the
+ * rate dg over 2 d: where the crossing is located) and at its own rate in time (t's rounding where
+ * the guard reads t, or an input's slope: a wall moving at 0.5 m/s blurs a guard by 0.5 m/s times
+ * t's ulps however slowly a ball moves against it). A guard within its band after a jump, a start
+ * or an input change is "at zero": the offset of a guard (x - d against x) changes the band,
+ * never the outcome. */
 static int guard_band(PgEngine *e, int i, double t, const double *x, double g, double rate, double *z)
 {
-    double xp[PG_MAX_X], gp, acc = 0.0;
+    double xp[PG_MAX_X], gp, gm, acc = 0.0;
     memcpy(xp, x, sizeof(double) * (size_t)NX(e));
     for (int j = 0; j < NX(e); ++j) {
         if (x[j] == 0.0) continue;
@@ -1060,7 +1063,11 @@ static int guard_band(PgEngine *e, int i, double t, const double *x, double g, d
         xp[j] = x[j];
         if (isfinite(gp)) acc += fabs(gp - g);
     }
-    double zt = BAND_ULPS * EPS * fabs(t) * fabs(rate);
+    double d = RATE_STEP * pmax(fabs(t), 1.0); /* the rate in time at fixed x: 0 for a guard that reads no time */
+    TRY(guard_at(e, i, t + d, x, &gp));
+    TRY(guard_at(e, i, t - d, x, &gm));
+    double own = (gp - gm) / (2 * d);
+    double zt = BAND_ULPS * EPS * fabs(t) * (fabs(rate) + (isfinite(own) ? fabs(own) : 0.0));
     *z = isfinite(zt) ? acc + zt : acc;
     return PG_OK;
 }
