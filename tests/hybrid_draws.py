@@ -273,6 +273,8 @@ def reference(model, d: Draw, max_events: int = 3000) -> Reference:
                 if before[j] and j != fired:
                     now.append(j)
                 new[j] = False
+        for j in now[1:]:  # crossed too: armed still, it fires in turn after the first (unless its jump undoes it)
+            new[j] = True
         return new, now
 
     def fire(j, t, x, q, u, cause, armed):

@@ -121,6 +121,30 @@ MODEL = HybridModel(
 )
 '''
 
+# Two events crossed at one instant (A and B, the same guard), A's jump leaving an armed guard C on
+# its after side (found by a user's model, 2026-12-06: C, a cascade, was lost behind B — z went on
+# below C's level with no event).
+CASCADE = '''
+from pogofmu import FALLING, RISING, Event, HybridModel, Parameter, Variable
+
+MODEL = HybridModel(
+    name="Cascade", description="a cascade behind a simultaneous event",
+    states=(Variable("x", "s", "clock"), Variable("z", "m", "level")),
+    parameters=(Parameter("use_b", 1, "", "1: event B is active", integer=True),),
+    inputs=(),
+    outputs=(Variable("z", "m", "level"), Variable("nC", "", "times C fired")),
+    flow=lambda t, x, q, u, p: [1.0, -0.1],
+    events=(Event("A", RISING, guard=lambda x, q, u, p: x[0] - 1.0, jump=lambda x, q, u, p: ([x[0], 0.4], q)),
+            Event("B", RISING, guard=lambda x, q, u, p: x[0] - 1.0, jump=lambda x, q, u, p: (x, q),
+                  active=lambda q: q["b"] == 1),
+            Event("C", FALLING, guard=lambda x, q, u, p: x[1] - 0.5,
+                  jump=lambda x, q, u, p: (x, {**q, "c": q["c"] + 1}))),
+    initial=lambda p: ([0.0, 2.0], {"b": p.use_b, "c": 0}),
+    output_fn=lambda t, x, q, u, p: {"z": x[1], "nC": q["c"]},
+    integer_outputs=frozenset({"nC"}),
+)
+'''
+
 KINDS = ("{n}.fmu", "fmi3/{n}.fmu", "native/{n}.fmu", "native/fmi3/{n}.fmu")
 
 
@@ -133,8 +157,9 @@ def user_folder(tmp_path_factory):
     (folder / "rest.py").write_text(REST)
     (folder / "toggle.py").write_text(TOGGLE)
     (folder / "floor.py").write_text(FLOOR)
-    proc = run_pogofmu("export", "wall.py", "wall0.py", "rest.py", "toggle.py", "floor.py", "--out", "out",
-                       cwd=folder, timeout=600)
+    (folder / "cascade.py").write_text(CASCADE)
+    proc = run_pogofmu("export", "wall.py", "wall0.py", "rest.py", "toggle.py", "floor.py", "cascade.py",
+                       "--out", "out", cwd=folder, timeout=600)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     return folder
 
@@ -272,6 +297,29 @@ def test_an_accumulation_on_a_moving_floor_ends_in_the_storm_never_through_the_f
         assert len(got) >= n and max(abs(a - b) for a, b in zip(got[:n], bounces[:n])) < 1e-6, (path, got, bounces)
         gap = np.array([r[2] for r in rows])
         assert gap.min() > -1e-6, (path, gap.min())
+
+
+@pytest.mark.parametrize("use_b", [0, 1])
+def test_a_cascade_fires_behind_an_event_crossed_at_the_same_instant(user_folder, use_b):
+    """docs/solver.md, "Cascades": A's jump leaves the armed C on its after side, so C fires at the
+    same instant, after A — and after B too where B crossed with A (the model's order). Then z goes
+    on below C's level without another C (it is disarmed there)."""
+    from fmpy import simulate_fmu
+
+    from pogofmu.runtime.eventlog import parse_event_log
+
+    for kind in KINDS:
+        path = user_folder / "out" / kind.format(n="Cascade")
+        messages = []
+        kw = {} if "fmi3" not in kind else dict(fmi_type="CoSimulation")
+        res = simulate_fmu(str(path), stop_time=2.0, output_interval=0.01, debug_logging=True,
+                           start_values={"log_events": 1, "use_b": use_b},
+                           logger=lambda *a: messages.append((a[-3], *(b.decode() if b else "" for b in a[-2:]))),
+                           **kw)
+        got = [(ev["name"], ev["time"]) for ev in parse_event_log(messages)]
+        assert [n for n, _ in got] == (["A", "B", "C"] if use_b else ["A", "C"]), (path, got)
+        assert all(abs(t - 1.0) < 1e-12 for _, t in got), (path, got)
+        assert res["nC"][-1] == 1 and abs(res["z"][-1] - 0.3) < 1e-9, (path, res["nC"][-1], res["z"][-1])
 
 
 def _force_table(stop=7.0, dt=1e-3):

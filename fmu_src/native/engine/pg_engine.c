@@ -1098,6 +1098,15 @@ static int guard_change(PgEngine *e, int i, double t, const double *x, const dou
  * The event that jumped sits at its located crossing: if its jump left its guard where it was
  * (own_g, within the band), that value is its zero, however far floating point resolves it.
  * *fire: the first event (in priority order, the model's) that fires now, -1 for none. */
+/* guard i, armed, crossed by a restart: the first such (in priority order) fires now; each later one
+ * stays armed, so that the restart of the first's jump fires it in turn at this same instant (unless
+ * that jump took it back to its before side) — a cascade is never lost behind another */
+static void crossed_now(PgEngine *e, int i, int *fire)
+{
+    if (*fire < 0) *fire = i;
+    else e->armed[i] = 1;
+}
+
 static int arm_guards(PgEngine *e, const signed char *was, int own, double own_g, int *fire)
 {
     *fire = -1;
@@ -1110,13 +1119,13 @@ static int arm_guards(PgEngine *e, const signed char *was, int own, double own_g
         int before = was ? was[i] : -1;
         e->zarm[i] = 0, e->armed[i] = 0, e->zband[i] = z;
         if (G > z) {
-            if (before == 1 && i != own && *fire < 0) *fire = i;
+            if (before == 1 && i != own) crossed_now(e, i, fire);
         } else if (G >= -z) {
             if (dg > 2 * z || (i == own && e->own_same)) { /* (a jump that changed nothing: its crossing goes on) */
                 /* armed before: the restart crossed it (a cascade) and it fires now; of unknown arming (the
                  * start, a newly active guard): it fires where the step shows it leave zero (at its start) */
                 if (i != own && before == -1) e->zarm[i] = 2, e->armed[i] = 1;
-                else if (i != own && before == 1 && *fire < 0) *fire = i;
+                else if (i != own && before == 1) crossed_now(e, i, fire);
             } else { /* 2: no direction to first order (it leaves zero by its curvature: where it was at
                       * zero); 1: heading to its before side (a rebound: where it returns past its band) */
                 e->zarm[i] = dg >= -2 * z ? 2 : 1, e->armed[i] = 1;
