@@ -5,7 +5,9 @@ A draw (:class:`Draw`) is a mass on a line, ``x'' = a0 + am m - k y - c v + b2 y
 ``m`` in {0, 1}, a held input ``u``, and up to six events drawn from a menu, in a drawn order:
 
 * ``wall`` (RISING ``x - (X0 + dhi)``) and ``floor`` (FALLING ``x - (X0 + dlo)``): restitution
-  impacts ``v -> -e v`` (an accumulation when a force presses the mass against them);
+  impacts ``v -> -e v`` (an accumulation when a force presses the mass against them); the floor may
+  move, ``X0 + dlo + Af sin(wf t)`` (a guard that reads t), its impacts then relative to its
+  velocity;
 * ``level`` (either direction, ``x - (X0 + L)``): toggles ``m``, and its jump may put ``x`` exactly
   on the wall or the floor, or across it (a cascade at one instant);
 * ``input`` (either direction, ``u - Lu``): toggles ``m`` (an event that only an input change fires);
@@ -74,10 +76,12 @@ class Draw:
     T0: float = 0.5
     P: float = 0.0              # 0: once
     dv: float = 0.5
+    Af: float = 0.0             # the floor's amplitude (0: it stands still)
+    wf: float = 3.0
 
     def params(self) -> dict:
         names = ("X0", "a0", "am", "k", "c", "b2", "bu", "y0", "v0", "dhi", "ehi", "dlo", "elo", "L", "dx",
-                 "Lu", "Tg", "T0", "P", "dv")
+                 "Lu", "Tg", "T0", "P", "dv", "Af", "wf")
         return {n: float(getattr(self, n)) for n in names}
 
     def inputs(self) -> np.ndarray:
@@ -90,7 +94,7 @@ def model_source(d: Draw, name: str) -> str:
     """The model file of a draw, as a user writes it (pogofmu's public API only)."""
     units = {"X0": "m", "a0": "m/s2", "am": "m/s2", "k": "1/s2", "c": "1/s", "b2": "1/(m.s2)", "bu": "m/(N.s2)",
              "y0": "m", "v0": "m/s", "dhi": "m", "ehi": "", "dlo": "m", "elo": "", "L": "m", "dx": "m",
-             "Lu": "N", "Tg": "s", "T0": "s", "P": "s", "dv": "m/s"}
+             "Lu": "N", "Tg": "s", "T0": "s", "P": "s", "dv": "m/s", "Af": "m", "wf": "rad/s"}
     params = ",\n    ".join(f'Parameter("{n}", {v!r}, "{units[n]}", "{n}")' for n, v in d.params().items())
     target = {"none": "x[0]", "on wall": "p.X0 + p.dhi", "across wall": "p.X0 + p.dhi + p.dx",
               "on floor": "p.X0 + p.dlo", "across floor": "p.X0 + p.dlo - p.dx"}[d.landing]
@@ -99,6 +103,10 @@ def model_source(d: Draw, name: str) -> str:
                 '          jump=lambda x, q, u, p: ([x[0], -p.ehi * x[1]], q))',
         "floor": 'Event("floor", FALLING, guard=lambda x, q, u, p: x[0] - (p.X0 + p.dlo),\n'
                  '          jump=lambda x, q, u, p: ([x[0], -p.elo * x[1]], q))',
+        "moving floor": 'Event("floor", FALLING,\n'
+                        '          guard=lambda t, x, q, u, p: x[0] - (p.X0 + p.dlo + p.Af * fmath.sin(p.wf * t)),\n'
+                        '          jump=lambda t, x, q, u, p: ([x[0], (1 + p.elo) * p.Af * p.wf * fmath.cos(p.wf * t)'
+                        ' - p.elo * x[1]], q))',
         "level": f'Event("level", {"RISING" if d.level_rising else "FALLING"}, '
                  'guard=lambda x, q, u, p: x[0] - (p.X0 + p.L),\n'
                  f'          jump=lambda x, q, u, p: ([{target}, x[1]], {{"m": 1 - q["m"]}}))',
@@ -107,13 +115,13 @@ def model_source(d: Draw, name: str) -> str:
         "clock": 'Event("clock", RISING, guard=lambda t, x, q, u, p: t - p.Tg,\n'
                  '          jump=lambda t, x, q, u, p: (x, {"m": 1 - q["m"]}))',
     }
-    events = [menu[e] for e in d.events]
+    events = [menu["moving floor" if e == "floor" and d.Af else e] for e in d.events]
     if d.tick:
         every = ", every=lambda p: p.P" if d.P > 0 else ""
         events.append('TimeEvent("tick", at=lambda p: p.T0' + every +
                       ',\n          jump=lambda x, q, u, p: ([x[0], x[1] + p.dv], q))')
     return f'''"""A drawn hybrid model (tests/hybrid_draws.py): {d!r}"""
-from pogofmu import FALLING, RISING, Event, HybridModel, Parameter, Variable{", TimeEvent" if d.tick else ""}
+from pogofmu import FALLING, RISING, Event, HybridModel, Parameter, Variable, fmath{", TimeEvent" if d.tick else ""}
 
 
 def flow(t, x, q, u, p):
@@ -188,6 +196,8 @@ def draws():
         d.T0 = data(st.sampled_from([0.0, 0.25, 1.0])) if data(st.booleans()) else f(0.0, 1.5)
         d.P = data(st.sampled_from([0.0, 0.1, 0.3, 0.37]))
         d.dv = f(-2.0, 2.0)
+        if "floor" in names and data(st.booleans()):
+            d.Af, d.wf = f(0.01, 0.3), f(1.0, 10.0)
         return d
 
     return draw()
