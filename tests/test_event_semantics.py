@@ -145,6 +145,48 @@ MODEL = HybridModel(
 )
 '''
 
+# Two events on one input's level (found by a user's model, 2026-12-06: an input that landed exactly
+# on the level did not fire, and fired only when it went on past it, or never when it came back).
+LEVEL = '''
+from pogofmu import FALLING, RISING, Event, HybridModel, Parameter, Variable
+
+MODEL = HybridModel(
+    name="Level", description="an alarm on an input's level",
+    states=(Variable("s", "s", "time"),),
+    parameters=(Parameter("lim", 0.8, "m3/s", "the level"),),
+    inputs=(Variable("q", "m3/s", "inflow", start=1.0),),
+    outputs=(Variable("a", "", "alarm"),),
+    flow=lambda t, x, q, u, p: [1.0],
+    events=(Event("over", RISING, guard=lambda x, q, u, p: u[0] - p.lim, jump=lambda x, q, u, p: (x, {"a": 1})),
+            Event("under", FALLING, guard=lambda x, q, u, p: u[0] - p.lim, jump=lambda x, q, u, p: (x, {"a": 0}))),
+    initial=lambda p: ([0.0], {"a": 1}),
+    output_fn=lambda t, x, q, u, p: {"a": q["a"]},
+    integer_outputs=frozenset({"a"}),
+)
+'''
+
+# A ramp that reaches its reset level exactly at a sampler's tick (found by a user's model,
+# 2026-12-06: the tick fired first, against the documented order, and the sampler read x before the
+# reset; FMI 3.0 model exchange then asked the importer to step to an event one ulp ahead).
+TICKS = '''
+from pogofmu import RISING, Event, HybridModel, Parameter, TimeEvent, Variable
+
+MODEL = HybridModel(
+    name="Ticks", description="a ramp reset at a level, sampled every P",
+    states=(Variable("x", "m", "ramp"),),
+    parameters=(Parameter("L", 0.3, "m", "reset level"), Parameter("D", 0.25, "m", "reset drop"),
+                Parameter("P", 0.3, "s", "tick period"), Parameter("Kc", 1.0, "1/s", "sampled gain")),
+    inputs=(),
+    outputs=(Variable("x", "m", "ramp"), Variable("F", "m/s", "held command")),
+    flow=lambda t, x, q, u, p: [1.0 + q["F"]],
+    events=(Event("hit", RISING, guard=lambda x, q, u, p: x[0] - p.L, jump=lambda x, q, u, p: ([x[0] - p.D], q)),
+            TimeEvent("tick", at=lambda p: 0.0, every=lambda p: p.P,
+                      jump=lambda x, q, u, p: (x, {"F": -p.Kc * x[0]}))),
+    initial=lambda p: ([0.0], {"F": 0.0}),
+    output_fn=lambda t, x, q, u, p: {"x": x[0], "F": q["F"]},
+)
+'''
+
 KINDS = ("{n}.fmu", "fmi3/{n}.fmu", "native/{n}.fmu", "native/fmi3/{n}.fmu")
 
 
@@ -158,8 +200,10 @@ def user_folder(tmp_path_factory):
     (folder / "toggle.py").write_text(TOGGLE)
     (folder / "floor.py").write_text(FLOOR)
     (folder / "cascade.py").write_text(CASCADE)
+    (folder / "level.py").write_text(LEVEL)
+    (folder / "ticks.py").write_text(TICKS)
     proc = run_pogofmu("export", "wall.py", "wall0.py", "rest.py", "toggle.py", "floor.py", "cascade.py",
-                       "--out", "out", cwd=folder, timeout=600)
+                       "level.py", "ticks.py", "--out", "out", "--platforms", "x86_64-linux", cwd=folder, timeout=600)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     return folder
 
@@ -330,7 +374,7 @@ def ball_folder(tmp_path_factory):
 
     folder = tmp_path_factory.mktemp("ball")
     shutil.copy(Path(__file__).resolve().parents[1] / "examples" / "ball" / "ball.py", folder / "ball.py")
-    proc = run_pogofmu("export", "ball.py", "--out", "out", cwd=folder, timeout=600)
+    proc = run_pogofmu("export", "ball.py", "--out", "out", "--platforms", "x86_64-linux", cwd=folder, timeout=600)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     return folder
 
@@ -358,6 +402,68 @@ def test_a_plastic_impact_or_a_start_at_rest_ends_in_the_storm_never_through_the
         assert storm and "bounce" in storm[0], (path, messages[-3:])
         assert abs(_storm_time(storm[0]) - t_storm) < 1e-9, (path, storm[0])
         assert all(r[1] >= -1e-9 for r in rows), (path, min(r[1] for r in rows))
+
+
+def test_an_input_that_lands_exactly_on_its_level_is_an_edge(user_folder):
+    """An event on a held input fires where its condition becomes true — `u >= lim` for the RISING
+    one, `u <= lim` for the FALLING one, an input exactly on the level included — and not again
+    while it holds (the reference: those edges of the input sequence itself; none at the start)."""
+    from fmpy import extract, read_model_description
+    from fmpy.fmi2 import FMU2Slave
+
+    from pogofmu.runtime.eventlog import parse_event_log
+    from support import fmi2_callbacks
+
+    q = [1.0, 1.0, 0.8, 0.8, 0.9, 0.9, 0.7, 0.7, 0.8, 1.0, 0.8, 0.8]
+    step, lim = 0.01, 0.8
+    want = [(name, k * step) for k in range(1, len(q)) for name, holds in
+            (("over", lambda v: v >= lim), ("under", lambda v: v <= lim)) if holds(q[k]) and not holds(q[k - 1])]
+    assert [n for n, _ in want] == ["under", "under", "over", "under"]  # (the sequence tests both edges at zero)
+    for kind in ("{n}.fmu", "native/{n}.fmu"):
+        path = str(user_folder / "out" / kind.format(n="Level"))
+        md = read_model_description(path)
+        vr = {v.name: v.valueReference for v in md.modelVariables}
+        fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(path), modelIdentifier=md.coSimulation.modelIdentifier,
+                        instanceName="level")
+        messages = []
+        callbacks = fmi2_callbacks(messages)
+        fmu.instantiate(loggingOn=True, callbacks=callbacks.struct)
+        fmu.setupExperiment(startTime=0.0)
+        fmu.enterInitializationMode()
+        fmu.setInteger([vr["log_events"]], [1])
+        fmu.exitInitializationMode()
+        for k, value in enumerate(q):
+            fmu.setReal([vr["q"]], [value])
+            fmu.doStep(currentCommunicationPoint=k * step, communicationStepSize=step)
+        fmu.terminate()
+        fmu.freeInstance()
+        got = [(ev["name"], ev["time"]) for ev in parse_event_log(messages)]
+        assert [n for n, _ in got] == [n for n, _ in want], (path, got, want)
+        assert all(abs(a[1] - b[1]) < 1e-12 for a, b in zip(got, want)), (path, got, want)
+
+
+def test_a_state_event_at_a_ticks_instant_fires_before_the_tick(user_folder):
+    """x = t reaches L = 0.3 at the tick t = 0.3 (x lands an ulp short of L there): the reset fires
+    first, then the tick samples the reset ramp, F = -(L - D) (docs/solver.md: at one instant the
+    state events come first) — in every co-simulation kind, and in FMI 3.0 model exchange, where
+    fmpy's CVode ran into 'tout too close to t0' (the next tick reported one ulp ahead)."""
+    from fmpy import simulate_fmu
+
+    from pogofmu.runtime.eventlog import parse_event_log
+
+    runs = [(kind, "CoSimulation") for kind in KINDS] + [(k, "ModelExchange") for k in KINDS if "fmi3" in k]
+    for kind, fmi_type in runs:
+        path = user_folder / "out" / kind.format(n="Ticks")
+        messages = []
+        kw = {} if "fmi3" not in kind else dict(fmi_type=fmi_type)
+        res = simulate_fmu(str(path), stop_time=0.5, output_interval=0.01, debug_logging=True,
+                           start_values={"log_events": 1, "rel_tol": 1e-10},
+                           logger=lambda *a: messages.append((a[-3], *(b.decode() if b else "" for b in a[-2:]))),
+                           **kw)
+        got = [(ev["name"], ev["time"]) for ev in parse_event_log(messages)]
+        at = [n for n, t in got if abs(t - 0.3) < 1e-9]
+        assert at == ["hit", "tick"], (path, fmi_type, got)
+        assert abs(res["F"][-1] + 0.05) < 1e-9, (path, fmi_type, res["F"][-1])
 
 
 def _force_table(stop=7.0, dt=1e-3):

@@ -342,7 +342,9 @@ static int me_update(PgInstance *in, int *need, int *changed)
         for (int i = 0; i < md->nx; ++i) *changed |= !(e->x[i] == x[i]);
         memcpy(in->st.me_x, e->x, sizeof(double) * (size_t)md->nx);
         stale(in);
-        *need = pg_engine_event_due(e);
+        /* another event at this instant: a cascade, or a time event due within its 16 ulps (its
+         * nextEventTime would be a hair ahead, which an importer cannot step to) */
+        *need = pg_engine_event_due(e) || pg_engine_time_event_due(e, in->st.me_t) >= 0;
     }
     return PG_ST_OK;
 }

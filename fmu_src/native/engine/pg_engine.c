@@ -1086,6 +1086,24 @@ static int guard_change(PgEngine *e, int i, double t, const double *x, const dou
     return PG_OK;
 }
 
+/* *still: guard i reads no state and no time (a guard of inputs or modes: no flow ever moves it),
+ * tried by moving each state, and time, by RATE_STEP of its magnitude (at least RATE_STEP) */
+static int guard_still(PgEngine *e, int i, double t, const double *x, double g, int *still)
+{
+    double xp[PG_MAX_X], gp;
+    *still = 0;
+    memcpy(xp, x, sizeof(double) * (size_t)NX(e));
+    for (int j = 0; j < NX(e); ++j) {
+        xp[j] = x[j] + RATE_STEP * pmax(fabs(x[j]), 1.0);
+        TRY(guard_at(e, i, t, xp, &gp));
+        xp[j] = x[j];
+        if (!(gp == g)) return PG_OK;
+    }
+    TRY(guard_at(e, i, t + RATE_STEP * pmax(fabs(t), 1.0), x, &gp));
+    *still = gp == g;
+    return PG_OK;
+}
+
 /* Arm every active guard at (e->t, e->x) after a restart: a jump of event `own`, the start or an
  * input change (own = -1). was[i] says what guard i was just before: 1 armed, 0 active and not
  * armed, -1 not active or no before (the start). A guard
@@ -1113,6 +1131,7 @@ static int arm_guards(PgEngine *e, const signed char *was, int own, double own_g
     for (int k = 0; k < e->n_active; ++k) {
         int i = e->active[k];
         double G = sgn_of(e, i) * e->g[k], z, dg, d;
+        int still = 0;
         TRY(guard_change(e, i, e->t, e->x, e->f, &dg, &d));
         TRY(guard_band(e, i, e->t, e->x, e->g[k], dg / (2 * d), &z));
         if (i == own && fabs(e->g[k] - own_g) <= z) z += fabs(G);
@@ -1121,7 +1140,11 @@ static int arm_guards(PgEngine *e, const signed char *was, int own, double own_g
         if (G > z) {
             if (before == 1 && i != own) crossed_now(e, i, fire);
         } else if (G >= -z) {
-            if (dg > 2 * z || (i == own && e->own_same)) { /* (a jump that changed nothing: its crossing goes on) */
+            if (!(dg > 2 * z) && !(dg < -2 * z)) TRY(guard_still(e, i, e->t, e->x, e->g[k], &still));
+            if (still) { /* the flow never moves it off zero: zero is its after side (G >= 0; an input that
+                          * lands exactly on its level): a crossing if it was armed, else disarmed there */
+                if (before == 1 && i != own) crossed_now(e, i, fire);
+            } else if (dg > 2 * z || (i == own && e->own_same)) { /* (a jump that changed nothing: its crossing goes on) */
                 /* armed before: the restart crossed it (a cascade) and it fires now; of unknown arming (the
                  * start, a newly active guard): it fires where the step shows it leave zero (at its start) */
                 if (i != own && before == -1) e->zarm[i] = 2, e->armed[i] = 1;
@@ -1475,6 +1498,27 @@ static int probe_step(PgEngine *e, double t, const double *y, const double *f, d
     return rc;
 }
 
+/* at a step's end on a time event's instant: the first armed guard (in priority order) that is
+ * within its rounding band short of zero and heading across — the state event of this same instant
+ * to rounding, which fires before the time events (docs/solver.md: at one instant the state events
+ * come first); k_now its index in active[], -1 for none */
+static int crossing_at(PgEngine *e, int *k_now)
+{
+    *k_now = -1;
+    for (int k = 0; k < e->n_active; ++k) {
+        int i = e->active[k];
+        double G = sgn_of(e, i) * e->g[k], z, dg, d;
+        if (!e->armed[i] || e->zarm[i] || G >= 0.0) continue;
+        TRY(guard_change(e, i, e->t, e->x, e->f, &dg, &d));
+        TRY(guard_band(e, i, e->t, e->x, e->g[k], dg / (2 * d), &z));
+        if (G >= -z && dg > 2 * z) {
+            *k_now = k;
+            return PG_OK;
+        }
+    }
+    return PG_OK;
+}
+
 /* _step */
 static int step(PgEngine *e, double t_target)
 {
@@ -1585,7 +1629,16 @@ static int step(PgEngine *e, double t_target)
             memcpy(e->g_prev, e->g, sizeof e->g), e->has_g_prev = 1;
             memcpy(e->g, g_new, sizeof g_new);
             armed_after_step(e, g_new);
-            if (on_time) time_event_pending(e, t_new == t_target ? reach_of(t_new) : t_new); /* landed on it */
+            if (on_time) { /* landed on it: a state event at this instant to rounding fires first */
+                int k_now;
+                TRY(crossing_at(e, &k_now));
+                if (k_now >= 0) {
+                    e->has_pending = 1, e->pending_index = e->active[k_now], e->pending_located = 1, e->zero_hit = 0;
+                    memcpy(e->pending_x, e->x, sizeof e->x);
+                } else {
+                    time_event_pending(e, t_new == t_target ? reach_of(t_new) : t_new);
+                }
+            }
         }
         return PG_OK;
     }
