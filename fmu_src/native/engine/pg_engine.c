@@ -1581,12 +1581,11 @@ static int step(PgEngine *e, double t_target)
     for (int k = 0; k < e->n_active; ++k) TRY(guard_at(e, e->active[k], t_new, y_new, &g_new[k]));
     int hit = -1;
     double hit_t = 0, hit_level = 0.0;
-    int hit_zero = 0; /* the hit fires from zero (its band, 0 for a guard exactly at 0 with no rounding) */
     for (int k = 0; k < e->n_active; ++k) {
         int i = e->active[k];
         double g0 = e->g[k], g1 = g_new[k], te = 0, level = 0.0;
         double sgn = sgn_of(e, i);
-        int found = 1, from_zero = 0;
+        int found = 1;
         if (e->zarm[i]) { /* at zero after a restart: fires once the flow carries it past its band */
             double z = e->zband[i];
             /* past its band; or, with no direction to first order, off zero and moving away from it */
@@ -1595,7 +1594,7 @@ static int step(PgEngine *e, double t_target)
             /* a dip to the before side resolved inside the step: the crossing is the return's */
             TRY(hidden_return(e, seg, i, sgn, g0, g1, f_new, z, &te, &found));
             if (!found) { /* it left zero without a dip floating point resolves */
-                level = z, from_zero = 1;
+                level = z;
                 if (e->zarm[i] == 2) te = t; /* no first-order direction: it leaves zero where it was */
                 else TRY(locate_level(e, seg, i, z, t, g0, g1, NULL, &te)); /* after a jump: the return */
             }
@@ -1613,7 +1612,7 @@ static int step(PgEngine *e, double t_target)
             TRY(hidden_return(e, seg, i, sgn, g0, g1, f_new, 0.0, &te, &found));
             if (!found) continue;
         }
-        if (hit < 0 || te < hit_t) hit = k, hit_t = te, hit_level = level, hit_zero = from_zero;
+        if (hit < 0 || te < hit_t) hit = k, hit_t = te, hit_level = level;
     }
     if (hit < 0) {
         int rc = MODEL(e)->domain(t_new, y_new, e->q, u_at(e, t_new), e->p, e->s, &e->msg);
@@ -1648,7 +1647,7 @@ static int step(PgEngine *e, double t_target)
         e->has_seg = 0;
         memcpy(e->x, y, sizeof y), memcpy(e->f, f, sizeof f);
         e->has_pending = 1, e->pending_index = i, e->pending_located = 1;
-        e->zero_hit = hit_zero;
+        e->zero_hit = hit_level > 0.0;
         memcpy(e->pending_x, y, sizeof y);
         return PG_OK;
     }
@@ -1667,7 +1666,7 @@ static int step(PgEngine *e, double t_target)
         e->t = te;
         memcpy(e->x, y_e, sizeof y_e), memcpy(e->f, f_e, sizeof f_e);
         e->has_pending = 1, e->pending_index = i, e->pending_located = 1;
-        e->zero_hit = hit_zero;
+        e->zero_hit = hit_level > 0.0;
         memcpy(e->pending_x, y_e, sizeof y_e);
     }
     return PG_OK;
@@ -1747,7 +1746,6 @@ static int apply_pending_event(PgEngine *e)
     if (e->recent_n < PG_RECENT) e->recent_n += 1;
     if (e->keep_history && e->on_event) e->on_event(e->hook_ctx, e, &e->last, e->n_events);
     e->has_pending = 0;
-    int from_zero = e->zero_hit; /* (zero_storm takes it) */
     TRY(zero_storm(e, i));
     int same = 1;
     for (int k = 0; k < NX(e); ++k) same &= x_new[k] == e->x[k];
@@ -1760,10 +1758,7 @@ static int apply_pending_event(PgEngine *e)
     double h0;
     TRY(initial_step(e, &h0));
     e->h = pmin(e->h, h0);
-    /* a jump that changed nothing lets its own crossing go on — unless the event fired from zero (its
-     * guard armed at zero after its last jump): then nothing stops the crossing, and the guard stays
-     * armed at zero, to fire again and end in the storm (a plastic impact pressed on: never through) */
-    e->own_same = same && !from_zero;
+    e->own_same = same;
     int rc = rearm(e, was, i, own_g); /* a guard the jump left crossed fires at this instant (a cascade) */
     e->own_same = 0;
     return rc;
