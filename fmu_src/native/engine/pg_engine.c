@@ -1104,18 +1104,6 @@ static int guard_still(PgEngine *e, int i, double t, const double *x, double g, 
     return PG_OK;
 }
 
-/* Arm every active guard at (e->t, e->x) after a restart: a jump of event `own`, the start or an
- * input change (own = -1). was[i] says what guard i was just before: 1 armed, 0 active and not
- * armed, -1 not active or no before (the start). A guard
- *   - on its before side beyond its band is armed;
- *   - at zero (within its band) is armed at zero, unless the flow carries it to its after side:
- *     then it fires now if it was armed or unknown and is not the event that just jumped (that
- *     event's own crossing goes on), and is disarmed otherwise;
- *   - on its after side beyond its band fires now if it was armed (the restart crossed it: a
- *     cascade, or simultaneous events), and is disarmed otherwise.
- * The event that jumped sits at its located crossing: if its jump left its guard where it was
- * (own_g, within the band), that value is its zero, however far floating point resolves it.
- * *fire: the first event (in priority order, the model's) that fires now, -1 for none. */
 /* guard i, armed, crossed by a restart: the first such (in priority order) fires now; each later one
  * stays armed, so that the restart of the first's jump fires it in turn at this same instant (unless
  * that jump took it back to its before side) — a cascade is never lost behind another */
@@ -1125,6 +1113,20 @@ static void crossed_now(PgEngine *e, int i, int *fire)
     else e->armed[i] = 1;
 }
 
+/* Arm every active guard at (e->t, e->x) after a restart: a jump of event `own`, the start or an
+ * input change (own = -1). was[i] says what guard i was just before: 1 armed, 0 active and not
+ * armed, -1 not active or no before (the start). A guard
+ *   - on its before side beyond its band is armed;
+ *   - at zero (within its band) is armed at zero, unless the flow carries it to its after side:
+ *     then it fires now if it was armed or unknown and is not the event that just jumped (that
+ *     event's own crossing goes on), and is disarmed otherwise;
+ *   - on its after side beyond its band fires now if it was armed (the restart crossed it: a
+ *     cascade, or simultaneous events), and is disarmed otherwise;
+ *   - reading no state and no time (guard_still), at zero is on its after side.
+ * Of several that fire now, the later stay armed and fire in turn (crossed_now).
+ * The event that jumped sits at its located crossing: if its jump left its guard where it was
+ * (own_g, within the band), that value is its zero, however far floating point resolves it.
+ * *fire: the first event (in priority order, the model's) that fires now, -1 for none. */
 static int arm_guards(PgEngine *e, const signed char *was, int own, double own_g, int *fire)
 {
     *fire = -1;
