@@ -75,9 +75,44 @@ def scipy_mem(law, beta, gamma, t_end, c=C, a0=0.0):
     return out
 
 
-def _ev(fun, direction, name):
-    fun.terminal, fun.direction, fun.__name__ = True, direction, name
+def _ev(fun, direction, name, on_xbar=False):
+    fun.terminal, fun.direction, fun.__name__, fun.on_xbar = True, direction, name, on_xbar
     return fun
+
+
+def _turn(t, X):  # the leg's length turns (xdot = 0): where a guard on xbar has its extrema
+    return X[1]
+
+
+_turn.terminal, _turn.direction = False, 0
+
+
+def _excursion(sol, evs, t0):
+    """The earliest crossing of a guard on xbar that scipy's sign check at step ends cannot see:
+    xbar goes over the level and back inside one step (a liftoff of a few ms inside a 10 ms
+    step). Between two turns of xbar (xdot = 0, located as the last, non-terminal event) xbar is
+    monotone, so a guard found on its after side at a turn crossed exactly once since the turn
+    before; the root is found on the dense output. (t, j, X), or None; (t0, -1, None) when the
+    crossing is at the segment's own start (cannot judge)."""
+    from scipy.optimize import brentq
+
+    before = t0
+    for tt in sol.t_events[-1]:
+        if tt <= t0:
+            continue
+        Xt = sol.sol(tt)
+        found = []
+        for j, ev in enumerate(evs):
+            if ev.on_xbar and ev.direction * ev(tt, Xt) > 0:
+                g = lambda s, ev=ev: ev(s, sol.sol(s))  # noqa: E731
+                if g(before) == 0.0:
+                    return (t0, -1, None)
+                r = brentq(g, before, tt, xtol=1e-16, rtol=1e-15, maxiter=200)
+                found.append((r, j, list(sol.sol(r))))
+        if found:
+            return min(found)
+        before = tt
+    return None
 
 
 def _ballistic_touchdown(z0, v0, g):
@@ -114,7 +149,7 @@ def reference_stick(name, p, t_end):
             return [xdot, acc, ydot, acc, 0.0, x]
         return f
 
-    liftoff = _ev(lambda t, X: X[0] - x_i, 1, "liftoff")
+    liftoff = _ev(lambda t, X: X[0] - x_i, 1, "liftoff", on_xbar=True)
     r_upper = lambda x: k1 * x1 + k2 * (x - x1)  # noqa: E731  (the SMA's plateaus)
     r_lower = lambda x: k1 * x3 + k2 * (x - x3)  # noqa: E731
     X = [p["xbar_0"], p["xdot_0"], p["y_0"], p["ydot_0"], p["z_0"], p.get("a_0", 0.0)]
@@ -137,25 +172,29 @@ def reference_stick(name, p, t_end):
             f, evs = contact(lambda x, xdot, a: k_of(a) * x + c * (1 + gamma * x * x) * xdot), [liftoff]
         elif mode == "contact":  # the SMA's virgin (elastic) line
             f = contact(lambda x, xdot, a: k1 * x + c * xdot)
-            evs = [liftoff, _ev(lambda t, X: X[0] - x_i - x1, -1, "upper_plateau")]
+            evs = [liftoff, _ev(lambda t, X: X[0] - x_i - x1, -1, "upper_plateau", on_xbar=True)]
         elif mode == "upper":
             f, evs = contact(lambda x, xdot, a: r_upper(x) + c * xdot), [_ev(lambda t, X: X[1], 1, "reversal")]
         elif mode == "unload":  # elastic from the reversal at H; meets the lower plateau at H + x3 - x1
             f = contact(lambda x, xdot, a, H=H: r_upper(H) + k1 * (x - H) + c * xdot)
-            evs = [_ev(lambda t, X, H=H: X[0] - x_i - (H + x3 - x1), 1, "lower_plateau"),
-                   _ev(lambda t, X, H=H: X[0] - x_i - H, -1, "upper_plateau")]
+            evs = [_ev(lambda t, X, H=H: X[0] - x_i - (H + x3 - x1), 1, "lower_plateau", on_xbar=True),
+                   _ev(lambda t, X, H=H: X[0] - x_i - H, -1, "upper_plateau", on_xbar=True)]
         else:  # the lower plateau
             f = contact(lambda x, xdot, a: r_lower(x) + c * xdot)
-            evs = [_ev(lambda t, X: X[0] - x_i - x3, 1, "virgin_line"), _ev(lambda t, X: X[1], -1, "reload")]
-        sol = solve_ivp(f, (t, t_end), X, method="DOP853", events=evs, rtol=1e-12,
-                        atol=1e-14 * max(1.0, x_i), max_step=0.01)
+            evs = [_ev(lambda t, X: X[0] - x_i - x3, 1, "virgin_line", on_xbar=True),
+                   _ev(lambda t, X: X[1], -1, "reload")]
+        sol = solve_ivp(f, (t, t_end), X, method="DOP853", events=evs + [_turn], rtol=1e-12,
+                        atol=1e-14 * max(1.0, x_i), max_step=0.01, dense_output=True)
         assert sol.status >= 0, sol.message
-        if sol.status == 0:
+        hits = [(sol.t_events[i][0], i, list(sol.y_events[i][0])) for i in range(len(evs)) if len(sol.t_events[i])]
+        missed = _excursion(sol, evs, t)
+        hits += [missed] if missed else []
+        if not hits:
             break
-        j = next(i for i, te in enumerate(sol.t_events) if len(te))
-        if sol.t_events[j][0] == t:
+        te, j, Xe = min(hits, key=lambda h: h[0])
+        if te == t:
             return None  # at the segment's own start: a contact over inside the first step, or none
-        t, X, event = sol.t_events[j][0], list(sol.y_events[j][0]), evs[j].__name__
+        t, X, event = te, Xe, evs[j].__name__
         out.append((event, t))
         if event == "touchdown":
             X[1], X[4], mode = X[3], 0.0, "contact"

@@ -394,6 +394,24 @@ def test_a_flight_inside_one_step_of_the_reference():
     assert min(flights) > 6e-3, flights
 
 
+def test_a_liftoff_inside_one_contact_step_of_the_reference():
+    """Found by CI (2026-12-06): this SMA stick, in a slow contact at g = 1, lifts off at 2.6 mm/s
+    and lands 5.3 ms later; the leg's excursion over its rest length (3.4 um) starts and ends inside
+    one 10 ms step of scipy, whose sign check at step ends did not see it. The FMU was right; the
+    reference now also locates a guard on xbar that is on its after side where xbar turns. Both
+    must see the 5.3 ms flight."""
+    p = {"m": 5.6217166434568195, "x_i": 0.7475408204592973, "g": 1.0, "c": 3.0, "method": 5,
+         "max_step": 0.01, "abs_tol": 1e-13, "k1": 2799.5051021368517, "k2": 2208.5866915040483,
+         "x1": -0.08020296884695541, "x3": -0.0356641542934129, "xbar_0": 0.7411877517647752,
+         "xdot_0": -2.1221177661295474e-191, "y_0": 0.7411877517647752, "z_0": 0.0,
+         "ydot_0": -2.1221177661295474e-191, **PHYSICS_TIGHT}
+    p["abs_tol"] = min(p["abs_tol"], 1e-9 * p["x_i"])
+    assert _worst_against_reference("PogoStickSMA", p) is not None
+    ref = reference_stick("PogoStickSMA", p, PHYSICS_STOP)
+    flights = [b[1] - a[1] for a, b in zip(ref, ref[1:]) if (a[0], b[0]) == ("liftoff", "touchdown")]
+    assert 5e-3 < min(flights) < 6e-3, flights
+
+
 def test_the_physics_check_catches_a_one_percent_spring_error():
     """The check above can fail: the reference with k 1 % too stiff disagrees with the FMU."""
     from support import simulate
