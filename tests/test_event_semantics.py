@@ -428,6 +428,44 @@ def test_a_state_event_at_a_ticks_instant_fires_before_the_tick(user_folder):
         assert abs(res["F"][-1] + 0.05) < 1e-9, (path, fmi_type, res["F"][-1])
 
 
+@pytest.fixture(scope="module")
+def ball_folder(tmp_path_factory):
+    """The ball of docs/writing-models.md section 1, copied as a user copies it, exported."""
+    import shutil
+    from pathlib import Path
+
+    folder = tmp_path_factory.mktemp("ball")
+    shutil.copy(Path(__file__).resolve().parents[1] / "examples" / "ball" / "ball.py", folder / "ball.py")
+    proc = run_pogofmu("export", "ball.py", "--out", "out", cwd=folder, timeout=600)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    return folder
+
+
+@pytest.mark.parametrize("case", ["plastic impact", "at rest on the floor"])
+def test_a_plastic_impact_or_a_start_at_rest_ends_in_the_storm_never_through_the_floor(ball_folder, case):
+    """Found by a user's run of the documented ball (2026-12-06): with e = 0 the impact fired twice,
+    the second jump (v = 0 -> 0) changed nothing and so was taken for a crossing going on, and the
+    ball fell through the floor (h = -1.48 m at 1 s) with no error; started at rest on the floor
+    (h_0 = 0) it fell at once. docs/solver.md ("Grazing"): a plastic impact pressed on fires again
+    and again and ends in the storm. Now it does, at the impact's closed-form time sqrt(2 h_0 / g)."""
+    from fmpy import simulate_fmu
+    from fmpy.fmi1 import FMICallException
+
+    sv, t_storm = ({"e": 0.0}, math.sqrt(2 * 1.0 / 9.81)) if case == "plastic impact" else ({"h_0": 0.0}, 0.0)
+    for kind in KINDS:
+        path = ball_folder / "out" / kind.format(n="Ball")
+        messages, rows = [], []
+        kw = {} if "fmi3" not in kind else dict(fmi_type="CoSimulation")
+        with pytest.raises(FMICallException):
+            simulate_fmu(str(path), stop_time=1.0, output_interval=0.01, debug_logging=True, start_values=sv, output=["h"],
+                         logger=lambda *a: messages.append(a[-1].decode() if a[-1] else ""),
+                         step_finished=lambda t, recorder: rows.append(recorder.rows[-1]) or True, **kw)
+        storm = [m for m in messages if "event storm" in m]
+        assert storm and "bounce" in storm[0], (path, messages[-3:])
+        assert abs(_storm_time(storm[0]) - t_storm) < 1e-9, (path, storm[0])
+        assert all(r[1] >= -1e-9 for r in rows), (path, min(r[1] for r in rows))
+
+
 def _force_table(stop=7.0, dt=1e-3):
     t = np.arange(0.0, stop + dt / 2, dt)
     return np.array(list(zip(t, 10.0 * np.sin(2 * np.pi * 0.3 * t))), dtype=[("time", float), ("F", float)])

@@ -1581,13 +1581,13 @@ static int step(PgEngine *e, double t_target)
     make_seg(e, seg, t, t_new, y, y_new, f, K);
     double g_new[PG_MAX_EVENTS];
     for (int k = 0; k < e->n_active; ++k) TRY(guard_at(e, e->active[k], t_new, y_new, &g_new[k]));
-    int hit = -1;
+    int hit = -1, hit_in_place = 0;
     double hit_t = 0, hit_level = 0.0;
     for (int k = 0; k < e->n_active; ++k) {
         int i = e->active[k];
         double g0 = e->g[k], g1 = g_new[k], te = 0, level = 0.0;
         double sgn = sgn_of(e, i);
-        int found = 1;
+        int found = 1, in_place = 0;
         if (e->zarm[i]) { /* at zero after a restart: fires once the flow carries it past its band */
             double z = e->zband[i];
             /* past its band; or, with no direction to first order, off zero and moving away from it */
@@ -1597,7 +1597,7 @@ static int step(PgEngine *e, double t_target)
             TRY(hidden_return(e, seg, i, sgn, g0, g1, f_new, z, &te, &found));
             if (!found) { /* it left zero without a dip floating point resolves */
                 level = z;
-                if (e->zarm[i] == 2) te = t; /* no first-order direction: it leaves zero where it was */
+                if (e->zarm[i] == 2) te = t, in_place = 1; /* no first-order direction: it leaves zero where it was */
                 else TRY(locate_level(e, seg, i, z, t, g0, g1, NULL, &te)); /* after a jump: the return */
             }
         } else if (sgn * g1 < 0.0) {
@@ -1614,7 +1614,7 @@ static int step(PgEngine *e, double t_target)
             TRY(hidden_return(e, seg, i, sgn, g0, g1, f_new, 0.0, &te, &found));
             if (!found) continue;
         }
-        if (hit < 0 || te < hit_t) hit = k, hit_t = te, hit_level = level;
+        if (hit < 0 || te < hit_t) hit = k, hit_t = te, hit_level = level, hit_in_place = in_place;
     }
     if (hit < 0) {
         int rc = MODEL(e)->domain(t_new, y_new, e->q, u_at(e, t_new), e->p, e->s, &e->msg);
@@ -1649,7 +1649,7 @@ static int step(PgEngine *e, double t_target)
         e->has_seg = 0;
         memcpy(e->x, y, sizeof y), memcpy(e->f, f, sizeof f);
         e->has_pending = 1, e->pending_index = i, e->pending_located = 1;
-        e->zero_hit = hit_level > 0.0;
+        e->zero_hit = hit_level > 0.0, e->zero_in_place = hit_in_place;
         memcpy(e->pending_x, y, sizeof y);
         return PG_OK;
     }
@@ -1748,6 +1748,8 @@ static int apply_pending_event(PgEngine *e)
     if (e->recent_n < PG_RECENT) e->recent_n += 1;
     if (e->keep_history && e->on_event) e->on_event(e->hook_ctx, e, &e->last, e->n_events);
     e->has_pending = 0;
+    int in_place = e->zero_in_place;
+    e->zero_in_place = 0;
     TRY(zero_storm(e, i));
     int same = 1;
     for (int k = 0; k < NX(e); ++k) same &= x_new[k] == e->x[k];
@@ -1760,8 +1762,15 @@ static int apply_pending_event(PgEngine *e)
     double h0;
     TRY(initial_step(e, &h0));
     e->h = pmin(e->h, h0);
-    e->own_same = same;
+    /* a jump that changed nothing lets its own crossing go on (a counter, a marker) — unless the event
+     * fired in place (armed at zero with no first-order direction, at the restart point itself): then
+     * nothing at all has changed since that restart, and it stays armed at zero, to fire again once the
+     * flow carries it past its band (a plastic impact pressed on, a ball at rest on its floor: the storm,
+     * never through the guard; a guard that only dithers within its band, as a marker at a resting
+     * record, never fires again) */
+    e->own_same = same && !in_place;
     int rc = rearm(e, was, i, own_g); /* a guard the jump left crossed fires at this instant (a cascade) */
+    if (in_place && same && e->zarm[i] == 2) e->zarm[i] = 1;
     e->own_same = 0;
     return rc;
 }
