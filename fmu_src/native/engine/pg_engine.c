@@ -1176,7 +1176,7 @@ static int rearm(PgEngine *e, const signed char *was, int own, double own_g)
     TRY(arm_guards(e, was, own, own_g, &fire));
     if (fire >= 0) {
         e->has_pending = 1, e->pending_located = 0, e->pending_index = fire;
-        e->zero_hit = 0;
+        e->zero_hit = 0, e->zero_in_place = 0;
         memcpy(e->pending_x, e->x, sizeof e->x);
     }
     return PG_OK;
@@ -1288,7 +1288,7 @@ static void time_event_pending(PgEngine *e, double reach)
     if (e->has_pending) return;
     int i = time_event_by(e, reach);
     if (i < 0) return;
-    e->has_pending = 1, e->pending_located = 0, e->pending_index = i, e->zero_hit = 0;
+    e->has_pending = 1, e->pending_located = 0, e->pending_index = i, e->zero_hit = 0, e->zero_in_place = 0;
     memcpy(e->pending_x, e->x, sizeof e->x);
 }
 
@@ -1634,7 +1634,7 @@ static int step(PgEngine *e, double t_target)
                 int k_now;
                 TRY(crossing_at(e, &k_now));
                 if (k_now >= 0) {
-                    e->has_pending = 1, e->pending_index = e->active[k_now], e->pending_located = 1, e->zero_hit = 0;
+                    e->has_pending = 1, e->pending_index = e->active[k_now], e->pending_located = 1, e->zero_hit = 0, e->zero_in_place = 0;
                     memcpy(e->pending_x, e->x, sizeof e->x);
                 } else {
                     time_event_pending(e, t_new == t_target ? reach_of(t_new) : t_new);
@@ -1668,7 +1668,7 @@ static int step(PgEngine *e, double t_target)
         e->t = te;
         memcpy(e->x, y_e, sizeof y_e), memcpy(e->f, f_e, sizeof f_e);
         e->has_pending = 1, e->pending_index = i, e->pending_located = 1;
-        e->zero_hit = hit_level > 0.0;
+        e->zero_hit = hit_level > 0.0, e->zero_in_place = 0;
         memcpy(e->pending_x, y_e, sizeof y_e);
     }
     return PG_OK;
@@ -1950,7 +1950,7 @@ int pg_engine_set_inputs(PgEngine *e, const double *u, const double *du)
         }
         e->t = e->t_out;
         memcpy(e->x, x, sizeof x);
-        e->has_pending = 0;
+        e->has_pending = 0, e->zero_in_place = 0;
         e->has_seg = 0;
     }
     /* each guard's arming at (t, x) with the inputs before the change: a guard armed there that the
@@ -1982,14 +1982,14 @@ int pg_engine_set_inputs(PgEngine *e, const double *u, const double *du)
         e->h = pmin(e->h, h0);
     }
     if (crossed >= 0) {
-        e->has_pending = 1, e->pending_located = 0, e->pending_index = crossed, e->zero_hit = 0;
+        e->has_pending = 1, e->pending_located = 0, e->pending_index = crossed, e->zero_hit = 0, e->zero_in_place = 0;
         memcpy(e->pending_x, e->x, sizeof e->x);
     }
     int fire = -1;
     rc = arm_guards(e, was, -1, 0.0, &fire);
     if (rc) return at_time(e, rc, "the input change at t = ", e->t, " s");
     if (fire >= 0 && !e->has_pending) {
-        e->has_pending = 1, e->pending_located = 0, e->pending_index = fire, e->zero_hit = 0;
+        e->has_pending = 1, e->pending_located = 0, e->pending_index = fire, e->zero_hit = 0, e->zero_in_place = 0;
         memcpy(e->pending_x, e->x, sizeof e->x);
     }
     return PG_OK;
@@ -2077,7 +2077,7 @@ int pg_engine_me_fired(PgEngine *e, double t, const double *x, int *index)
         *index = e->pending_index;
         return PG_OK;
     }
-    e->zero_hit = 0;
+    e->zero_hit = 0, e->zero_in_place = 0;
     for (int k = 0; k < e->n_active; ++k) { /* (active[] is in the model's order: priority) */
         int i = e->active[k];
         double g;
