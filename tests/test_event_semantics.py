@@ -343,6 +343,64 @@ def test_an_accumulation_on_a_moving_floor_ends_in_the_storm_never_through_the_f
         assert gap.min() > -1e-6, (path, gap.min())
 
 
+def _plastic_floor(A, w, g=9.81, stop=3.0):
+    """Independent reference of FLOOR with e = 0 from rest at 1 m: the flights are parabolas, each
+    impact the first sign change of the gap on a 1e-5 s grid, rooted by brentq; the impact leaves the
+    ball with the floor's velocity, so it separates if the floor's acceleration downward exceeds g
+    there (the gap's second derivative -g + A w^2 sin(w t) > 0) and is pressed (the storm) if not.
+    Returns (the impact times, whether the last one is pressed)."""
+    from scipy.optimize import brentq
+
+    t0, y0, v0, times = 0.0, 1.0, 0.0, []
+    while True:
+        def gap(t):
+            return y0 + v0 * (t - t0) - g / 2 * (t - t0) ** 2 - A * np.sin(w * t)
+
+        ts = np.arange(t0 + 1e-7, stop, 1e-5)
+        below = np.nonzero(gap(ts) < 0)[0]
+        if len(below) == 0:
+            return times, False
+        k = below[0]
+        t = brentq(gap, ts[k - 1], ts[k], xtol=1e-15)
+        times.append(t)
+        if -g + A * w * w * math.sin(w * t) < 0:
+            return times, True
+        t0, y0, v0 = t, A * math.sin(w * t), A * w * math.cos(w * t)
+
+
+@pytest.mark.parametrize("A, w", [(0.3, 14.73), (0.3, 15.84), (0.3, 15.1), (0.2, 15.1), (0.1, 5.0)])
+def test_a_plastic_impact_on_a_moving_floor_separates_or_storms_as_the_floor_pulls_or_presses(user_folder, A, w):
+    """A guard that reads t, and a plastic impact (e = 0): where the floor's acceleration downward
+    exceeds g at the impact the ball leaves it and flies to a later impact; where it does not, the
+    floor presses the ball and the run ends in the storm at that impact — never through the floor.
+    Every impact at the reference's time, in every kind."""
+    from fmpy import simulate_fmu
+    from fmpy.fmi1 import FMICallException
+
+    from pogofmu.runtime.eventlog import parse_event_log
+
+    times, pressed = _plastic_floor(A, w)
+    for kind in KINDS:
+        path = user_folder / "out" / kind.format(n="Floor")
+        messages, rows = [], []
+        kw = {} if "fmi3" not in kind else dict(fmi_type="CoSimulation")
+        try:
+            simulate_fmu(str(path), stop_time=3.0, output_interval=1e-3, debug_logging=True,
+                         start_values={"log_events": 1, "e": 0.0, "A": A, "w": w},
+                         logger=lambda *a: messages.append((a[-3], *(b.decode() if b else "" for b in a[-2:]))),
+                         step_finished=lambda t, recorder: rows.append(recorder.rows[-1]) or True, **kw)
+            storm = None
+        except FMICallException:
+            storm = next(m for *_, m in messages if "event storm" in m)
+        assert (storm is not None) == pressed, (path, storm, times)
+        got = [ev["time"] for ev in parse_event_log(messages)]
+        if pressed:  # (the storm's refires, within a rounding band of the pressed impact)
+            assert "bounce" in storm and abs(_storm_time(storm) - times[-1]) < 1e-6, (path, storm, times)
+            got = got[:len(times)]
+        assert len(got) == len(times) and max(abs(a - b) for a, b in zip(got, times)) < 1e-9, (path, got, times)
+        assert min(r[2] for r in rows) > -1e-9, (path, min(r[2] for r in rows))
+
+
 @pytest.mark.parametrize("use_b", [0, 1])
 def test_a_cascade_fires_behind_an_event_crossed_at_the_same_instant(user_folder, use_b):
     """docs/solver.md, "Cascades": A's jump leaves the armed C on its after side, so C fires at the
