@@ -1767,7 +1767,7 @@ static int apply_pending_event(PgEngine *e)
      * nothing at all has changed since that restart, and it stays armed at zero, to fire again once the
      * flow carries it past its band (a plastic impact pressed on, a ball at rest on its floor: the storm,
      * never through the guard; a guard that only dithers within its band, as a marker at a resting
-     * record, never fires again) */
+     * record, does not fire again while it stays within it) */
     e->own_same = same && !in_place;
     int rc = rearm(e, was, i, own_g); /* a guard the jump left crossed fires at this instant (a cascade) */
     if (in_place && same && e->zarm[i] == 2) e->zarm[i] = 1;

@@ -116,7 +116,8 @@ struct PgEngine {
     int zero_hit, zrun, zrun_event;
     int own_same; /* (during a re-arming) the jump just applied left x and q as they were */
     /* the pending event fires where its step started, armed at zero with no first-order direction
-     * (zarm 2): at the restart point itself, so a jump that changes nothing there leaves it as it was */
+     * (zarm 2): at the restart point itself; if its jump changes nothing, it stays armed at zero and
+     * fires again past its band (apply_pending_event) */
     int zero_in_place;
     PgMsg note; /* a trial stage's non-finite rate since the last accepted step (the flow named): the cause, if the step collapses */
     int has_note;
