@@ -1169,16 +1169,24 @@ static void arming_before(const PgEngine *e, signed char *was)
     for (int k = 0; k < e->n_active; ++k) was[e->active[k]] = e->armed[e->active[k]];
 }
 
+/* the event ``index`` pending at e->t, its states before the jump ``x`` (PG_MAX_X of them); located: found
+ * on a crossing of its guard (1) or fired by a restart's arming, a time event or an input change (0);
+ * zero_hit, in_place: its guard hit from zero, and at the restart point itself (the rules of
+ * apply_pending_event). Every place that makes an event pending goes through here, so that no flag of
+ * an earlier one is left behind. */
+static void set_pending(PgEngine *e, int index, int located, const double *x, int zero_hit, int in_place)
+{
+    e->has_pending = 1, e->pending_index = index, e->pending_located = located;
+    e->zero_hit = zero_hit, e->zero_in_place = in_place;
+    memcpy(e->pending_x, x, sizeof e->pending_x);
+}
+
 /* a restart's arming, and the event it fires now (pending at e->t) */
 static int rearm(PgEngine *e, const signed char *was, int own, double own_g)
 {
     int fire;
     TRY(arm_guards(e, was, own, own_g, &fire));
-    if (fire >= 0) {
-        e->has_pending = 1, e->pending_located = 0, e->pending_index = fire;
-        e->zero_hit = 0, e->zero_in_place = 0;
-        memcpy(e->pending_x, e->x, sizeof e->x);
-    }
+    if (fire >= 0) set_pending(e, fire, 0, e->x, 0, 0);
     return PG_OK;
 }
 
@@ -1288,8 +1296,7 @@ static void time_event_pending(PgEngine *e, double reach)
     if (e->has_pending) return;
     int i = time_event_by(e, reach);
     if (i < 0) return;
-    e->has_pending = 1, e->pending_located = 0, e->pending_index = i, e->zero_hit = 0, e->zero_in_place = 0;
-    memcpy(e->pending_x, e->x, sizeof e->x);
+    set_pending(e, i, 0, e->x, 0, 0);
 }
 
 /* ---- locating events ------------------------------------------------------------------------ */
@@ -1634,8 +1641,7 @@ static int step(PgEngine *e, double t_target)
                 int k_now;
                 TRY(crossing_at(e, &k_now));
                 if (k_now >= 0) {
-                    e->has_pending = 1, e->pending_index = e->active[k_now], e->pending_located = 1, e->zero_hit = 0, e->zero_in_place = 0;
-                    memcpy(e->pending_x, e->x, sizeof e->x);
+                    set_pending(e, e->active[k_now], 1, e->x, 0, 0);
                 } else {
                     time_event_pending(e, t_new == t_target ? reach_of(t_new) : t_new);
                 }
@@ -1648,9 +1654,7 @@ static int step(PgEngine *e, double t_target)
     if (te == t) {
         e->has_seg = 0;
         memcpy(e->x, y, sizeof y), memcpy(e->f, f, sizeof f);
-        e->has_pending = 1, e->pending_index = i, e->pending_located = 1;
-        e->zero_hit = hit_level > 0.0, e->zero_in_place = hit_in_place;
-        memcpy(e->pending_x, y, sizeof y);
+        set_pending(e, i, 1, y, hit_level > 0.0, hit_in_place);
         return PG_OK;
     }
     double y_e[PG_MAX_X], f_e[PG_MAX_X];
@@ -1667,9 +1671,7 @@ static int step(PgEngine *e, double t_target)
         e->seg_i = !e->seg_i, e->has_seg = 1;
         e->t = te;
         memcpy(e->x, y_e, sizeof y_e), memcpy(e->f, f_e, sizeof f_e);
-        e->has_pending = 1, e->pending_index = i, e->pending_located = 1;
-        e->zero_hit = hit_level > 0.0, e->zero_in_place = 0;
-        memcpy(e->pending_x, y_e, sizeof y_e);
+        set_pending(e, i, 1, y_e, hit_level > 0.0, 0);
     }
     return PG_OK;
 }
@@ -1982,15 +1984,13 @@ int pg_engine_set_inputs(PgEngine *e, const double *u, const double *du)
         e->h = pmin(e->h, h0);
     }
     if (crossed >= 0) {
-        e->has_pending = 1, e->pending_located = 0, e->pending_index = crossed, e->zero_hit = 0, e->zero_in_place = 0;
-        memcpy(e->pending_x, e->x, sizeof e->x);
+        set_pending(e, crossed, 0, e->x, 0, 0);
     }
     int fire = -1;
     rc = arm_guards(e, was, -1, 0.0, &fire);
     if (rc) return at_time(e, rc, "the input change at t = ", e->t, " s");
     if (fire >= 0 && !e->has_pending) {
-        e->has_pending = 1, e->pending_located = 0, e->pending_index = fire, e->zero_hit = 0, e->zero_in_place = 0;
-        memcpy(e->pending_x, e->x, sizeof e->x);
+        set_pending(e, fire, 0, e->x, 0, 0);
     }
     return PG_OK;
 }
@@ -2001,8 +2001,7 @@ int pg_engine_apply_event(PgEngine *e, int index, double t, const double *x)
     memcpy(e->x, x, sizeof(double) * (size_t)NX(e));
     e->has_seg = 0;
     /* (e->zero_hit: as pg_engine_me_fired found this event, from zero or not: the storm rule counts it) */
-    e->has_pending = 1, e->pending_index = index, e->pending_located = 1;
-    memcpy(e->pending_x, e->x, sizeof e->x);
+    set_pending(e, index, 1, e->x, e->zero_hit, e->zero_in_place);
     int rc = apply_pending_event(e);
     if (rc) return at_time(e, rc, "t = ", e->t, " s");
     memcpy(e->x_out, e->x, sizeof e->x);
