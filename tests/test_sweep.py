@@ -480,6 +480,47 @@ def test_a_worker_killed_mid_sweep_loses_no_run(tmp_path, gate_fmu, gate):
     assert not _wait_gone(_children() - before), "worker processes left behind"
 
 
+_KILLED_WORKERS = r"""
+import os, subprocess, sys, time
+import psutil
+from distributed import LocalCluster
+
+if __name__ == "__main__":
+    pogofmu, fmu, out = sys.argv[1:]
+    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0")
+    proc = subprocess.run([pogofmu, "sweep", fmu, "--grid", "k=80,90,100,120", "--stop-time", "0.2", "--chunk-size", "1",
+                           "--scheduler", cluster.scheduler_address, "--out", out, "--no-progress"],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0 and "0 failed" in proc.stdout, proc.stdout + proc.stderr[-2000:]
+    workers = [p for p in psutil.Process().children(recursive=True) if "resource_tracker" not in " ".join(p.cmdline())]
+    for p in workers:  # as the OOM killer or a batch system's limit ends them: no exit handler runs
+        p.kill()
+    psutil.wait_procs(workers, timeout=60)
+    cluster.close()
+    LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=":0").close()  # a later cluster
+    print(len(workers), "workers killed")
+"""
+
+
+def test_workers_killed_after_a_sweep_leave_no_copy_of_the_fmu_behind(tmp_path):
+    """Each worker writes the scattered FMU and its extraction to disk. A worker process that is
+    killed runs no exit handler, so those copies must lie in the worker's own Dask folder, which Dask
+    removes when a later worker starts there; in a folder of their own in the system's temporary
+    folder (the sweep before this test) every killed worker left about 1 MB behind for good."""
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    script = tmp_path / "killed_workers.py"
+    script.write_text(_KILLED_WORKERS)
+    env = dict(os.environ, TMPDIR=str(tmp))  # the temporary folder of every process of the scenario
+    proc = subprocess.run([sys.executable, str(script), str(POGOFMU), str(fmu_path("PogoStick")), str(tmp_path / "o.parquet")],
+                          capture_output=True, text=True, env=env, timeout=600, cwd=tmp_path)
+    assert proc.returncode == 0 and "2 workers killed" in proc.stdout, proc.stdout + proc.stderr[-3000:]
+    assert pq.read_table(tmp_path / "o.parquet").num_rows == 4
+    # what remains is Dask's own two lock files of its scratch space, empty
+    left = sorted(str(p.relative_to(tmp)) for p in tmp.rglob("*") if p.is_file() and p.name not in ("global.lock", "purge.lock"))
+    assert not left, f"left in the temporary folder after the killed workers: {left}"
+
+
 def test_a_lost_scheduler_stops_the_sweep_and_resume_finishes_it_elsewhere(tmp_path, scheduler, gate_fmu, gate):
     """The cluster goes away mid-sweep (while the held runs wait at the gate): the sweep stops at
     once, says so, keeps what it saved and records no run it did not do; --resume on another

@@ -28,8 +28,7 @@ class Runner:
         from fmpy import extract, read_model_description
 
         self.md = read_model_description(fmu)
-        self.unzipdir = extract(fmu)
-        atexit.register(shutil.rmtree, self.unzipdir, True)
+        self.unzipdir = extract(fmu, unzipdir=str(scratch_folder("pogofmu-sweep-fmu-")))
         self.vars = {v.name: v for v in self.md.modelVariables}
         self.default_step = default_step(self.md)
         self.fmi3 = self.md.fmiVersion.startswith("3")
@@ -202,14 +201,29 @@ _COPIES: Dict[str, Path] = {}
 _COPIES_LOCK = threading.Lock()
 
 
+def scratch_folder(prefix: str) -> Path:
+    """A new folder for this process's copies. In a Dask worker it lies in the worker's own local
+    directory, which Dask removes when the worker ends: a process worker is stopped without running
+    ``atexit``, so a folder of its own in the system's temporary folder would be left behind, one per
+    worker and sweep. Elsewhere (the threads of the calling process) a temporary folder removed at exit."""
+    base = None
+    try:
+        from distributed import get_worker
+
+        base = get_worker().local_directory
+    except (ImportError, ValueError):  # not in a Dask worker
+        pass
+    folder = Path(tempfile.mkdtemp(prefix=prefix, dir=base))
+    atexit.register(shutil.rmtree, folder, True)
+    return folder
+
+
 def worker_copy(key: str, data: bytes, name: str) -> Path:
     """The worker's copy, as a file ``name``, of the bytes that hash to ``key`` (the FMU or the SSP
     package a sweep scattered): written once per worker, removed when the worker ends."""
     with _COPIES_LOCK:
         if key not in _COPIES:
-            folder = Path(tempfile.mkdtemp(prefix="pogofmu-sweep-"))
-            atexit.register(shutil.rmtree, folder, True)
-            path = folder / name
+            path = scratch_folder("pogofmu-sweep-") / name
             path.write_bytes(data)
             _COPIES[key] = path
         return _COPIES[key]
