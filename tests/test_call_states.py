@@ -14,6 +14,7 @@ Both backends, on the project's PogoStick and HopController and on two user mode
 event semantics' generator (tests/hybrid_draws.py); derandomized and short in CI (``POGOFMU_STATEFUL_EXAMPLES=500`` for a long run),
 and the native FMUs once more with their sources compiled under AddressSanitizer and UBSan.
 """
+import atexit
 import ctypes
 import functools
 import os
@@ -472,6 +473,7 @@ def drawn_dist() -> Path:
     from support import run_pogofmu
 
     folder = Path(tempfile.mkdtemp(prefix="pogofmu-drawn-machines-"))
+    atexit.register(shutil.rmtree, folder, True)  # the FMUs live as long as the session that loads them
     files = []
     for name, d in zip(DRAWN, two_drawn_models()):
         files.append(f"{name.lower()}.py")

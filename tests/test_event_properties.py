@@ -20,7 +20,9 @@ Budget: CI runs a derandomized set (POGOFMU_FUZZ unset); POGOFMU_FUZZ=long draws
 """
 from __future__ import annotations
 
+import atexit
 import os
+import shutil
 import tempfile
 from pathlib import Path
 
@@ -37,6 +39,7 @@ LONG = os.environ.get("POGOFMU_FUZZ") == "long"
 TOL = 1e-10
 T_TOL = 1e-6
 CACHE = Path(tempfile.mkdtemp(prefix="pogofmu-draws-cache-"))
+atexit.register(shutil.rmtree, CACHE, True)  # the session's exports, gone with it
 
 
 def run_cs(path: Path, d: Draw, tol: float = TOL):
@@ -168,7 +171,12 @@ def compare(d, ref, rows, events, errors):
                 dv=-0.46626215135050986))
 def test_a_drawn_model_keeps_the_event_semantics_in_both_backends(d):
     note(repr(d))
-    folder = Path(tempfile.mkdtemp(prefix="pogofmu-draw-"))
+    with tempfile.TemporaryDirectory(prefix="pogofmu-draw-") as folder:
+        _check_draw(d, Path(folder))
+
+
+def _check_draw(d: Draw, folder: Path):
+    """Export the drawn model in ``folder`` and hold both FMUs to the reference."""
     (folder / "drawn.py").write_text(model_source(d, "Drawn"))
     model = load_model(folder / "drawn.py")
     try:
