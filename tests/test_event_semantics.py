@@ -523,6 +523,27 @@ def test_a_plastic_impact_or_a_start_at_rest_ends_in_the_storm_never_through_the
         assert all(r[1] >= -tol for r in rows), (path, fmi_type, min(r[1] for r in rows))
 
 
+@pytest.mark.parametrize("name, value, rule", [("h_0", -1.0, "h_0 >= 0"), ("g", -9.81, "g > 0"), ("g", 0.0, "g > 0")])
+def test_the_documented_ball_refuses_a_start_under_its_floor_and_a_gravity_that_is_not_down(ball_folder, name, value, rule):
+    """Found by a user's audit (2026-12-06): the documented ball checked e only. Started under its
+    floor (h_0 = -1) its guard was past zero from the start, so the bounce was not armed
+    (docs/solver.md, "Armed") and the ball fell on with no error (h = -2.2 m at 0.5 s); with
+    g = -9.81 it flew up. Its check now refuses both, in every kind, naming the parameter, its value
+    and the rule; the run ends at initialization and serves no row."""
+    from fmpy import simulate_fmu
+    from fmpy.fmi1 import FMICallException
+
+    for kind in KINDS:
+        path = ball_folder / "out" / kind.format(n="Ball")
+        messages = []
+        kw = dict(fmi_type="CoSimulation") if "fmi3" in kind else {}
+        with pytest.raises(FMICallException, match="ExitInitializationMode"):
+            simulate_fmu(str(path), stop_time=1.0, output_interval=0.01, start_values={name: value},
+                         logger=lambda *a: messages.append(a[-1].decode() if a[-1] else ""), **kw)
+        said = f"parameter {name} = {value!r} violates the rule: {rule}"
+        assert any(said in m for m in messages), (path, messages)
+
+
 # A body under a constant acceleration a toward a wall at x = d, any restitution 0 <= e < 1 (a
 # plastic impact included), started anywhere from the wall up (on it included) with any velocity;
 # the jump either keeps x (the located crossing) or puts the body on the wall, as users write both.

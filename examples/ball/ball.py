@@ -1,7 +1,14 @@
 """A bouncing ball: free fall, and a bounce with restitution e at the floor."""
-from pogofmu import FALLING, Event, HybridModel, Parameter, Variable, require
+from pogofmu import FALLING, Event, HybridModel, Parameter, Variable, require, require_nonnegative, require_positive
 
 h, v = Variable("h", "m", "height above the floor"), Variable("v", "m/s", "velocity (up)")
+
+
+def check(p):
+    require_positive(p, "g")      # the floor is below: a ball started under it, or pulled up, never meets it
+    require_nonnegative(p, "h_0")
+    require(0 <= p.e < 1, "e", p.e, "0 <= e < 1")
+
 
 MODEL = HybridModel(
     name="Ball",
@@ -17,6 +24,6 @@ MODEL = HybridModel(
                   jump=lambda x, q, u, p: ([0.0, -p.e * x[1]], q)),),
     initial=lambda p: ([p.h_0, 0.0], {}),
     output_fn=lambda t, x, q, u, p: {"h": x[0], "v": x[1]},
-    check=lambda p: require(0 <= p.e < 1, "e", p.e, "0 <= e < 1"),
+    check=check,
     default_stop_time=3.0,
 )
