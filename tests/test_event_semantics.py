@@ -187,6 +187,26 @@ MODEL = HybridModel(
 )
 '''
 
+# A ramp and a counter on a held input's level (found by a user's audit, 2026-12-06: in FMI 3.0 model
+# exchange an input step that carried the guard past zero fired the event, then again after every step
+# of the importer, until a false storm).
+RAMP_LEVEL = '''
+from pogofmu import RISING, Event, HybridModel, Variable
+
+MODEL = HybridModel(
+    name="RampLevel", description="a ramp and a counter on a held input's level",
+    states=(Variable("y", "m", "ramp"),), parameters=(),
+    inputs=(Variable("lev", "m", "level", start=0.9),),
+    outputs=(Variable("y", "m", "ramp"), Variable("nD", "", "times D fired")),
+    flow=lambda t, x, q, u, p: [1.0],
+    events=(Event("D", RISING, guard=lambda x, q, u, p: x[0] - u[0],
+                  jump=lambda x, q, u, p: (x, {"nD": q["nD"] + 1})),),
+    initial=lambda p: ([0.0], {"nD": 0}),
+    output_fn=lambda t, x, q, u, p: {"y": x[0], "nD": q["nD"]},
+    integer_outputs=frozenset({"nD"}),
+)
+'''
+
 KINDS = ("{n}.fmu", "fmi3/{n}.fmu", "native/{n}.fmu", "native/fmi3/{n}.fmu")
 
 
@@ -202,8 +222,10 @@ def user_folder(tmp_path_factory):
     (folder / "cascade.py").write_text(CASCADE)
     (folder / "level.py").write_text(LEVEL)
     (folder / "ticks.py").write_text(TICKS)
+    (folder / "ramp_level.py").write_text(RAMP_LEVEL)
     proc = run_pogofmu("export", "wall.py", "wall0.py", "rest.py", "toggle.py", "floor.py", "cascade.py",
-                       "level.py", "ticks.py", "--out", "out", "--platforms", "x86_64-linux", cwd=folder, timeout=600)
+                       "level.py", "ticks.py", "ramp_level.py", "--out", "out", "--platforms", "x86_64-linux",
+                       cwd=folder, timeout=600)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     return folder
 
@@ -415,18 +437,21 @@ def test_a_cascade_fires_behind_an_event_crossed_at_the_same_instant(user_folder
 
     from pogofmu.runtime.eventlog import parse_event_log
 
-    for kind in KINDS:
+    # (model exchange: fmpy's CVode locates A; before the fix the counter C fired again after every
+    # importer step, its jump having changed no state, until a false storm)
+    for kind, fmi_type, tol in [*((k, "CoSimulation", 1e-12) for k in KINDS),
+                                *((k, "ModelExchange", 1e-9) for k in KINDS if "fmi3" in k)]:
         path = user_folder / "out" / kind.format(n="Cascade")
         messages = []
-        kw = {} if "fmi3" not in kind else dict(fmi_type="CoSimulation")
+        kw = {} if "fmi3" not in kind else dict(fmi_type=fmi_type, relative_tolerance=1e-10)
         res = simulate_fmu(str(path), stop_time=2.0, output_interval=0.01, debug_logging=True,
                            start_values={"log_events": 1, "use_b": use_b},
                            logger=lambda *a: messages.append((a[-3], *(b.decode() if b else "" for b in a[-2:]))),
                            **kw)
         got = [(ev["name"], ev["time"]) for ev in parse_event_log(messages)]
-        assert [n for n, _ in got] == (["A", "B", "C"] if use_b else ["A", "C"]), (path, got)
-        assert all(abs(t - 1.0) < 1e-12 for _, t in got), (path, got)
-        assert res["nC"][-1] == 1 and abs(res["z"][-1] - 0.3) < 1e-9, (path, res["nC"][-1], res["z"][-1])
+        assert [n for n, _ in got] == (["A", "B", "C"] if use_b else ["A", "C"]), (path, fmi_type, got)
+        assert all(abs(t - 1.0) < tol for _, t in got), (path, fmi_type, got)
+        assert res["nC"][-1] == 1 and abs(res["z"][-1] - 0.3) < tol, (path, fmi_type, res["nC"][-1], res["z"][-1])
 
 
 def test_an_input_that_lands_exactly_on_its_level_is_an_edge(user_folder):
@@ -652,6 +677,98 @@ def test_an_event_caused_by_a_held_input_fires_at_that_communication_point(user_
             after = np.nonzero(t > t_ref + 1e-9)[0]
             if len(after):
                 assert s[after[0]] == 0, (kind, t_ref, s[after[0]])
+
+
+def _me_drive(path, lev_at, stop, h=1.0 / 64):
+    """A model-exchange importer written here, in the standard's order (FMI 3.0 section 3.2): explicit
+    Euler on RampLevel's y' = 1 (exact in binary at h = 1/64), the event indicators compared after each
+    step, an event iteration where one changes sign or the FMU asks for one, and the input lev set once
+    at each of its changes, in Event Mode, at an instant the steps reach exactly. Returns (nD, the event
+    records, the FMU's error messages)."""
+    from ctypes import POINTER, c_double
+
+    from fmpy import extract, read_model_description
+    from fmpy.fmi3 import FMU3Model
+
+    from pogofmu.runtime.eventlog import parse_event_log
+
+    ptr = lambda a: a.ctypes.data_as(POINTER(c_double))  # noqa: E731
+    md = read_model_description(str(path))
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    messages = []
+    fmu = FMU3Model(guid=md.guid, unzipDirectory=extract(str(path)), modelIdentifier=md.modelExchange.modelIdentifier,
+                    instanceName="me")
+    fmu.instantiate(loggingOn=True, logMessage=lambda *a: messages.append((a[-3], a[-2].decode(), a[-1].decode())))
+    fmu.setInt32([vr["log_events"]], [1])
+    fmu.enterInitializationMode()
+    fmu.exitInitializationMode()
+    while fmu.updateDiscreteStates()[0]:
+        pass
+    fmu.enterContinuousTimeMode()
+    x, z, dx = np.zeros(1), np.zeros(1), np.zeros(1)
+    fmu.getContinuousStates(ptr(x), 1)
+    fmu.getEventIndicators(ptr(z), 1)
+    t = 0.0
+
+    def event_iteration(value=None):
+        fmu.enterEventMode()
+        if value is not None:
+            fmu.setFloat64([vr["lev"]], [value])
+        while fmu.updateDiscreteStates()[0]:
+            pass
+        fmu.enterContinuousTimeMode()
+        fmu.getContinuousStates(ptr(x), 1)
+        fmu.getEventIndicators(ptr(z), 1)
+
+    try:
+        while t < stop:
+            fmu.getContinuousStateDerivatives(ptr(dx), 1)
+            t, x[:] = t + h, x + h * dx
+            fmu.setTime(t)
+            fmu.setContinuousStates(ptr(x), 1)
+            z_before = z.copy()
+            fmu.getEventIndicators(ptr(z), 1)
+            enter, _ = fmu.completedIntegratorStep(True)
+            if enter or np.any(np.sign(z) != np.sign(z_before)):
+                event_iteration()
+            if t in lev_at:
+                event_iteration(lev_at[t])
+        n = fmu.getInt32([vr["nD"]])[0]
+    except Exception:
+        n = None
+    return n, parse_event_log(messages), [m for s, _, m in messages if s >= 3]
+
+
+def test_an_input_step_across_a_moving_guard_fires_once_in_model_exchange(user_folder):
+    """RampLevel: y = t rises; its counter D fires where y rises through the held input lev. lev steps
+    from 0.9 to 0.3 at t = 0.5, which carries D's guard y - lev from -0.4 to +0.2: one edge, nD = 1 at
+    0.5, and no other (y stays above lev). So it went in co-simulation; in FMI 3.0 model exchange the
+    FMU took the guard's value after that input change for its located zero and fired D again after
+    every step of the importer (nD = 5 at 0.5625, no error), then a false storm. Driven by an importer
+    written here (the input set once, in Event Mode) and by fmpy's CVode with a step table (which also
+    sets the value from before the step again at 0.5, in Continuous-Time Mode), in both backends."""
+    from fmpy import simulate_fmu
+
+    from pogofmu.runtime.eventlog import parse_event_log
+
+    table = np.array([(0.0, 0.9), (0.5, 0.9), (0.5, 0.3), (1.0, 0.3)], dtype=[("time", float), ("lev", float)])
+    for kind in KINDS:
+        path = user_folder / "out" / kind.format(n="RampLevel")
+        runs = [("CoSimulation", {})] + ([("ModelExchange", dict(relative_tolerance=1e-10))] if "fmi3" in kind else [])
+        for fmi_type, extra in runs:
+            messages = []
+            kw = {} if "fmi3" not in kind else dict(fmi_type=fmi_type, **extra)
+            res = simulate_fmu(str(path), stop_time=1.0, output_interval=0.01, input=table, debug_logging=True,
+                               start_values={"log_events": 1},
+                               logger=lambda *a: messages.append((a[-3], *(b.decode() if b else "" for b in a[-2:]))),
+                               **kw)
+            got = [(ev["name"], ev["time"]) for ev in parse_event_log(messages)]
+            assert [n for n, _ in got] == ["D"] and abs(got[0][1] - 0.5) < 1e-12 and res["nD"][-1] == 1, \
+                (path, fmi_type, got, res["nD"][-1])
+        if "fmi3" in kind:
+            n, events, errors = _me_drive(path, {0.5: 0.3}, stop=1.0)
+            got = [(ev["name"], ev["time"]) for ev in events]
+            assert n == 1 and got == [("D", 0.5)] and not errors, (path, n, got, errors)
 
 
 def test_an_input_event_fires_once_while_the_input_stays_beyond_its_level(user_folder):

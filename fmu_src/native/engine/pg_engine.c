@@ -1997,11 +1997,19 @@ int pg_engine_set_inputs(PgEngine *e, const double *u, const double *du)
 
 int pg_engine_apply_event(PgEngine *e, int index, double t, const double *x)
 {
+    /* located: the importer found its guard at its zero (a root of its indicator; that value is its
+     * zero after the jump) — unless the engine made it pending at this instant itself (a cascade, the
+     * start, an input change of a model without states: as it said) or an input change carried its
+     * guard past zero here (pg_engine_restart_at): then it fired beyond its zero, as in co-simulation */
+    int located = e->has_pending && e->t == t && e->pending_index == index
+                      ? e->pending_located
+                      : !(index < MODEL(e)->ne && e->me_input_t == t && e->me_input_crossed[index]);
+    if (index < MODEL(e)->ne) e->me_input_crossed[index] = 0;
     e->t = e->t_out = t;
     memcpy(e->x, x, sizeof(double) * (size_t)NX(e));
     e->has_seg = 0;
     /* (e->zero_hit: as pg_engine_me_fired found this event, from zero or not: the storm rule counts it) */
-    set_pending(e, index, 1, e->x, e->zero_hit, e->zero_in_place);
+    set_pending(e, index, located, e->x, e->zero_hit, e->zero_in_place);
     int rc = apply_pending_event(e);
     if (rc) return at_time(e, rc, "t = ", e->t, " s");
     memcpy(e->x_out, e->x, sizeof e->x);
@@ -2051,8 +2059,12 @@ int pg_engine_me_indicators(PgEngine *e, double t, const double *x, double *z)
         if (e->zarm[i] && G < -band) { /* it left zero to its before side: an ordinary armed guard */
             if (i == e->zrun_event) e->zrun = 0; /* no accumulation */
             e->zarm[i] = 0;
-        } else if (!e->armed[i] && G < 0.0 && !(t == e->t && G >= -band)) {
-            e->armed[i] = 1; /* seen on its before side (beyond the rounding of the restart point) */
+        } else if (!e->armed[i] && G < 0.0 && !(t == e->t && G >= -band) && !(e->has_last && t == e->last.time)) {
+            /* seen on its before side (beyond the rounding of the restart point), after the instant of
+             * the last event: at that instant the restart decided its arming, and the trajectory has not
+             * moved since (an importer that sets the inputs' values from before the event again there,
+             * as fmpy's model exchange does at the start of each integration, does not arm it) */
+            e->armed[i] = 1;
         }
         if (e->zarm[i]) { /* a sign change where it leaves its band to its after side */
             double r = G - band;
@@ -2114,7 +2126,7 @@ int pg_engine_restart_at(PgEngine *e, double t, const double *x, const double *u
      * the new inputs put on its after side fires: pg_engine_me_fired), and so is an event pending at
      * this instant; a model without states is re-armed by the change, as in co-simulation */
     signed char armed[PG_MAX_EVENTS], zarm[PG_MAX_EVENTS];
-    double zband[PG_MAX_EVENTS], pending_x[PG_MAX_X];
+    double zband[PG_MAX_EVENTS], pending_x[PG_MAX_X], g_old[PG_MAX_EVENTS];
     memcpy(armed, e->armed, sizeof armed), memcpy(zarm, e->zarm, sizeof zarm), memcpy(zband, e->zband, sizeof zband);
     int pending = e->has_pending && e->t == t, pending_index = e->pending_index;
     memcpy(pending_x, e->pending_x, sizeof pending_x);
@@ -2122,10 +2134,28 @@ int pg_engine_restart_at(PgEngine *e, double t, const double *x, const double *u
     memcpy(e->x, x, sizeof(double) * (size_t)NX(e));
     memcpy(e->x_out, x, sizeof(double) * (size_t)NX(e));
     e->has_seg = 0, e->has_pending = 0;
+    int change = 0;
+    for (int i = 0; i < e->nu; ++i) change |= !(u[i] == e->u[i]);
+    int n_active = e->n_active, active[PG_MAX_EVENTS];
+    memcpy(active, e->active, sizeof(int) * (size_t)n_active);
+    if (change && !e->stateless) /* each armed guard at this point under the inputs before the change */
+        for (int k = 0; k < n_active; ++k)
+            if (armed[active[k]]) TRY(guard_at(e, active[k], t, x, &g_old[k]));
     /* set_input with the same inputs returns at once in Python: the rebinding happens only for a change */
     int rc = pg_engine_set_input(e, u);
     if (e->stateless) return rc; /* (without states an input change is the only motion: armed as in co-simulation) */
     memcpy(e->armed, armed, sizeof armed), memcpy(e->zarm, zarm, sizeof zarm), memcpy(e->zband, zband, sizeof zband);
+    if (change && rc == PG_OK) { /* an armed guard the change carried past zero (past its band, armed at zero) */
+        if (e->me_input_t != t) memset(e->me_input_crossed, 0, sizeof e->me_input_crossed);
+        e->me_input_t = t;
+        for (int k = 0; k < n_active; ++k) {
+            int i = active[k];
+            if (!armed[i]) continue;
+            double g_new, sgn = sgn_of(e, i), at = zarm[i] ? zband[i] : 0.0;
+            TRY(guard_at(e, i, t, x, &g_new));
+            if (sgn * g_old[k] <= at && sgn * g_new > at) e->me_input_crossed[i] = 1;
+        }
+    }
     e->has_pending = pending, e->pending_index = pending_index;
     memcpy(e->pending_x, pending_x, sizeof pending_x);
     return rc;
