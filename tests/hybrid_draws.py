@@ -12,6 +12,9 @@ A draw (:class:`Draw`) is a mass on a line, ``x'' = a0 + am m - k y - c v + b2 y
   on the wall or the floor, or across it (a cascade at one instant);
 * ``input`` (either direction, ``u - Lu``): toggles ``m`` (an event that only an input change fires);
 * ``clock`` (RISING ``t - Tg``, a guard on time): toggles ``m``;
+* ``gate`` (either direction, ``x - (X0 + Lg + gu u)``, last in the model's order): counts in ``n``,
+  a jump that changes no state — a level the held input moves, so that an input change can carry
+  it past the mass (an event of the input on a moving guard);
 * ``tick``: a :class:`~pogofmu.TimeEvent` at ``T0``, once or every ``P``, kicking ``v`` by ``dv``.
 
 :func:`model_source` writes the model file; :func:`reference` solves the same model with scipy's
@@ -78,10 +81,13 @@ class Draw:
     dv: float = 0.5
     Af: float = 0.0             # the floor's amplitude (0: it stands still)
     wf: float = 3.0
+    Lg: float = 0.0             # the gate: a counter on x - (X0 + Lg + gu u), a level the input moves
+    gu: float = 0.0
+    gate_rising: bool = True
 
     def params(self) -> dict:
         names = ("X0", "a0", "am", "k", "c", "b2", "bu", "y0", "v0", "dhi", "ehi", "dlo", "elo", "L", "dx",
-                 "Lu", "Tg", "T0", "P", "dv", "Af", "wf")
+                 "Lu", "Tg", "T0", "P", "dv", "Af", "wf", "Lg", "gu")
         return {n: float(getattr(self, n)) for n in names}
 
     def inputs(self) -> np.ndarray:
@@ -94,7 +100,7 @@ def model_source(d: Draw, name: str) -> str:
     """The model file of a draw, as a user writes it (pogofmu's public API only)."""
     units = {"X0": "m", "a0": "m/s2", "am": "m/s2", "k": "1/s2", "c": "1/s", "b2": "1/(m.s2)", "bu": "m/(N.s2)",
              "y0": "m", "v0": "m/s", "dhi": "m", "ehi": "", "dlo": "m", "elo": "", "L": "m", "dx": "m",
-             "Lu": "N", "Tg": "s", "T0": "s", "P": "s", "dv": "m/s", "Af": "m", "wf": "rad/s"}
+             "Lu": "N", "Tg": "s", "T0": "s", "P": "s", "dv": "m/s", "Af": "m", "wf": "rad/s", "Lg": "m", "gu": "m/N"}
     params = ",\n    ".join(f'Parameter("{n}", {v!r}, "{units[n]}", "{n}")' for n, v in d.params().items())
     target = {"none": "x[0]", "on wall": "p.X0 + p.dhi", "across wall": "p.X0 + p.dhi + p.dx",
               "on floor": "p.X0 + p.dlo", "across floor": "p.X0 + p.dlo - p.dx"}[d.landing]
@@ -109,11 +115,14 @@ def model_source(d: Draw, name: str) -> str:
                         ' - p.elo * x[1]], q))',
         "level": f'Event("level", {"RISING" if d.level_rising else "FALLING"}, '
                  'guard=lambda x, q, u, p: x[0] - (p.X0 + p.L),\n'
-                 f'          jump=lambda x, q, u, p: ([{target}, x[1]], {{"m": 1 - q["m"]}}))',
+                 f'          jump=lambda x, q, u, p: ([{target}, x[1]], {{**q, "m": 1 - q["m"]}}))',
         "input": f'Event("input", {"RISING" if d.input_rising else "FALLING"}, guard=lambda x, q, u, p: u[0] - p.Lu,\n'
-                 '          jump=lambda x, q, u, p: (x, {"m": 1 - q["m"]}))',
+                 '          jump=lambda x, q, u, p: (x, {**q, "m": 1 - q["m"]}))',
         "clock": 'Event("clock", RISING, guard=lambda t, x, q, u, p: t - p.Tg,\n'
-                 '          jump=lambda t, x, q, u, p: (x, {"m": 1 - q["m"]}))',
+                 '          jump=lambda t, x, q, u, p: (x, {**q, "m": 1 - q["m"]}))',
+        "gate": f'Event("gate", {"RISING" if d.gate_rising else "FALLING"}, '
+                'guard=lambda x, q, u, p: x[0] - (p.X0 + p.Lg + p.gu * u[0]),\n'
+                '          jump=lambda x, q, u, p: (x, {**q, "n": q["n"] + 1}))',
     }
     events = [menu["moving floor" if e == "floor" and d.Af else e] for e in d.events]
     if d.tick:
@@ -141,7 +150,7 @@ MODEL = HybridModel(
     events=(
         {(","+chr(10)+"        ").join(events)}{"," if events else ""}
     ),
-    initial=lambda p: ([p.X0 + p.y0, p.v0], {{"m": {int(d.m0)}}}),
+    initial=lambda p: ([p.X0 + p.y0, p.v0], {{"m": {int(d.m0)}{', "n": 0' if "gate" in d.events else ""}}}),
     output_fn=lambda t, x, q, u, p: {{"x": x[0], "v": x[1], "m": q["m"]}},
     integer_outputs=frozenset({{"m"}}),
     default_stop_time={STOP!r},
@@ -198,6 +207,11 @@ def draws():
         d.dv = f(-2.0, 2.0)
         if "floor" in names and data(st.booleans()):
             d.Af, d.wf = f(0.01, 0.3), f(1.0, 10.0)
+        if data(st.booleans()):  # (drawn last: the draws before it stay those of the earlier menu)
+            d.events += ("gate",)
+            d.gu = data(st.sampled_from([0.0, 1.0])) * f(-0.1, 0.1)
+            d.Lg = f(-0.3, 0.3) - d.gu * d.U0
+            d.gate_rising = data(st.booleans())
         return d
 
     return draw()
