@@ -216,8 +216,9 @@ def test_a_drawn_model_keeps_the_event_semantics_in_both_backends(d):
         _check_draw(d, Path(folder))
 
 
-def _check_draw(d: Draw, folder: Path):
-    """Export the drawn model in ``folder`` and hold both FMUs to the reference."""
+def _check_draw(d: Draw, folder: Path, fmi: int = 2):
+    """Export the drawn model in ``folder`` and hold both FMUs to the reference: FMI 2.0 co-simulation,
+    or (fmi = 3) FMI 3.0 model exchange."""
     (folder / "drawn.py").write_text(model_source(d, "Drawn"))
     model = load_model(folder / "drawn.py")
     try:
@@ -233,42 +234,39 @@ def _check_draw(d: Draw, folder: Path):
         event(f"a jump that lands {d.landing.split()[0]} another guard")
     if d.X0:
         event("an offset")
-    python_fmu, native_fmu = export(d, folder)
-    py, nat = run_cs(python_fmu, d), run_cs(native_fmu, d)
+    python_fmu, native_fmu = export(d, folder, fmi)
+    run = run_cs if fmi == 2 else run_me
+    py, nat = run(python_fmu, d), run(native_fmu, d)
     # the same bits: rows, event records, messages
     assert py[0] == nat[0] and py[1] == nat[1] and py[2] == nat[2], (py[2], nat[2])
     rows, events, errors = py
     check_invariant(model, d, rows, events)
-    compare(d, ref, rows, events, errors)
+    # model exchange: CVode at rtol 1e-12 places the first events within 1e-9 s, and its error grows by
+    # each impact (2e-5 s after 20 impacts with restitution 0.95): the bound is its, the names and order exact
+    compare(d, ref, rows, events, errors, **({} if fmi == 2 else dict(t_tol=ME_T_TOL, x_tol=ME_T_TOL)))
 
 
 @settings(max_examples=100 if LONG else 30, deadline=None, derandomize=not LONG,
           phases=(Phase.explicit, Phase.reuse, Phase.generate) + ((Phase.shrink,) if LONG else ()),
           suppress_health_check=list(HealthCheck))
 @given(d=draws())
+# a draw that found a bug: the held input stepped the gate's level past the rising mass at five points in
+# a row; fmpy applied each new value inside CVode's root search, and the FMU took the crossing for one
+# the importer had located where the flow carries the guard back, and fired none of the five
+@example(d=Draw(X0=0.0, a0=8.79061215401487, am=0.044352408060714055, k=52.4947733034341, c=0.40233320339815265,
+                b2=0.0, bu=-0.0, y0=0.22556417438119808, v0=1.4941473788497843, m0=1, U0=4.0, U1=6.965480934504168,
+                fu=0.9272381706652582, events=('floor', 'level', 'gate'), dhi=0.3626102098104842,
+                ehi=0.799821739958952, dlo=-0.8044559366432208, elo=0.95, L=0.1155246490584787, level_rising=True,
+                landing='on floor', dx=0.14112319152347277, Lu=1.7214267015104294, input_rising=True,
+                Tg=0.13258996703447584, tick=True, T0=0.4654489314951379, P=0.3, dv=-0.505842927023245, Af=0.0,
+                wf=3.0, Lg=-0.09969508480529385, gu=-0.03445939782951983, gate_rising=False))
 def test_a_drawn_model_keeps_the_event_semantics_in_model_exchange(d):
     """The same draws in FMI 3.0 model exchange, where fmpy's CVode integrates and locates the event
     indicators' roots and the FMU arms and fires (docs/solver.md, "Model exchange"): both backends give
     the same bits, and the events, the states and an accumulation's storm hold to the same reference
     (CVode at rtol 1e-12: times within 1e-3 s, states within 1e-3 (1 + |x|), the events' names and order
-    exact). A user's audit found two events that fired
-    again after every importer step here (an input step across a moving guard, a cascade of a counter)
-    while co-simulation was right."""
+    exact). A user's audit found two events that fired again after every importer step here (an input
+    step across a moving guard, a cascade of a counter) while co-simulation was right."""
     note(repr(d))
     with tempfile.TemporaryDirectory(prefix="pogofmu-draw-me-") as folder:
-        folder = Path(folder)
-        (folder / "drawn.py").write_text(model_source(d, "Drawn"))
-        model = load_model(folder / "drawn.py")
-        try:
-            ref = reference(model, d)
-        except Undecided as why:
-            note(f"undecided: {why}")
-            assume(False)
-        python_fmu, native_fmu = export(d, folder, fmi=3)
-        py, nat = run_me(python_fmu, d), run_me(native_fmu, d)
-        assert py[0] == nat[0] and py[1] == nat[1] and py[2] == nat[2], (py[2], nat[2])
-        rows, events, errors = py
-        check_invariant(model, d, rows, events)
-        # CVode at rtol 1e-12 places the first events within 1e-9 s, and its error grows by each impact
-        # (2e-5 s after 20 impacts with restitution 0.95): the bound is its, the names and order exact
-        compare(d, ref, rows, events, errors, t_tol=ME_T_TOL, x_tol=ME_T_TOL)
+        _check_draw(d, Path(folder), fmi=3)

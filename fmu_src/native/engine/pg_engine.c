@@ -2003,8 +2003,8 @@ int pg_engine_apply_event(PgEngine *e, int index, double t, const double *x)
      * guard past zero here (pg_engine_restart_at): then it fired beyond its zero, as in co-simulation */
     int located = e->has_pending && e->t == t && e->pending_index == index
                       ? e->pending_located
-                      : !(index < MODEL(e)->ne && e->me_input_t == t && e->me_input_crossed[index]);
-    if (index < MODEL(e)->ne) e->me_input_crossed[index] = 0;
+                      : !(index < MODEL(e)->ne && e->me_input_crossed[index]);
+    memset(e->me_input_crossed, 0, sizeof e->me_input_crossed); /* (the restart re-arms every guard) */
     e->t = e->t_out = t;
     memcpy(e->x, x, sizeof(double) * (size_t)NX(e));
     e->has_seg = 0;
@@ -2056,6 +2056,7 @@ int pg_engine_me_indicators(PgEngine *e, double t, const double *x, double *z)
         double g, sgn = sgn_of(e, i);
         TRY(guard_at(e, i, t, x, &g)); /* (the model's own message, as the adapters gave it) */
         double G = sgn * g, band = e->zband[i];
+        if (G < -band) e->me_input_crossed[i] = 0; /* seen on its before side: no input change carries it past now */
         if (e->zarm[i] && G < -band) { /* it left zero to its before side: an ordinary armed guard */
             if (i == e->zrun_event) e->zrun = 0; /* no accumulation */
             e->zarm[i] = 0;
@@ -2095,6 +2096,13 @@ int pg_engine_me_fired(PgEngine *e, double t, const double *x, int *index)
         TRY(guard_at(e, i, t, x, &g));
         double G = sgn_of(e, i) * g, band = e->zband[i];
         if (!(e->zarm[i] ? G > band : e->armed[i] && G >= 0.0)) continue;
+        if (e->me_input_crossed[i]) { /* an input change carried it past zero: it fires whatever the flow does
+                                       * there, as in co-simulation (not a crossing the importer located) */
+            *index = i;
+            e->me_decl_n = 0;
+            e->zero_hit = 0;
+            return PG_OK;
+        }
         /* a crossing or a touch, unless the flow carries the guard back to its before side: the
          * importer's interpolant, whose error is its tolerance, met the threshold where the motion
          * leaves it (a mass leaving a wall at 1e-7 m/s seen 1e-13 m inside it) */
@@ -2146,14 +2154,13 @@ int pg_engine_restart_at(PgEngine *e, double t, const double *x, const double *u
     if (e->stateless) return rc; /* (without states an input change is the only motion: armed as in co-simulation) */
     memcpy(e->armed, armed, sizeof armed), memcpy(e->zarm, zarm, sizeof zarm), memcpy(e->zband, zband, sizeof zband);
     if (change && rc == PG_OK) { /* an armed guard the change carried past zero (past its band, armed at zero) */
-        if (e->me_input_t != t) memset(e->me_input_crossed, 0, sizeof e->me_input_crossed);
-        e->me_input_t = t;
         for (int k = 0; k < n_active; ++k) {
             int i = active[k];
             if (!armed[i]) continue;
             double g_new, sgn = sgn_of(e, i), at = zarm[i] ? zband[i] : 0.0;
             TRY(guard_at(e, i, t, x, &g_new));
             if (sgn * g_old[k] <= at && sgn * g_new > at) e->me_input_crossed[i] = 1;
+            else if (sgn * g_new <= at) e->me_input_crossed[i] = 0; /* (back: the importer tried a point before the change) */
         }
     }
     e->has_pending = pending, e->pending_index = pending_index;

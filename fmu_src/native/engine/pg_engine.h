@@ -131,10 +131,10 @@ struct PgEngine {
      * event) me_decl_n times in a row since me_decl_t0 (pg_engine_me_fired; a storm at the bound) */
     int me_decl_n, me_decl_event;
     double me_decl_t0, me_decl_t;
-    /* model exchange: the guards an input change carried past their zero at me_input_t (pg_engine_restart_at):
-     * an event they fire there is beyond its zero, not at a located crossing (pg_engine_apply_event) */
+    /* model exchange: the armed guards an input change carried past their zero (pg_engine_restart_at), until
+     * an event fires or the guard is seen on its before side again: such a guard fires whatever the flow
+     * does there (pg_engine_me_fired), beyond its zero, not at a located crossing (pg_engine_apply_event) */
     signed char me_input_crossed[PG_MAX_EVENTS];
-    double me_input_t;
     double f[PG_MAX_X], g[PG_MAX_EVENTS], g_prev[PG_MAX_EVENTS];
     int has_g_prev;
     double h;
