@@ -210,6 +210,16 @@ def compare(d, ref, rows, events, errors, t_tol=T_TOL, x_tol=1e-6):
                 L=0.008251463145851456, level_rising=True, landing='none', dx=0.15108809640997276,
                 Lu=-0.6812137862044807, input_rising=True, Tg=1.805518982575146, tick=False, T0=0.0, P=0.37,
                 dv=-0.46626215135050986))
+# a draw that found a bug (CI, 2026-12-07): the mass rose past the gate's level and on to the level
+# event within one step; the event's point ended that step, but the gate, seen there on its before side,
+# was not armed, so the level's jump (down past the gate) did not fire it
+@example(d=Draw(X0=0.0, a0=8.770678855142453, am=3.7541291426284324, k=51.53027996588951, c=0.4139981141951927,
+                b2=0.0, bu=0.0, y0=0.24493756635042224, v0=-0.9241996545752262, m0=0, U0=0.2880677021286928,
+                U1=2.00001, fu=0.3560612810635665, events=('level', 'gate'), dhi=0.9103414975589438,
+                ehi=0.33984976259283506, dlo=-0.9760748107923942, elo=0.3514682770225182, L=0.11081265534253859,
+                level_rising=True, landing='on floor', dx=0.012651089341923868, Lu=-0.5186008842613214,
+                input_rising=False, Tg=0.6246604363824948, tick=False, T0=0.0, P=0.3, dv=0.7688553550634123,
+                Af=0.0, wf=3.0, Lg=0.020661274498804668, gu=-0.07172367587940957, gate_rising=False))
 def test_a_drawn_model_keeps_the_event_semantics_in_both_backends(d):
     note(repr(d))
     with tempfile.TemporaryDirectory(prefix="pogofmu-draw-") as folder:

@@ -1671,6 +1671,16 @@ static int step(PgEngine *e, double t_target)
         e->seg_i = !e->seg_i, e->has_seg = 1;
         e->t = te;
         memcpy(e->x, y_e, sizeof y_e), memcpy(e->f, f_e, sizeof f_e);
+        /* the event's point ends this accepted step: a disarmed guard seen there on its before side is
+         * armed, as at any step's end — it came back within the step behind the event's crossing (a
+         * counter's level that the mass passes just before another event whose jump crosses it again) */
+        for (int k = 0; k < e->n_active; ++k) {
+            int j = e->active[k];
+            if (j == i || e->armed[j] || e->zarm[j]) continue;
+            double g;
+            TRY(guard_at(e, j, te, y_e, &g));
+            if (sgn_of(e, j) * g < 0.0) e->armed[j] = 1;
+        }
         set_pending(e, i, 1, y_e, hit_level > 0.0, 0);
     }
     return PG_OK;
