@@ -230,23 +230,41 @@ def user_folder(tmp_path_factory):
     return folder
 
 
+def _logged(path, raises=False, rows=None, **kw):
+    """fmpy's run of ``path`` with the FMU's log kept: (the result, or None where the run raised and
+    ``raises`` allowed it, the log as (status, category, message), the event records parsed from it).
+    An FMI 3.0 FMU runs in co-simulation unless ``fmi_type`` says otherwise; ``rows``, a list, gets
+    every row served, those before a failing call too."""
+    from fmpy import simulate_fmu
+    from fmpy.fmi1 import FMICallException
+
+    from pogofmu.runtime.eventlog import parse_event_log
+
+    if "fmi3" in str(path):
+        kw.setdefault("fmi_type", "CoSimulation")
+    if rows is not None:
+        kw["step_finished"] = lambda t, recorder: rows.append(recorder.rows[-1]) or True
+    messages = []
+    try:
+        res = simulate_fmu(str(path), debug_logging=True,
+                           logger=lambda *a: messages.append((a[-3], *((b or b"").decode() for b in a[-2:]))), **kw)
+    except FMICallException:
+        if not raises:
+            raise
+        res = None
+    return res, messages, parse_event_log(messages)
+
+
 def _storm(path, start_values, stop_time=3.0, output_interval=1e-3, fmi_type=None, output=None):
     """fmpy's run past the accumulation, which must fail: (the storm messages, every row served
     before it). ``fmi_type``: an FMI 3.0 FMU's interface (default co-simulation for a path that
     names fmi3/); ``path`` may be an unzipped FMU's folder."""
-    from fmpy import simulate_fmu
-    from fmpy.fmi1 import FMICallException
-
-    if fmi_type is None and "fmi3" in str(path):
-        fmi_type = "CoSimulation"
-    messages, rows = [], []
+    rows = []
     kw = {} if fmi_type is None else dict(fmi_type=fmi_type)
-    with pytest.raises(FMICallException):
-        simulate_fmu(str(path), stop_time=stop_time, output_interval=output_interval, debug_logging=True,
-                     start_values=start_values, output=output,
-                     logger=lambda *a: messages.append(a[-1].decode() if a[-1] else ""),
-                     step_finished=lambda t, recorder: rows.append(recorder.rows[-1]) or True, **kw)
-    storm = [m for m in messages if "event storm" in m]
+    res, messages, _ = _logged(path, raises=True, rows=rows, stop_time=stop_time, output_interval=output_interval,
+                               start_values=start_values, output=output, **kw)
+    assert res is None, (path, start_values)
+    storm = [m for *_, m in messages if "event storm" in m]
     return storm, rows
 
 
@@ -344,26 +362,17 @@ def test_an_accumulation_on_a_moving_floor_ends_in_the_storm_never_through_the_f
     Now each kind ends with the storm naming the bounce at the reference's accumulation time, every
     bounce before it at the reference's time, the ball never below the floor by more than the
     solver's tolerance."""
-    from fmpy import simulate_fmu
-    from fmpy.fmi1 import FMICallException
-
-    from pogofmu.runtime.eventlog import parse_event_log
-
     bounces, t_acc = _floor_accumulation()
     for kind in KINDS:
         path = user_folder / "out" / kind.format(n="Floor")
-        messages, rows = [], []
-        kw = {} if "fmi3" not in kind else dict(fmi_type="CoSimulation")
-        with pytest.raises(FMICallException):
-            simulate_fmu(str(path), stop_time=2.0, output_interval=1e-3, debug_logging=True,
-                         start_values={"log_events": 1, "rel_tol": 1e-10},
-                         logger=lambda *a: messages.append((a[-3], *(b.decode() if b else "" for b in a[-2:]))),
-                         step_finished=lambda t, recorder: rows.append(recorder.rows[-1]) or True, **kw)
+        rows = []
+        res, messages, events = _logged(path, raises=True, rows=rows, stop_time=2.0, output_interval=1e-3,
+                                        start_values={"log_events": 1, "rel_tol": 1e-10})
         texts = [m for *_, m in messages]
         storm = [m for m in texts if "event storm" in m]
-        assert storm and "bounce" in storm[0], (path, texts[-3:])
+        assert res is None and storm and "bounce" in storm[0], (path, texts[-3:])
         assert abs(_storm_time(storm[0]) - t_acc) < 1e-6, (path, storm[0], t_acc)
-        got = [ev["time"] for ev in parse_event_log(messages)]
+        got = [ev["time"] for ev in events]
         n = len(bounces) - 5  # (the last few are within the storm's rounding)
         assert len(got) >= n and max(abs(a - b) for a, b in zip(got[:n], bounces[:n])) < 1e-6, (path, got, bounces)
         gap = np.array([r[2] for r in rows])
@@ -401,26 +410,15 @@ def test_a_plastic_impact_on_a_moving_floor_separates_or_storms_as_the_floor_pul
     exceeds g at the impact the ball leaves it and flies to a later impact; where it does not, the
     floor presses the ball and the run ends in the storm at that impact — never through the floor.
     Every impact at the reference's time, in every kind."""
-    from fmpy import simulate_fmu
-    from fmpy.fmi1 import FMICallException
-
-    from pogofmu.runtime.eventlog import parse_event_log
-
     times, pressed = _plastic_floor(A, w)
     for kind in KINDS:
         path = user_folder / "out" / kind.format(n="Floor")
-        messages, rows = [], []
-        kw = {} if "fmi3" not in kind else dict(fmi_type="CoSimulation")
-        try:
-            simulate_fmu(str(path), stop_time=3.0, output_interval=1e-3, debug_logging=True,
-                         start_values={"log_events": 1, "e": 0.0, "A": A, "w": w},
-                         logger=lambda *a: messages.append((a[-3], *(b.decode() if b else "" for b in a[-2:]))),
-                         step_finished=lambda t, recorder: rows.append(recorder.rows[-1]) or True, **kw)
-            storm = None
-        except FMICallException:
-            storm = next(m for *_, m in messages if "event storm" in m)
+        rows = []
+        res, messages, events = _logged(path, raises=True, rows=rows, stop_time=3.0, output_interval=1e-3,
+                                        start_values={"log_events": 1, "e": 0.0, "A": A, "w": w})
+        storm = None if res is not None else next(m for *_, m in messages if "event storm" in m)
         assert (storm is not None) == pressed, (path, storm, times)
-        got = [ev["time"] for ev in parse_event_log(messages)]
+        got = [ev["time"] for ev in events]
         if pressed:  # (the storm's refires, within a rounding band of the pressed impact)
             assert "bounce" in storm and abs(_storm_time(storm) - times[-1]) < 1e-6, (path, storm, times)
             got = got[:len(times)]
@@ -433,22 +431,15 @@ def test_a_cascade_fires_behind_an_event_crossed_at_the_same_instant(user_folder
     """docs/solver.md, "Cascades": A's jump leaves the armed C on its after side, so C fires at the
     same instant, after A — and after B too where B crossed with A (the model's order). Then z goes
     on below C's level without another C (it is disarmed there)."""
-    from fmpy import simulate_fmu
-
-    from pogofmu.runtime.eventlog import parse_event_log
-
     # (model exchange: fmpy's CVode locates A; before the fix the counter C fired again after every
     # importer step, its jump having changed no state, until a false storm)
     for kind, fmi_type, tol in [*((k, "CoSimulation", 1e-12) for k in KINDS),
                                 *((k, "ModelExchange", 1e-9) for k in KINDS if "fmi3" in k)]:
         path = user_folder / "out" / kind.format(n="Cascade")
-        messages = []
         kw = {} if "fmi3" not in kind else dict(fmi_type=fmi_type, relative_tolerance=1e-10)
-        res = simulate_fmu(str(path), stop_time=2.0, output_interval=0.01, debug_logging=True,
-                           start_values={"log_events": 1, "use_b": use_b},
-                           logger=lambda *a: messages.append((a[-3], *(b.decode() if b else "" for b in a[-2:]))),
-                           **kw)
-        got = [(ev["name"], ev["time"]) for ev in parse_event_log(messages)]
+        res, _, events = _logged(path, stop_time=2.0, output_interval=0.01,
+                                 start_values={"log_events": 1, "use_b": use_b}, **kw)
+        got = [(ev["name"], ev["time"]) for ev in events]
         assert [n for n, _ in got] == (["A", "B", "C"] if use_b else ["A", "C"]), (path, fmi_type, got)
         assert all(abs(t - 1.0) < tol for _, t in got), (path, fmi_type, got)
         assert res["nC"][-1] == 1 and abs(res["z"][-1] - 0.3) < tol, (path, fmi_type, res["nC"][-1], res["z"][-1])
@@ -497,20 +488,13 @@ def test_a_state_event_at_a_ticks_instant_fires_before_the_tick(user_folder):
     first, then the tick samples the reset ramp, F = -(L - D) (docs/solver.md: at one instant the
     state events come first) — in every co-simulation kind, and in FMI 3.0 model exchange, where
     fmpy's CVode ran into 'tout too close to t0' (the next tick reported one ulp ahead)."""
-    from fmpy import simulate_fmu
-
-    from pogofmu.runtime.eventlog import parse_event_log
-
     runs = [(kind, "CoSimulation") for kind in KINDS] + [(k, "ModelExchange") for k in KINDS if "fmi3" in k]
     for kind, fmi_type in runs:
         path = user_folder / "out" / kind.format(n="Ticks")
-        messages = []
         kw = {} if "fmi3" not in kind else dict(fmi_type=fmi_type)
-        res = simulate_fmu(str(path), stop_time=0.5, output_interval=0.01, debug_logging=True,
-                           start_values={"log_events": 1, "rel_tol": 1e-10},
-                           logger=lambda *a: messages.append((a[-3], *(b.decode() if b else "" for b in a[-2:]))),
-                           **kw)
-        got = [(ev["name"], ev["time"]) for ev in parse_event_log(messages)]
+        res, _, events = _logged(path, stop_time=0.5, output_interval=0.01,
+                                 start_values={"log_events": 1, "rel_tol": 1e-10}, **kw)
+        got = [(ev["name"], ev["time"]) for ev in events]
         at = [n for n, t in got if abs(t - 0.3) < 1e-9]
         assert at == ["hit", "tick"], (path, fmi_type, got)
         assert abs(res["F"][-1] + 0.05) < 1e-9, (path, fmi_type, res["F"][-1])
@@ -688,6 +672,7 @@ def _me_drive(path, lev_at, stop, h=1.0 / 64):
     from ctypes import POINTER, c_double
 
     from fmpy import extract, read_model_description
+    from fmpy.fmi1 import FMICallException
     from fmpy.fmi3 import FMU3Model
 
     from pogofmu.runtime.eventlog import parse_event_log
@@ -734,7 +719,7 @@ def _me_drive(path, lev_at, stop, h=1.0 / 64):
             if t in lev_at:
                 event_iteration(lev_at[t])
         n = fmu.getInt32([vr["nD"]])[0]
-    except Exception:
+    except FMICallException:  # (the FMU's own error messages are returned)
         n = None
     return n, parse_event_log(messages), [m for s, _, m in messages if s >= 3]
 
@@ -747,22 +732,15 @@ def test_an_input_step_across_a_moving_guard_fires_once_in_model_exchange(user_f
     every step of the importer (nD = 5 at 0.5625, no error), then a false storm. Driven by an importer
     written here (the input set once, in Event Mode) and by fmpy's CVode with a step table (which also
     sets the value from before the step again at 0.5, in Continuous-Time Mode), in both backends."""
-    from fmpy import simulate_fmu
-
-    from pogofmu.runtime.eventlog import parse_event_log
-
     table = np.array([(0.0, 0.9), (0.5, 0.9), (0.5, 0.3), (1.0, 0.3)], dtype=[("time", float), ("lev", float)])
     for kind in KINDS:
         path = user_folder / "out" / kind.format(n="RampLevel")
         runs = [("CoSimulation", {})] + ([("ModelExchange", dict(relative_tolerance=1e-10))] if "fmi3" in kind else [])
         for fmi_type, extra in runs:
-            messages = []
             kw = {} if "fmi3" not in kind else dict(fmi_type=fmi_type, **extra)
-            res = simulate_fmu(str(path), stop_time=1.0, output_interval=0.01, input=table, debug_logging=True,
-                               start_values={"log_events": 1},
-                               logger=lambda *a: messages.append((a[-3], *(b.decode() if b else "" for b in a[-2:]))),
-                               **kw)
-            got = [(ev["name"], ev["time"]) for ev in parse_event_log(messages)]
+            res, _, events = _logged(path, stop_time=1.0, output_interval=0.01, input=table,
+                                     start_values={"log_events": 1}, **kw)
+            got = [(ev["name"], ev["time"]) for ev in events]
             assert [n for n, _ in got] == ["D"] and abs(got[0][1] - 0.5) < 1e-12 and res["nD"][-1] == 1, \
                 (path, fmi_type, got, res["nD"][-1])
         if "fmi3" in kind:
@@ -796,24 +774,13 @@ def test_the_event_log_of_a_run_that_ends_in_the_storm_is_complete_in_every_kind
     numbered in order, the same records in every kind. The Python-hosted FMUs numbered the failing
     call's events from the counters read before it (negative numbers, which no reader parses), so
     the log lost them: found by the drawn models of test_event_properties.py."""
-    from fmpy import simulate_fmu
-    from fmpy.fmi1 import FMICallException
-
-    from pogofmu.runtime.eventlog import parse_event_log
-
     logs = {}
     for kind in KINDS:
         path = user_folder / "out" / kind.format(n="Wall")
-        messages = []
-        kw = {} if "fmi3" not in kind else dict(fmi_type="CoSimulation")
-        with pytest.raises(FMICallException):
-            simulate_fmu(str(path), stop_time=3.0, output_interval=1e-3, debug_logging=True,
-                         start_values={"rel_tol": 1e-10, "log_events": 1},
-                         logger=lambda *a: messages.append((a[-3], (a[-2] or b"").decode(), (a[-1] or b"").decode())),
-                         **kw)
-        events = parse_event_log(messages)
+        res, messages, events = _logged(path, raises=True, stop_time=3.0, output_interval=1e-3,
+                                        start_values={"rel_tol": 1e-10, "log_events": 1})
         storm = [m[2] for m in messages if "event storm" in m[2]]
-        assert storm, kind
+        assert res is None and storm, kind
         assert [e["index"] for e in events] == list(range(1, len(events) + 1)), kind
         # the storm's own count: the 5 refires from zero are the last records, at the storm's time
         assert abs(events[-1]["time"] - _storm_time(storm[0])) < 1e-12, kind
