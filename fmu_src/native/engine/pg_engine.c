@@ -2143,39 +2143,34 @@ int pg_engine_restart_at(PgEngine *e, double t, const double *x, const double *u
      * the arming of a model with states is the observed trajectory's and is kept (an armed guard that
      * the new inputs put on its after side fires: pg_engine_me_fired), and so is an event pending at
      * this instant; a model without states is re-armed by the change, as in co-simulation */
-    signed char armed[PG_MAX_EVENTS], zarm[PG_MAX_EVENTS];
-    double zband[PG_MAX_EVENTS], pending_x[PG_MAX_X], g_old[PG_MAX_EVENTS];
-    memcpy(armed, e->armed, sizeof armed), memcpy(zarm, e->zarm, sizeof zarm), memcpy(zband, e->zband, sizeof zband);
-    int pending = e->has_pending && e->t == t, pending_index = e->pending_index;
-    memcpy(pending_x, e->pending_x, sizeof pending_x);
+    int pending = e->has_pending && e->t == t;
     e->t = e->t_out = t;
     memcpy(e->x, x, sizeof(double) * (size_t)NX(e));
     memcpy(e->x_out, x, sizeof(double) * (size_t)NX(e));
     e->has_seg = 0, e->has_pending = 0;
+    if (e->stateless) return pg_engine_set_input(e, u); /* (an input change is the only motion: as in co-simulation) */
     int change = 0;
     for (int i = 0; i < e->nu; ++i) change |= !(u[i] == e->u[i]);
-    int n_active = e->n_active, active[PG_MAX_EVENTS];
-    memcpy(active, e->active, sizeof(int) * (size_t)n_active);
-    if (change && !e->stateless) /* each armed guard at this point under the inputs before the change */
-        for (int k = 0; k < n_active; ++k)
-            if (armed[active[k]]) TRY(guard_at(e, active[k], t, x, &g_old[k]));
-    /* set_input with the same inputs returns at once in Python: the rebinding happens only for a change */
-    int rc = pg_engine_set_input(e, u);
-    if (e->stateless) return rc; /* (without states an input change is the only motion: armed as in co-simulation) */
-    memcpy(e->armed, armed, sizeof armed), memcpy(e->zarm, zarm, sizeof zarm), memcpy(e->zband, zband, sizeof zband);
-    if (change && rc == PG_OK) { /* an armed guard the change carried past zero (past its band, armed at zero) */
-        for (int k = 0; k < n_active; ++k) {
-            int i = active[k];
-            if (!armed[i]) continue;
-            double g_new, sgn = sgn_of(e, i), at = zarm[i] ? zband[i] : 0.0;
-            TRY(guard_at(e, i, t, x, &g_new));
-            if (sgn * g_old[k] <= at && sgn * g_new > at) e->me_input_crossed[i] = 1;
-            else if (sgn * g_new <= at) e->me_input_crossed[i] = 0; /* (back: the importer tried a point before the change) */
-        }
+    e->has_pending = pending;
+    if (!change) return PG_OK;
+    /* the new inputs bound, and nothing else of a co-simulation restart (pg_engine_set_inputs): the
+     * importer integrates, so no step size is chosen, and the flow is tried at no point it did not ask for */
+    TRY(check_inputs(e, u));
+    double g_old[PG_MAX_EVENTS]; /* each armed guard at this point under the inputs before the change */
+    for (int k = 0; k < e->n_active; ++k)
+        if (e->armed[e->active[k]]) TRY(at_time(e, guard_at(e, e->active[k], t, x, &g_old[k]), "the input change at t = ", t, " s"));
+    memcpy(e->u, u, sizeof(double) * (size_t)e->nu);
+    memset(e->du, 0, sizeof(double) * (size_t)e->nu);
+    e->has_du = 0, e->t_u = t;
+    TRY(at_time(e, bind(e), "the input change at t = ", t, " s")); /* (e->g: each active guard under the new inputs) */
+    for (int k = 0; k < e->n_active; ++k) { /* an armed guard the change carried past zero (past its band, armed at zero) */
+        int i = e->active[k];
+        if (!e->armed[i]) continue;
+        double sgn = sgn_of(e, i), at = e->zarm[i] ? e->zband[i] : 0.0;
+        if (sgn * g_old[k] <= at && sgn * e->g[k] > at) e->me_input_crossed[i] = 1;
+        else if (sgn * e->g[k] <= at) e->me_input_crossed[i] = 0; /* (back: the importer tried a point before the change) */
     }
-    e->has_pending = pending, e->pending_index = pending_index;
-    memcpy(e->pending_x, pending_x, sizeof pending_x);
-    return rc;
+    return PG_OK;
 }
 
 const double *pg_engine_inputs_at(PgEngine *e, double t) { return u_at(e, t); }
