@@ -224,9 +224,12 @@ class Instance:
 
 def run_pogofmu(*args, cwd, timeout):
     """The ``pogofmu`` command of the project's venv (``python -m pogofmu.cli``), run in ``cwd`` as a
-    user runs it in their folder: the finished process, its output captured."""
+    user runs it in their folder: the finished process, its output captured. It runs this checkout's
+    code, as the tests' own imports do (conftest.py), whichever checkout the venv has installed: a
+    test run from a second worktree exports with that worktree's engine, not the installed one."""
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(ROOT / "fmu_src"), os.environ.get("PYTHONPATH")])))
     return subprocess.run([sys.executable, "-m", "pogofmu.cli", *map(str, args)], cwd=cwd, capture_output=True,
-                          text=True, timeout=timeout)
+                          text=True, timeout=timeout, env=env)
 
 
 def fmi2_callbacks(messages):

@@ -548,15 +548,17 @@ void pg_inst_stopped_text(PgInstance *in, const char *call, double t, PgMsg *m)
 }
 
 /* _input_problem */
-int pg_inst_input_problem(PgInstance *in, PgMsg *m)
+int pg_inst_input_problem(PgInstance *in, double t, PgMsg *m)
 {
     const PgModel *md = in->fmu->model;
     for (int i = 0; i < md->nu; ++i) {
         double v = in->st.u[i];
         if (!isfinite(v)) {
-            pg_msg_printf(m, "input %s = ", md->input_names[i]);
+            pg_msg_printf(m, "%s: input %s = ", md->name, md->input_names[i]);
             pg_msg_value(m, v, 'f', "r");
-            pg_msg_printf(m, " violates the rule: %s must be a finite number", md->input_names[i]);
+            pg_msg_str(m, " at t = ");
+            pg_msg_value(m, t, 'f', "r");
+            pg_msg_printf(m, " s violates the rule: %s must be a finite number", md->input_names[i]);
             return 1;
         }
     }
@@ -634,7 +636,7 @@ static int step_problem(PgInstance *in, double t, double h, PgMsg *m)
         pg_msg_str(m, ")");
         return 1;
     }
-    if (in->inputs_changed) return pg_inst_input_problem(in, m);
+    if (in->inputs_changed) return pg_inst_input_problem(in, t, m);
     return 0;
 }
 
@@ -643,6 +645,7 @@ PG_NOINLINE int pg_inst_model_failed(PgInstance *in)
 {
     PgState *st = &in->st;
     st->failed = 1;
+    if (in->mode == 'm') st->t_ok = st->me_t; /* (model exchange: the failing call's time, where the run stopped) */
     snprintf(st->failed_text, sizeof st->failed_text, "%s: %s", model_name(in), st->sim.msg.text);
     PgMsg m;
     pg_msg_clear(&m);

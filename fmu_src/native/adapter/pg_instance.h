@@ -143,7 +143,7 @@ int pg_inst_refuse_text(PgInstance *in, const char *text);
 int pg_inst_update_outputs_at(PgInstance *in, double t, const double *x, const double *q);
 int pg_inst_update_outputs(PgInstance *in);
 int pg_inst_model_failed(PgInstance *in);
-int pg_inst_input_problem(PgInstance *in, PgMsg *m);
+int pg_inst_input_problem(PgInstance *in, double t, PgMsg *m); /* (t: the time the inputs apply from) */
 void pg_inst_stopped_text(PgInstance *in, const char *call, double t, PgMsg *m);
 typedef struct PgNotes PgNotes;
 PgNotes *pg_inst_notes_begin(PgInstance *in);

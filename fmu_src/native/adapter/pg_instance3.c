@@ -66,9 +66,9 @@ static int me_inputs(PgInstance *in)
 {
     PgMsg m;
     pg_msg_clear(&m);
-    if (pg_inst_input_problem(in, &m)) return pg_inst_refuse(in, &m);
+    if (pg_inst_input_problem(in, in->st.me_t, &m)) return pg_inst_refuse(in, &m);
     PgEngine *e = &in->st.sim;
-    if (pg_engine_restart_at(e, in->st.me_t, in->st.me_x, in->st.u) != PG_OK) return pg_inst_refuse_text(in, e->msg.text);
+    if (pg_engine_restart_at(e, in->st.me_t, in->st.me_x, in->st.u) != PG_OK) return pg_inst_model_failed(in);
     in->inputs_changed = 0;
     stale(in);
     return PG_ST_OK;
@@ -82,7 +82,7 @@ static int me_instance(PgInstance *in, const char *what)
     PgMsg m;
     pg_msg_clear(&m);
     if (in->st.failed) {
-        pg_inst_stopped_text(in, what, in->st.me_t, &m);
+        pg_inst_stopped_text(in, what, in->st.t_ok, &m);
         return pg_inst_refuse(in, &m);
     }
     if (!in->st.has_sim) {
@@ -103,7 +103,9 @@ static int me_refresh(PgInstance *in)
         if (rc) return rc;
         in->me_stale = 0;
     }
-    pg_inst_update_outputs_at(in, in->st.me_t, in->st.me_x, in->st.sim.q);
+    /* (an output that is not finite, or a state's output that is not the state: the run ends here, as a
+     * co-simulation step that served it would) */
+    if (pg_inst_update_outputs_at(in, in->st.me_t, in->st.me_x, in->st.sim.q)) return pg_inst_model_failed(in);
     return PG_ST_OK;
 }
 
@@ -113,7 +115,7 @@ static int cs_event_inputs(PgInstance *in)
     in->cs_stale = 0;
     PgMsg m;
     pg_msg_clear(&m);
-    if (pg_inst_input_problem(in, &m)) return pg_inst_refuse(in, &m);
+    if (pg_inst_input_problem(in, in->st.sim.t_out, &m)) return pg_inst_refuse(in, &m);
     PgNotes *nt = pg_inst_notes_begin(in);
     int rc = pg_engine_set_input(&in->st.sim, in->st.u);
     pg_inst_notes_end(in, nt);
@@ -264,8 +266,7 @@ int pg3_get_derivatives(PgInstance *in, double *dx)
     }
     int rc = me_instance(in, "fmi3GetContinuousStateDerivatives");
     if (rc) return rc;
-    if (md->nx && pg_engine_flow(&in->st.sim, in->st.me_t, in->st.me_x, dx) != PG_OK)
-        return pg_inst_refuse_text(in, in->st.sim.msg.text);
+    if (md->nx && pg_engine_flow(&in->st.sim, in->st.me_t, in->st.me_x, dx) != PG_OK) return pg_inst_model_failed(in);
     return PG_ST_OK;
 }
 
@@ -284,7 +285,7 @@ int pg3_get_event_indicators(PgInstance *in, double *z)
     int rc = me_instance(in, "fmi3GetEventIndicators");
     if (rc) return rc;
     PgEngine *e = &in->st.sim; /* the engine's arming, updated from this observation */
-    if (pg_engine_me_indicators(e, in->st.me_t, in->st.me_x, z) != PG_OK) return pg_inst_refuse_text(in, e->msg.text);
+    if (pg_engine_me_indicators(e, in->st.me_t, in->st.me_x, z) != PG_OK) return pg_inst_model_failed(in);
     return PG_ST_OK;
 }
 
@@ -313,7 +314,7 @@ int pg3_completed_integrator_step(PgInstance *in, int *enter_event_mode)
         pg_msg_printf(&m, "%s: the trajectory left the model's domain at t = ", md->name);
         pg_msg_value(&m, in->st.me_t, 'f', ".10g");
         pg_msg_printf(&m, " s: %s", outside ? e->msg.text : "the state became non-finite");
-        in->st.failed = 1;
+        in->st.failed = 1, in->st.t_ok = in->st.me_t;
         snprintf(in->st.failed_text, sizeof in->st.failed_text, "%s", m.text);
         return pg_inst_refuse(in, &m);
     }

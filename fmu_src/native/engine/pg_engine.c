@@ -913,6 +913,13 @@ int pg_engine_init(PgEngine *e, const PgModel *model, const double *p, const dou
     memcpy(e->x_out, e->x, sizeof e->x);
     memcpy(e->q_out, e->q, sizeof e->q);
     e->stateless = NX(e) == 0;
+    e->n_xy = 0;
+    for (int i = 0; i < NX(e); ++i)
+        for (int k = 0; k < NY(e); ++k)
+            if (!strcmp(MODEL(e)->state_names[i], MODEL(e)->output_names[k])) {
+                e->xy_y[e->n_xy] = k, e->xy_x[e->n_xy++] = i;
+                break;
+            }
     rc = check_domain(e, e->t, e->x);
     if (!rc) rc = bind(e);
     if (!rc) rc = check_initial_rates(e);
@@ -2183,7 +2190,25 @@ int pg_engine_domain_problem(PgEngine *e, double t, const double *x)
 
 int pg_engine_flow(PgEngine *e, double t, const double *x, double *dx)
 {
-    return MODEL(e)->flow(t, x, e->q, u_at(e, t), e->p, dx, &e->msg);
+    /* (model exchange: the rates handed to the importer, each finite, or the flow named) */
+    int rc = MODEL(e)->flow(t, x, e->q, u_at(e, t), e->p, dx, &e->msg);
+    return model_call(e, &e->msg, rc, "the flow", -1, t, x, dx, NX(e), "d%s/dt", MODEL(e)->state_names);
+}
+
+/* an output of a state's name that does not carry the state's value (a NaN state: told elsewhere) */
+static PG_NOINLINE int state_output_differs(PgEngine *e, int k, double t, const double *x, const double *y)
+{
+    int o = e->xy_y[k], i = e->xy_x[k];
+    PgMsg *m = &e->msg;
+    pg_msg_clear(m);
+    function_failed_at(e, m, "the outputs", -1, t, x);
+    pg_msg_printf(m, "it returned %s = ", MODEL(e)->output_names[o]);
+    pg_msg_value(m, y[o], 'f', "r");
+    pg_msg_printf(m, ", which violates the rule: an output that shares a state's name carries that state's value "
+                     "(%s = ", MODEL(e)->state_names[i]);
+    pg_msg_value(m, x[i], 'f', "r");
+    pg_msg_str(m, ")");
+    return PG_RAISE;
 }
 
 int pg_engine_guard(PgEngine *e, int k, const double *x, double *g) { return guard_at(e, k, e->t_out, x, g); }
@@ -2191,7 +2216,10 @@ int pg_engine_guard(PgEngine *e, int k, const double *x, double *g) { return gua
 int pg_engine_outputs(PgEngine *e, double t, const double *x, const double *q, double *y)
 {
     int rc = MODEL(e)->outputs(t, x, q, u_at(e, t), e->p, y, &e->msg);
-    return model_call(e, &e->msg, rc, "the outputs", -1, t, x, y, NY(e), "%s", MODEL(e)->output_names);
+    rc = model_call(e, &e->msg, rc, "the outputs", -1, t, x, y, NY(e), "%s", MODEL(e)->output_names);
+    for (int k = 0; !rc && k < e->n_xy; ++k)
+        if (!(y[e->xy_y[k]] == x[e->xy_x[k]]) && isfinite(x[e->xy_x[k]])) return state_output_differs(e, k, t, x, y);
+    return rc;
 }
 
 size_t pg_engine_sizeof(void) { return sizeof(PgEngine); }

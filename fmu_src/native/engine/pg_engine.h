@@ -135,6 +135,9 @@ struct PgEngine {
      * an event fires or the guard is seen on its before side again: such a guard fires whatever the flow
      * does there (pg_engine_me_fired), beyond its zero, not at a located crossing (pg_engine_apply_event) */
     signed char me_input_crossed[PG_MAX_EVENTS];
+    /* the outputs that share a state's name (docs/writing-models.md section 6: they carry that state's
+     * value; in FMI 3.0 they are the state's own variable): output xy_y[k] is state xy_x[k] */
+    int n_xy, xy_y[PG_MAX_X], xy_x[PG_MAX_X];
     double f[PG_MAX_X], g[PG_MAX_EVENTS], g_prev[PG_MAX_EVENTS];
     int has_g_prev;
     double h;
