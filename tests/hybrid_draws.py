@@ -20,7 +20,8 @@ A draw (:class:`Draw`) is a mass on a line, ``x'' = a0 + am m - k y - c v + b2 y
 :func:`model_source` writes the model file; :func:`reference` solves the same model with scipy's
 DOP853 at rtol 1e-12, restarted at every event and every communication point, following the rules
 of docs/solver.md ("Event semantics") written here a second time, independently of the engine:
-arming, a guard at zero after a jump (its heading decides), cascades in the model's order, events
+arming, a guard at zero after a jump (its heading decides, or its crossing with the event that jumped
+at the jump's point), cascades in the model's order, events
 an input change causes at its communication point, time events after state events at an instant.
 Draws that the reference cannot decide (a near-graze, a guard near zero at a restart other than
 exactly on it) are refused with
@@ -270,9 +271,25 @@ def reference(model, d: Draw, max_events: int = 3000) -> Reference:
         h = 1e-6
         return (G(j, t + h, x + h * f, q, u) - G(j, t - h, x - h * f, q, u)) / (2 * h)
 
-    def rearm(fired, before, t, x, q, u, changed):
+    def crossing_with(j, fired, t, x_pre, q_pre, u):
+        """Whether guard j was crossing at the point of ``fired``'s jump, before it: exactly at zero (or
+        at the fired guard's own located value, the same guard) heading to its after side, or beyond
+        zero on its after side."""
+        g = G(j, t, x_pre, q_pre, u)
+        twin = fired is not None and sign[j] == sign[fired] and g == G(fired, t, x_pre, q_pre, u)
+        if g == 0.0 or (twin and abs(g) <= OWN * scale):
+            r = rate(j, t, x_pre, q_pre, u)
+            if abs(r) < 1e-6:
+                raise Undecided(f"{names[j]} at zero with no direction before a jump at t = {t!r}")
+            return r > 0
+        if abs(g) < NEAR * scale:
+            raise Undecided(f"{names[j]} {g:.1e} from zero before a jump at t = {t!r}")
+        return g > 0
+
+    def rearm(fired, before, t, x, q, u, changed, pre=None):
         """The arming after a restart (a jump of ``fired``, or an input change), and the events that
-        fire at once, in the model's order. ``changed(j)``: whether the restart moved guard j."""
+        fire at once, in the model's order. ``changed(j)``: whether the restart moved guard j; ``pre``:
+        the states and modes before the jump (None for an input change)."""
         new, now = list(before), []
         for j in range(len(evs)):
             if not changed(j):
@@ -288,6 +305,9 @@ def reference(model, d: Draw, max_events: int = 3000) -> Reference:
                 if r > 0:  # heading to its after side
                     if j != fired and before[j]:
                         now.append(j)
+                    new[j] = False
+                elif j != fired and before[j] and pre is not None and crossing_with(j, fired, t, *pre, u):
+                    now.append(j)  # crossed at this instant with the event that jumped: fires after it
                     new[j] = False
                 else:      # armed at zero: fires on its return
                     new[j] = True
@@ -314,7 +334,7 @@ def reference(model, d: Draw, max_events: int = 3000) -> Reference:
             # re-armed: the guards the jump moved, its own, and the armed ones crossed at this instant
             moved = lambda jj, x=x, q=q, xn=xn, qn=dict(qn), a=list(armed): (
                 jj == j or G(jj, t, xn, qn, u) != G(jj, t, x, q, u) or (a[jj] and G(jj, t, xn, qn, u) >= 0))
-            armed, now = rearm(j, armed, t, xn, dict(qn), u, moved)
+            armed, now = rearm(j, armed, t, xn, dict(qn), u, moved, pre=(x, dict(q)))
             x, q = xn, dict(qn)
             if not now:
                 return x, q, armed
@@ -344,7 +364,7 @@ def reference(model, d: Draw, max_events: int = 3000) -> Reference:
         xn = np.asarray(xn, dtype=float)
         ref.events.append((t, tick.name, "time"))
         moved = lambda jj: G(jj, t, xn, qn, u) != G(jj, t, x, q, u)
-        armed, now = rearm(None, armed, t, xn, dict(qn), u, moved)
+        armed, now = rearm(None, armed, t, xn, dict(qn), u, moved, pre=(x, dict(q)))
         x, q = xn, dict(qn)
         if now:
             x, q, armed = fire(now[0], t, x, q, u, "state", armed)

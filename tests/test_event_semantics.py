@@ -207,6 +207,29 @@ MODEL = HybridModel(
 )
 '''
 
+# Two events on one guard: a ball's impact and a counter of impacts, in either order (found by a user's
+# audit, 2026-12-07: with the impact listed first the counter never fired, silently, in every kind — the
+# impact's jump turned the flow back at zero, and the counter, crossed at the same instant, was taken
+# for a guard the jump had put on zero heading away: armed for a return that never comes).
+SAMEGUARD = '''
+from pogofmu import FALLING, Event, HybridModel, Parameter, Variable
+
+count = Event("count", FALLING, guard=lambda x, q, u, p: x[0], jump=lambda x, q, u, p: (x, {{**q, "n": q["n"] + 1}}))
+bounce = Event("bounce", FALLING, guard=lambda x, q, u, p: x[0], jump=lambda x, q, u, p: ([0.0, -p.e * x[1]], q))
+
+MODEL = HybridModel(
+    name="{name}", description="a bouncing ball with a counter of impacts on the same guard",
+    states=(Variable("h", "m", "height"), Variable("v", "m/s", "velocity")),
+    parameters=(Parameter("g", 9.81, "m/s2", "gravity"), Parameter("e", 0.8, "", "restitution")),
+    inputs=(), outputs=(Variable("h", "m", "height"), Variable("n", "", "impacts counted")),
+    flow=lambda t, x, q, u, p: [x[1], -p.g],
+    events=({events}),
+    initial=lambda p: ([1.0, 0.0], {{"n": 0}}),
+    output_fn=lambda t, x, q, u, p: {{"h": x[0], "n": q["n"]}},
+    integer_outputs=frozenset({{"n"}}),
+)
+'''
+
 KINDS = ("{n}.fmu", "fmi3/{n}.fmu", "native/{n}.fmu", "native/fmi3/{n}.fmu")
 
 
@@ -223,9 +246,11 @@ def user_folder(tmp_path_factory):
     (folder / "level.py").write_text(LEVEL)
     (folder / "ticks.py").write_text(TICKS)
     (folder / "ramp_level.py").write_text(RAMP_LEVEL)
+    (folder / "count_first.py").write_text(SAMEGUARD.format(name="CountFirst", events="count, bounce"))
+    (folder / "bounce_first.py").write_text(SAMEGUARD.format(name="BounceFirst", events="bounce, count"))
     proc = run_pogofmu("export", "wall.py", "wall0.py", "rest.py", "toggle.py", "floor.py", "cascade.py",
-                       "level.py", "ticks.py", "ramp_level.py", "--out", "out", "--platforms", "x86_64-linux",
-                       cwd=folder, timeout=600)
+                       "level.py", "ticks.py", "ramp_level.py", "count_first.py", "bounce_first.py",
+                       "--out", "out", "--platforms", "x86_64-linux", cwd=folder, timeout=600)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     return folder
 
@@ -443,6 +468,34 @@ def test_a_cascade_fires_behind_an_event_crossed_at_the_same_instant(user_folder
         assert [n for n, _ in got] == (["A", "B", "C"] if use_b else ["A", "C"]), (path, fmi_type, got)
         assert all(abs(t - 1.0) < tol for _, t in got), (path, fmi_type, got)
         assert res["nC"][-1] == 1 and abs(res["z"][-1] - 0.3) < tol, (path, fmi_type, res["nC"][-1], res["z"][-1])
+
+
+@pytest.mark.parametrize("name", ["CountFirst", "BounceFirst"])
+def test_two_events_on_one_guard_both_fire_at_each_impact_in_either_order(user_folder, name):
+    """docs/solver.md, "After a restart" and "Cascades": the counter crosses with the impact, so it fires
+    at each impact, after it where the impact is listed first, though the impact's jump (h -> 0,
+    v -> -e v) turns the flow back at zero. Independent reference, the closed form: the impacts at
+    t_1 = sqrt(2 h0 / g), then after flights of 2 e^k v_1 / g (v_1 = sqrt(2 g h0)); n counts them."""
+    g, e, h0, stop = 9.81, 0.8, 1.0, 3.0
+    v1 = math.sqrt(2 * g * h0)
+    impacts, t, k = [], math.sqrt(2 * h0 / g), 0
+    while t < stop:
+        impacts.append(t)
+        k += 1
+        t += 2 * e**k * v1 / g
+    order = ["count", "bounce"] if name == "CountFirst" else ["bounce", "count"]
+    for kind, fmi_type, tol in [*((k, "CoSimulation", 1e-12) for k in KINDS),
+                                *((k, "ModelExchange", 1e-6) for k in KINDS if "fmi3" in k)]:
+        path = user_folder / "out" / kind.format(n=name)
+        kw = {} if "fmi3" not in kind else dict(fmi_type=fmi_type, relative_tolerance=1e-10)
+        for dt in (0.01, 0.7):  # (any output interval: the events do not depend on the grid)
+            res, _, events = _logged(path, stop_time=stop, output_interval=dt, start_values={"log_events": 1}, **kw)
+            got = [(ev["name"], ev["time"]) for ev in events]
+            assert [n for n, _ in got] == order * len(impacts), (path, fmi_type, dt, got)
+            for j, t_ref in enumerate(impacts):  # the pair at one instant, the closed form's
+                (_, ta), (_, tb) = got[2 * j], got[2 * j + 1]
+                assert ta == tb and abs(ta - t_ref) < tol * (1 + 10 * j), (path, fmi_type, dt, j, ta, t_ref)
+            assert res["n"][-1] == len(impacts) == 6, (path, fmi_type, dt, res["n"][-1])
 
 
 def test_an_input_that_lands_exactly_on_its_level_is_an_edge(user_folder):

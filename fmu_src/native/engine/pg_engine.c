@@ -74,7 +74,7 @@ extern const PgModel PG_ONE_MODEL;
 /* an error of the model's own (PG_RAISE) or of its arithmetic (PG_ARITH), as raised in Python */
 #define TRY(call) do { int rc_ = (call); if (rc_) return rc_; } while (0)
 
-static int rearm(PgEngine *e, const signed char *was, int own, double own_g);
+static int rearm(PgEngine *e, const signed char *was, int own, double own_g, const double *x_pre, const double *q_pre);
 static int time_events_init(PgEngine *e, double t0);
 
 static double pmax(double a, double b) { return b > a ? b : a; } /* Python's max(a, b) */
@@ -928,7 +928,7 @@ int pg_engine_init(PgEngine *e, const PgModel *model, const double *p, const dou
         if (is > 0) e->h = pmax(is, START_STEP_ULPS * EPS * pmax(fabs(e->t), 1.0));
         else rc = initial_step(e, &e->h);
     }
-    if (!rc && !e->stateless) rc = rearm(e, NULL, -1, 0.0); /* a guard at zero heading across fires at the start */
+    if (!rc && !e->stateless) rc = rearm(e, NULL, -1, 0.0, NULL, NULL); /* a guard at zero heading across fires at the start */
     if (rc) return at_time(e, rc, "initialization", 0, NULL);
     return PG_OK;
 }
@@ -1120,13 +1120,42 @@ static void crossed_now(PgEngine *e, int i, int *fire)
     else e->armed[i] = 1;
 }
 
+/* *with: guard i crossed at this instant together with the event that jumped — at the jump's point
+ * (t, x_pre) under the modes before it (q_pre), its guard was on its after side beyond its band, or
+ * at zero within its band heading across (its change along the flow there above twice its band).
+ * Only asked for an armed guard that the jump left at zero and not heading across (arm_guards): a
+ * rebound there, unless it was crossing with the event itself (two events on one guard, an impact
+ * listed before a counter of impacts: the impact's jump turns the flow back at zero, and the
+ * counter, crossed at the same instant, still fires after it). A guard with no first-order
+ * direction at the jump's point (armed at zero there, a plastic impact's v = 0) was not crossing. */
+static int crossed_with(PgEngine *e, int i, const double *x_pre, const double *q_pre, int *with)
+{
+    double q_post[PG_MAX_Q], f[PG_MAX_X], g, dg, d, z;
+    size_t nq = sizeof(double) * (size_t)e->nq;
+    *with = 0;
+    memcpy(q_post, e->q, nq), memcpy(e->q, q_pre, nq); /* (the guard and the flow read e->q) */
+    int rc = MODEL(e)->flow(e->t, x_pre, e->q, u_at(e, e->t), e->p, f, &e->msg);
+    if (!rc) rc = guard_at(e, i, e->t, x_pre, &g);
+    if (!rc) rc = guard_change(e, i, e->t, x_pre, f, &dg, &d);
+    if (!rc) rc = guard_band(e, i, e->t, x_pre, g, dg / (2 * d), &z);
+    memcpy(e->q, q_post, nq);
+    TRY(rc);
+    double G = sgn_of(e, i) * g;
+    *with = G > z || (G >= -z && dg > 2 * z);
+    return PG_OK;
+}
+
 /* Arm every active guard at (e->t, e->x) after a restart: a jump of event `own`, the start or an
  * input change (own = -1). was[i] says what guard i was just before: 1 armed, 0 active and not
- * armed, -1 not active or no before (the start). A guard
+ * armed, -1 not active or no before (the start). x_pre, q_pre: the states and modes at the jump's
+ * point before it (NULL for the start and an input change). A guard
  *   - on its before side beyond its band is armed;
  *   - at zero (within its band) is armed at zero, unless the flow carries it to its after side:
  *     then it fires now if it was armed or unknown and is not the event that just jumped (that
- *     event's own crossing goes on), and is disarmed otherwise;
+ *     event's own crossing goes on), and is disarmed otherwise; a guard other than the event that
+ *     just jumped, armed before and left at zero by the jump heading to its before side or with
+ *     no direction, fires now too if it was crossing at the jump's point (crossed_with: two events
+ *     on one guard) — the extra guard values only there;
  *   - on its after side beyond its band fires now if it was armed (the restart crossed it: a
  *     cascade, or simultaneous events), and is disarmed otherwise;
  *   - reading no state and no time (guard_still), at zero is on its after side.
@@ -1134,7 +1163,8 @@ static void crossed_now(PgEngine *e, int i, int *fire)
  * The event that jumped sits at its located crossing: if its jump left its guard where it was
  * (own_g, within the band), that value is its zero, however far floating point resolves it.
  * *fire: the first event (in priority order, the model's) that fires now, -1 for none. */
-static int arm_guards(PgEngine *e, const signed char *was, int own, double own_g, int *fire)
+static int arm_guards(PgEngine *e, const signed char *was, int own, double own_g, const double *x_pre,
+                      const double *q_pre, int *fire)
 {
     *fire = -1;
     for (int k = 0; k < e->n_active; ++k) {
@@ -1159,8 +1189,12 @@ static int arm_guards(PgEngine *e, const signed char *was, int own, double own_g
                 if (i != own && before == -1) e->zarm[i] = 2, e->armed[i] = 1;
                 else if (i != own && before == 1) crossed_now(e, i, fire);
             } else { /* 2: no direction to first order (it leaves zero by its curvature: where it was at
-                      * zero); 1: heading to its before side (a rebound: where it returns past its band) */
-                e->zarm[i] = dg >= -2 * z ? 2 : 1, e->armed[i] = 1;
+                      * zero); 1: heading to its before side (a rebound: where it returns past its band) —
+                      * unless, armed before, it was crossing at the jump's point: it fires now */
+                int with = 0;
+                if (i != own && before == 1 && x_pre) TRY(crossed_with(e, i, x_pre, q_pre, &with));
+                if (with) crossed_now(e, i, fire);
+                else e->zarm[i] = dg >= -2 * z ? 2 : 1, e->armed[i] = 1;
             }
         } else {
             e->armed[i] = 1;
@@ -1189,10 +1223,10 @@ static void set_pending(PgEngine *e, int index, int located, const double *x, in
 }
 
 /* a restart's arming, and the event it fires now (pending at e->t) */
-static int rearm(PgEngine *e, const signed char *was, int own, double own_g)
+static int rearm(PgEngine *e, const signed char *was, int own, double own_g, const double *x_pre, const double *q_pre)
 {
     int fire;
-    TRY(arm_guards(e, was, own, own_g, &fire));
+    TRY(arm_guards(e, was, own, own_g, x_pre, q_pre, &fire));
     if (fire >= 0) set_pending(e, fire, 0, e->x, 0, 0);
     return PG_OK;
 }
@@ -1738,7 +1772,7 @@ static int check_zeno(PgEngine *e)
 static int apply_pending_event(PgEngine *e)
 {
     int i = e->pending_index;
-    double x_new[PG_MAX_X], q_new[PG_MAX_Q];
+    double x_new[PG_MAX_X], q_new[PG_MAX_Q], x_pre[PG_MAX_X], q_pre[PG_MAX_Q];
     signed char was[PG_MAX_EVENTS];
     arming_before(e, was);
     /* its guard at the located crossing, before the jump: its zero (NaN, no zero to keep, for an event
@@ -1773,6 +1807,7 @@ static int apply_pending_event(PgEngine *e)
     int same = 1;
     for (int k = 0; k < NX(e); ++k) same &= x_new[k] == e->x[k];
     for (int k = 0; k < e->nq; ++k) same &= q_new[k] == e->q[k];
+    memcpy(x_pre, e->x, nx), memcpy(q_pre, e->q, sizeof(double) * (size_t)e->nq); /* (the jump's point: crossed_with) */
     memcpy(e->x, x_new, nx);
     memcpy(e->q, q_new, sizeof(double) * (size_t)e->nq);
     TRY(check_zeno(e));
@@ -1788,7 +1823,7 @@ static int apply_pending_event(PgEngine *e)
      * never through the guard; a guard that only dithers within its band, as a marker at a resting
      * record, does not fire again while it stays within it) */
     e->own_same = same && !in_place;
-    int rc = rearm(e, was, i, own_g); /* a guard the jump left crossed fires at this instant (a cascade) */
+    int rc = rearm(e, was, i, own_g, x_pre, q_pre); /* a guard the jump left crossed fires at this instant (a cascade) */
     if (in_place && same && e->zarm[i] == 2) e->zarm[i] = 1;
     e->own_same = 0;
     return rc;
@@ -2004,7 +2039,7 @@ int pg_engine_set_inputs(PgEngine *e, const double *u, const double *du)
         set_pending(e, crossed, 0, e->x, 0, 0);
     }
     int fire = -1;
-    rc = arm_guards(e, was, -1, 0.0, &fire);
+    rc = arm_guards(e, was, -1, 0.0, NULL, NULL, &fire);
     if (rc) return at_time(e, rc, "the input change at t = ", e->t, " s");
     if (fire >= 0 && !e->has_pending) {
         set_pending(e, fire, 0, e->x, 0, 0);
