@@ -839,3 +839,101 @@ def test_the_event_log_of_a_run_that_ends_in_the_storm_is_complete_in_every_kind
         assert abs(events[-1]["time"] - _storm_time(storm[0])) < 1e-12, kind
         logs[kind] = events
     assert all(v == logs[KINDS[0]] for v in logs.values()), {k: len(v) for k, v in logs.items()}
+
+
+# Two counters on one level, up (RISING) and down (FALLING): a projectile whose apex touches a ceiling,
+# and a level x that sin(t) touches at its peaks (found by a user's audit, 2026-12-07: with the level
+# within an ulp of the apex, or of 1, every kind fired up, then down again and again at the same
+# instant, and ended in a false storm — each counter's jump, which changes no state, left its guard at
+# zero with no direction to first order, armed there, and the same curvature fired it again in place).
+APEX = '''
+from pogofmu import FALLING, RISING, Event, HybridModel, Parameter, Variable
+
+MODEL = HybridModel(
+    name="Apex", description="a projectile whose apex touches a ceiling, two counters on it",
+    states=(Variable("y", "m", "height"), Variable("v", "m/s", "velocity")),
+    parameters=(Parameter("g", 9.81, "m/s2", "gravity"), Parameter("v_0", 4.4294469180700204, "m/s", "launch speed"),
+                Parameter("c", 1.0, "m", "ceiling height")),
+    inputs=(), outputs=(Variable("y", "m", "height"), Variable("nu", "", "up crossings"),
+                        Variable("nd", "", "down crossings")),
+    flow=lambda t, x, q, u, p: [x[1], -p.g],
+    events=(Event("up", RISING, guard=lambda x, q, u, p: x[0] - p.c,
+                  jump=lambda x, q, u, p: (x, {**q, "nu": q["nu"] + 1})),
+            Event("down", FALLING, guard=lambda x, q, u, p: x[0] - p.c,
+                  jump=lambda x, q, u, p: (x, {**q, "nd": q["nd"] + 1}))),
+    initial=lambda p: ([0.0, p.v_0], {"nu": 0, "nd": 0}),
+    output_fn=lambda t, x, q, u, p: {"y": x[0], "nu": q["nu"], "nd": q["nd"]},
+    integer_outputs=frozenset({"nu", "nd"}),
+)
+'''
+
+PEAK = '''
+from pogofmu import FALLING, RISING, Event, HybridModel, Parameter, Variable, fmath
+
+MODEL = HybridModel(
+    name="Peak", description="a level that sin(t) touches at its peaks, two counters on it",
+    states=(Variable("x", "m", "level"),), parameters=(Parameter("x_0", 1.0, "m", "the level"),),
+    inputs=(), outputs=(Variable("nu", "", "up crossings"), Variable("nd", "", "down crossings")),
+    flow=lambda t, x, q, u, p: [0.0],
+    events=(Event("up", RISING, guard=lambda t, x, q, u, p: fmath.sin(t) - x[0],
+                  jump=lambda x, q, u, p: (x, {**q, "nu": q["nu"] + 1})),
+            Event("down", FALLING, guard=lambda t, x, q, u, p: fmath.sin(t) - x[0],
+                  jump=lambda x, q, u, p: (x, {**q, "nd": q["nd"] + 1}))),
+    initial=lambda p: ([p.x_0], {"nu": 0, "nd": 0}),
+    output_fn=lambda t, x, q, u, p: {"nu": q["nu"], "nd": q["nd"]},
+    integer_outputs=frozenset({"nu", "nd"}),
+)
+'''
+
+
+@pytest.fixture(scope="module")
+def apex_folder(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("apex")
+    (folder / "apex.py").write_text(APEX)
+    (folder / "peak.py").write_text(PEAK)
+    proc = run_pogofmu("export", "apex.py", "peak.py", "--out", "out", "--platforms", "x86_64-linux", cwd=folder,
+                       timeout=600)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    return folder
+
+
+def _touches(path, start_values, stop_time):
+    """fmpy's run of a two-counter model: (the events as (name, time), nu and nd at the end, the errors)."""
+    res, messages, events = _logged(path, raises=True, stop_time=stop_time, output_interval=0.1,
+                                    start_values={"log_events": 1, **start_values})
+    errors = [m for s, _, m in messages if s >= 3]
+    counts = (None, None) if res is None else (int(res["nu"][-1]), int(res["nd"][-1]))
+    return [(ev["name"], ev["time"]) for ev in events], counts, errors
+
+
+@pytest.mark.parametrize("ulps", [0, -1, 1])
+def test_two_counters_on_a_level_at_a_projectiles_apex_fire_once_each_or_not_at_all(apex_folder, ulps):
+    """docs/solver.md, "Grazing": a touch is a miss or an event, never an accumulation. The ceiling c
+    at the apex H = v_0^2 / (2 g), an ulp below it or an ulp above: either no event, or up then down
+    once each at the apex t = v_0 / g (closed form; a tangency is located to about sqrt(ulps of H / g)),
+    no error, nu = nd, in every kind. Before the fix each kind fired up, then down 5 times at one
+    instant, and failed with 'event storm: down happens again within the rounding of its own location'."""
+    v_0, g = 4.4294469180700204, 9.81
+    c = v_0 * v_0 / (2 * g) * (1 + ulps * 2.0 ** -52)
+    for kind in KINDS:
+        path = apex_folder / "out" / kind.format(n="Apex")
+        got, (nu, nd), errors = _touches(path, {"c": c}, 0.9)
+        assert not errors and nu == nd and nu in (0, 1), (path, got, errors)
+        assert [n for n, _ in got] == ["up", "down"] * nu, (path, got)
+        assert all(abs(t - v_0 / g) < 1e-7 for _, t in got), (path, got)
+
+
+@pytest.mark.parametrize("below", [0.0, 2.0 ** -53, 1e-15])
+def test_two_counters_on_a_level_at_the_peaks_of_sin_t_fire_once_each_or_not_at_all(apex_folder, below):
+    """The same with a guard that reads t, sin(t) - x at x = 1 - below: at each peak t = pi/2 + 2 pi n
+    (two within 8 s) either no event or up then down once each there; no error, nu = nd, every kind.
+    It failed with the same false storm at the first peak before the fix."""
+    peaks = (math.pi / 2, 5 * math.pi / 2)
+    for kind in KINDS:
+        path = apex_folder / "out" / kind.format(n="Peak")
+        got, (nu, nd), errors = _touches(path, {"x_0": 1.0 - below}, 8.0)
+        assert not errors and nu == nd and nu <= 2, (path, got, errors)
+        for peak in peaks:  # (an event a touch fires is at the peak to the rounding of its location)
+            near = [n for n, t in got if abs(t - peak) < 1e-6]
+            assert near in ([], ["up", "down"]), (path, peak, got)
+        assert len(got) == 2 * nu, (path, got)

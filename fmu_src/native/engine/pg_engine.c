@@ -1161,7 +1161,10 @@ static int crossed_with(PgEngine *e, int i, const double *x_pre, const double *q
  *   - reading no state and no time (guard_still), at zero is on its after side.
  * Of several that fire now, the later stay armed and fire in turn (crossed_now).
  * The event that jumped sits at its located crossing: if its jump left its guard where it was
- * (own_g, within the band), that value is its zero, however far floating point resolves it.
+ * (own_g, within the band), that value is its zero, however far floating point resolves it. If its
+ * jump changed q only (a counter) at a point a step of the flow reached (e->own_kept), its guard at
+ * zero with no direction to first order is its crossing going on too (a tangency: the curvature that
+ * fired it carries it on), disarmed — armed at zero, it would fire again in place at the same point.
  * *fire: the first event (in priority order, the model's) that fires now, -1 for none. */
 static int arm_guards(PgEngine *e, const signed char *was, int own, double own_g, const double *x_pre,
                       const double *q_pre, int *fire)
@@ -1173,9 +1176,10 @@ static int arm_guards(PgEngine *e, const signed char *was, int own, double own_g
         int still = 0;
         TRY(guard_change(e, i, e->t, e->x, e->f, &dg, &d));
         TRY(guard_band(e, i, e->t, e->x, e->g[k], dg / (2 * d), &z));
+        double z0 = z; /* (the rounding band, before its widening to the located zero) */
         if (i == own && fabs(e->g[k] - own_g) <= z) z += fabs(G);
         int before = was ? was[i] : -1;
-        e->zarm[i] = 0, e->armed[i] = 0, e->zband[i] = z;
+        e->zarm[i] = 0, e->armed[i] = 0, e->zband[i] = z, e->kept[i] = 0;
         if (G > z) {
             if (before == 1 && i != own) crossed_now(e, i, fire);
         } else if (G >= -z) {
@@ -1183,6 +1187,13 @@ static int arm_guards(PgEngine *e, const signed char *was, int own, double own_g
             if (still) { /* the flow never moves it off zero: zero is its after side (G >= 0; an input that
                           * lands exactly on its level): a crossing if it was armed, else disarmed there */
                 if (before == 1 && i != own) crossed_now(e, i, fire);
+            } else if (i == own && e->own_kept && fabs(G) <= 2 * z0 && !(dg > 2 * z)) {
+                /* a counter's jump at a point the flow reached, its guard within the rounding of a crossing
+                 * located at zero or at its band's edge (2 z0; not only within the band widened to a
+                 * located zero beyond rounding), with no direction to first order (a tangency): its
+                 * crossing goes on, disarmed, and its dither within its band is that crossing's rounding
+                 * (kept), not a new crossing */
+                e->kept[i] = 1;
             } else if (dg > 2 * z || (i == own && e->own_same)) { /* (a jump that changed nothing: its crossing goes on) */
                 /* armed before: the restart crossed it (a cascade) and it fires now; of unknown arming (the
                  * start, a newly active guard): it fires where the step shows it leave zero (at its start) */
@@ -1268,7 +1279,8 @@ static void armed_after_step(PgEngine *e, const double *g)
     for (int k = 0; k < e->n_active; ++k) {
         int i = e->active[k];
         double G = sgn_of(e, i) * g[k];
-        if (e->zarm[i] && G >= -e->zband[i] && G <= e->zband[i]) continue;
+        if ((e->zarm[i] || e->kept[i]) && G >= -e->zband[i] && G <= e->zband[i]) continue;
+        e->kept[i] = 0;
         if (e->zarm[i] && i == e->zrun_event) e->zrun = 0; /* it left zero: no accumulation */
         e->zarm[i] = 0;
         e->armed[i] = G < 0.0;
@@ -1522,7 +1534,7 @@ static int end_step(PgEngine *e, PgSeg *seg, double t_target, int *cut)
         TRY(pair_step(e, t, y0, f0, t_target - t, y_c, f_c, K_c));
         make_seg(e, SEG(e), t, t_target, y0, y_c, f0, K_c);
         e->has_seg = 1;
-        e->t = t_target;
+        e->t = t_target, e->flow_reached = 1;
         memcpy(e->x, y_c, sizeof y_c), memcpy(e->f, f_c, sizeof f_c);
         for (int k = 0; k < e->n_active; ++k) TRY(guard_at(e, e->active[k], t_target, y_c, &e->g[k]));
         e->has_g_prev = 0;
@@ -1655,11 +1667,11 @@ static int step(PgEngine *e, double t_target)
         } else if (sgn * g0 < 0.0) {
             if (continues_own_crossing(e, i, sgn * g0)) continue;
             TRY(locate(e, seg, i, t, g0, g1, NULL, &te));
-        } else if (g0 == 0.0) {
+        } else if (g0 == 0.0 && !e->kept[i]) {
             TRY(locate_from_zero(e, seg, i, g1, 0, &te, &found));
             if (!found) continue;
         } else {
-            TRY(hidden_return(e, seg, i, sgn, g0, g1, f_new, 0.0, &te, &found));
+            TRY(hidden_return(e, seg, i, sgn, g0, g1, f_new, e->kept[i] ? e->zband[i] : 0.0, &te, &found));
             if (!found) continue;
         }
         if (hit < 0 || te < hit_t) hit = k, hit_t = te, hit_level = level, hit_in_place = in_place;
@@ -1673,7 +1685,7 @@ static int step(PgEngine *e, double t_target)
         if (!(rc == PG_OK && finite)) TRY(end_step(e, seg, t_target, &cut));
         if (!cut) {
             e->seg_i = !e->seg_i, e->has_seg = 1;
-            e->t = t_new;
+            e->t = t_new, e->flow_reached = 1;
             memcpy(e->x, y_new, sizeof y_new), memcpy(e->f, f_new, sizeof f_new);
             memcpy(e->g_prev, e->g, sizeof e->g), e->has_g_prev = 1;
             memcpy(e->g, g_new, sizeof g_new);
@@ -1710,7 +1722,7 @@ static int step(PgEngine *e, double t_target)
     TRY(end_step(e, seg, t_target, &cut));
     if (!cut) {
         e->seg_i = !e->seg_i, e->has_seg = 1;
-        e->t = te;
+        e->t = te, e->flow_reached = 1;
         memcpy(e->x, y_e, sizeof y_e), memcpy(e->f, f_e, sizeof f_e);
         /* the event's point ends this accepted step: a disarmed guard seen there on its before side is
          * armed, as at any step's end — it came back within the step behind the event's crossing (a
@@ -1804,9 +1816,10 @@ static int apply_pending_event(PgEngine *e)
     int in_place = e->zero_in_place;
     e->zero_in_place = 0;
     TRY(zero_storm(e, i));
-    int same = 1;
-    for (int k = 0; k < NX(e); ++k) same &= x_new[k] == e->x[k];
+    int same_x = 1, same = 1;
+    for (int k = 0; k < NX(e); ++k) same_x &= x_new[k] == e->x[k];
     for (int k = 0; k < e->nq; ++k) same &= q_new[k] == e->q[k];
+    same &= same_x;
     memcpy(x_pre, e->x, nx), memcpy(q_pre, e->q, sizeof(double) * (size_t)e->nq); /* (the jump's point: crossed_with) */
     memcpy(e->x, x_new, nx);
     memcpy(e->q, q_new, sizeof(double) * (size_t)e->nq);
@@ -1823,9 +1836,16 @@ static int apply_pending_event(PgEngine *e)
      * never through the guard; a guard that only dithers within its band, as a marker at a resting
      * record, does not fire again while it stays within it) */
     e->own_same = same && !in_place;
+    /* a jump that changed q only (a counter) at a point a step of the flow reached: at a tangency (no
+     * direction to first order) its crossing goes on too, in place or not — armed at zero, it fired again
+     * in place at that same point on the same curvature until the storm (two counters up and down on
+     * one level at a projectile's apex). A body the start or a jump put on its guard (at rest on a
+     * floor, after a plastic impact) is not at such a point: its in-place fires keep the rules above */
+    e->own_kept = same_x && !same && e->flow_reached;
+    if (!same_x) e->flow_reached = 0;
     int rc = rearm(e, was, i, own_g, x_pre, q_pre); /* a guard the jump left crossed fires at this instant (a cascade) */
     if (in_place && same && e->zarm[i] == 2) e->zarm[i] = 1;
-    e->own_same = 0;
+    e->own_same = 0, e->own_kept = 0;
     return rc;
 }
 
@@ -1987,6 +2007,7 @@ int pg_engine_set_inputs(PgEngine *e, const double *u, const double *du)
         for (int i = 0; same && i < e->nu; ++i) same &= du[i] == e->du[i];
     }
     if (same) return PG_OK;
+    e->flow_reached = 0; /* (an input change may put a guard at zero: not a point the flow reached) */
     TRY(check_inputs(e, u));
     if (sloped) TRY(check_finite_inputs(e, du, 1));
     int crossed = -1;
@@ -2059,7 +2080,7 @@ int pg_engine_apply_event(PgEngine *e, int index, double t, const double *x)
     memset(e->me_input_crossed, 0, sizeof e->me_input_crossed); /* (the restart re-arms every guard) */
     e->t = e->t_out = t;
     memcpy(e->x, x, sizeof(double) * (size_t)NX(e));
-    e->has_seg = 0;
+    e->has_seg = 0, e->flow_reached = 0; /* (the importer's point) */
     /* (e->zero_hit: as pg_engine_me_fired found this event, from zero or not: the storm rule counts it) */
     set_pending(e, index, located, e->x, e->zero_hit, e->zero_in_place);
     int rc = apply_pending_event(e);
@@ -2189,7 +2210,7 @@ int pg_engine_restart_at(PgEngine *e, double t, const double *x, const double *u
     e->t = e->t_out = t;
     memcpy(e->x, x, sizeof(double) * (size_t)NX(e));
     memcpy(e->x_out, x, sizeof(double) * (size_t)NX(e));
-    e->has_seg = 0, e->has_pending = 0;
+    e->has_seg = 0, e->has_pending = 0, e->flow_reached = 0;
     if (e->stateless) return pg_engine_set_input(e, u); /* (an input change is the only motion: as in co-simulation) */
     int change = 0;
     for (int i = 0; i < e->nu; ++i) change |= !(u[i] == e->u[i]);

@@ -115,6 +115,13 @@ struct PgEngine {
      * many of the latest events in a row of event zrun_event did (a storm at ZERO_REFIRES) */
     int zero_hit, zrun, zrun_event;
     int own_same; /* (during a re-arming) the jump just applied left x and q as they were */
+    /* (e->t, e->x) is where a step of the flow ended, no jump since having changed x (0 after the start, a
+     * jump that changed x, an input change, a point the importer set); and, during a re-arming, the jump
+     * just applied at such a point changed q only (a counter): its guard's departure from zero goes on */
+    int flow_reached, own_kept;
+    /* kept[i]: guard i, disarmed so (its counter's crossing going on at a tangency), is still within its
+     * band zband[i]: its dither there is that crossing's rounding, not a new one (armed_after_step, step) */
+    signed char kept[PG_MAX_EVENTS];
     /* the pending event fires where its step started, armed at zero with no first-order direction
      * (zarm 2): at the restart point itself; if its jump changes nothing, it stays armed at zero and
      * fires again past its band (apply_pending_event) */
