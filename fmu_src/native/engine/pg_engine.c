@@ -1140,6 +1140,7 @@ static int crossed_with(PgEngine *e, int i, const double *x_pre, const double *q
     if (!rc) rc = guard_band(e, i, e->t, x_pre, g, dg / (2 * d), &z);
     memcpy(e->q, q_post, nq);
     TRY(rc);
+    if (e->own_carry) z = pmax(z, e->zband[i]); /* (the band it was armed with at this instant: arm_guards) */
     double G = sgn_of(e, i) * g;
     *with = G > z || (G >= -z && dg > 2 * z);
     return PG_OK;
@@ -1178,6 +1179,7 @@ static int arm_guards(PgEngine *e, const signed char *was, int own, double own_g
         TRY(guard_band(e, i, e->t, e->x, e->g[k], dg / (2 * d), &z));
         double z0 = z; /* (the rounding band, before its widening to the located zero) */
         if (i == own && fabs(e->g[k] - own_g) <= z) z += fabs(G);
+        else if (e->own_carry) z = pmax(z, e->zband[i]); /* (the band it was armed with at this instant) */
         int before = was ? was[i] : -1;
         e->zarm[i] = 0, e->armed[i] = 0, e->zband[i] = z, e->kept[i] = 0;
         if (G > z) {
@@ -1783,7 +1785,7 @@ static int check_zeno(PgEngine *e)
 /* apply_pending_event */
 static int apply_pending_event(PgEngine *e)
 {
-    int i = e->pending_index;
+    int i = e->pending_index, located = e->pending_located; /* (a cascade's set_pending overwrites them) */
     double x_new[PG_MAX_X], q_new[PG_MAX_Q], x_pre[PG_MAX_X], q_pre[PG_MAX_Q];
     signed char was[PG_MAX_EVENTS];
     arming_before(e, was);
@@ -1791,8 +1793,12 @@ static int apply_pending_event(PgEngine *e)
      * fired beyond it by an input change or a jump) */
     double own_g = NAN;
     int ne = MODEL(e)->ne;
+    int at_zero = e->zero_at_ok && e->armed_at_ok && e->armed_at_t == e->t;
     if (i < ne) {
-        if (e->pending_located) TRY(guard_at(e, i, e->t, e->x, &own_g));
+        if (located || at_zero) TRY(guard_at(e, i, e->t, e->x, &own_g));
+        /* (fired by a cascade at the point of a crossing located at this instant: its zero there only if
+         * its guard reads the same value as the located one's, the same guard; else beyond its zero) */
+        if (!located && !(own_g == e->zero_at_g)) own_g = NAN;
         TRY(model_call(e, &e->msg, MODEL(e)->jump(i, e->t, e->x, e->q, u_at(e, e->t), e->p, x_new, q_new, &e->msg),
                        "the jump", i, e->t, e->x, x_new, NX(e), "%s", MODEL(e)->state_names));
     } else {
@@ -1843,9 +1849,18 @@ static int apply_pending_event(PgEngine *e)
      * floor, after a plastic impact) is not at such a point: its in-place fires keep the rules above */
     e->own_kept = same_x && !same && e->flow_reached;
     if (!same_x) e->flow_reached = 0;
+    /* a jump that left x as it was at the instant of the last re-arming (a counter after an impact that
+     * kept h where it was located, 1e-15 beyond the counter's band): each guard keeps the band it was
+     * armed with there — else the impact's guard, at its located zero, is seen beyond the counter's
+     * band on its after side and the impact fires again at this instant, sending the ball through its
+     * floor with both guards disarmed */
+    e->own_carry = same_x && e->armed_at_ok && e->armed_at_t == e->t;
     int rc = rearm(e, was, i, own_g, x_pre, q_pre); /* a guard the jump left crossed fires at this instant (a cascade) */
     if (in_place && same && e->zarm[i] == 2) e->zarm[i] = 1;
-    e->own_same = 0, e->own_kept = 0;
+    e->own_same = 0, e->own_kept = 0, e->own_carry = 0;
+    e->armed_at_t = e->t, e->armed_at_ok = 1;
+    if (i < ne && located && isfinite(own_g)) e->zero_at_g = own_g, e->zero_at_ok = same_x;
+    else e->zero_at_ok = e->zero_at_ok && same_x && at_zero;
     return rc;
 }
 
@@ -2007,9 +2022,10 @@ int pg_engine_set_inputs(PgEngine *e, const double *u, const double *du)
         for (int i = 0; same && i < e->nu; ++i) same &= du[i] == e->du[i];
     }
     if (same) return PG_OK;
-    e->flow_reached = 0; /* (an input change may put a guard at zero: not a point the flow reached) */
     TRY(check_inputs(e, u));
     if (sloped) TRY(check_finite_inputs(e, du, 1));
+    int early = e->t == e->t_out && !e->has_pending; /* (the state event of this instant: below) */
+    e->flow_reached = 0, e->armed_at_ok = 0; /* (an input change may put a guard at zero: not a point the flow reached) */
     int crossed = -1;
     if (e->t > e->t_out) {
         double x[PG_MAX_X];
@@ -2027,6 +2043,28 @@ int pg_engine_set_inputs(PgEngine *e, const double *u, const double *du)
         memcpy(e->x, x, sizeof x);
         e->has_pending = 0, e->zero_in_place = 0;
         e->has_seg = 0;
+        if (crossed < 0 && !e->stateless) { /* (the flow and the guards at this point, for the rule below) */
+            int rc = MODEL(e)->flow(e->t, e->x, e->q, u_at(e, e->t), e->p, e->f, &e->msg);
+            for (int k = 0; !rc && k < e->n_active; ++k) rc = guard_at(e, e->active[k], e->t, e->x, &e->g[k]);
+            if (rc) return at_time(e, rc, "the input change at t = ", e->t, " s");
+            early = 1;
+        }
+    }
+    if (early && !e->stateless) {
+        /* an armed guard within its rounding band short of zero and heading across here, where the inputs
+         * change: the state event of this instant to rounding (located an ulp or two past it, or a step
+         * landed an ulp short of it) fires first, under the inputs before the change — as before a time
+         * event at its instant (a sawtooth that reached its level at the instant the level stepped lost
+         * that reset, in every co-simulation kind, until 2026-12-07) */
+        int k_now;
+        int rc = crossing_at(e, &k_now);
+        if (!rc && k_now >= 0) {
+            set_pending(e, e->active[k_now], 1, e->x, 0, 0);
+            rc = apply_pending_event(e);
+            memcpy(e->x_out, e->x, sizeof e->x);
+            memcpy(e->q_out, e->q, sizeof e->q);
+        }
+        if (rc) return at_time(e, rc, "t = ", e->t, " s");
     }
     /* each guard's arming at (t, x) with the inputs before the change: a guard armed there that the
      * new inputs put on its after side fires at this instant (an event caused by an input) */

@@ -119,6 +119,16 @@ struct PgEngine {
      * jump that changed x, an input change, a point the importer set); and, during a re-arming, the jump
      * just applied at such a point changed q only (a counter): its guard's departure from zero goes on */
     int flow_reached, own_kept;
+    /* the instant of the last re-arming after a jump (armed_at_ok: valid); during a re-arming, own_carry:
+     * the jump left x as it was at that same instant, so each guard keeps the band it was armed with there
+     * (a crossing located beyond rounding stays at its zero through the instant's other jumps) */
+    double armed_at_t;
+    int armed_at_ok, own_carry;
+    /* (e->t, e->x) is still the point where an event's crossing was located at this instant (its jump
+     * and those after it left x as it was; zero_at_ok), its guard's value there zero_at_g: an event that
+     * fires there by a cascade with the same guard value has its zero there too (two events on one guard) */
+    double zero_at_g;
+    int zero_at_ok;
     /* kept[i]: guard i, disarmed so (its counter's crossing going on at a tangency), is still within its
      * band zband[i]: its dither there is that crossing's rounding, not a new one (armed_after_step, step) */
     signed char kept[PG_MAX_EVENTS];
