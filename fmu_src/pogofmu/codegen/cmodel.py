@@ -340,8 +340,33 @@ def sizes_header(model: HybridModel) -> str:
 def specialization(model: HybridModel) -> Dict[str, object]:
     """What a native FMU's engine is built for besides its sizes (``sizes_header``; a C program built
     like it takes them as ``-D`` defines): the model's exact counts and ``PG_ONE_MODEL``, the name of
-    its ``PgModel``, whose functions the engine then calls by name (pg_engine.c, ``MODEL``)."""
-    return {**exact_counts(model), "PG_ONE_MODEL": ONE_MODEL}
+    its ``PgModel``, whose functions the engine then calls by name (pg_engine.c, ``MODEL``); and
+    ``PG_STATE_OUTPUTS_EXACT`` where every output of a state's name is that state, as generated."""
+    exact = {"PG_STATE_OUTPUTS_EXACT": 1} if state_outputs_exact(model) else {}
+    return {**exact_counts(model), "PG_ONE_MODEL": ONE_MODEL, **exact}
+
+
+def state_outputs_exact(model: HybridModel) -> bool:
+    """Whether the generated outputs function assigns every output of a state's name the state itself,
+    on every path (``y[j] = v;`` with ``const double v = x[i];``): then the engine's check of that rule
+    at each point (docs/writing-models.md section 6) cannot fail and is compiled out. Any other form,
+    a computed value or a path the reading does not recognize, keeps the check."""
+    import re
+
+    states = {v.name: i for i, v in enumerate(model.states)}
+    pairs = [(j, states[v.name]) for j, v in enumerate(model.outputs) if v.name in states]
+    if not pairs:
+        return True
+    source = generate(model)
+    start = source.find("static int pg_outputs(")
+    if start < 0:
+        return False
+    body = source[start:source.find("\n}\n", start)]
+    for j, i in pairs:
+        assigned = re.findall(rf"\by\[{j}\] = (\w+);", body)
+        if not assigned or any(not re.search(rf"const double {v} = x\[{i}\];", body) for v in assigned):
+            return False
+    return True
 
 
 def exact_counts(model: HybridModel) -> Dict[str, int]:
