@@ -191,7 +191,10 @@ def test_nan_input_and_negative_step_are_refused_then_the_instance_goes_on():
         inst.set(F_ext=math.nan)
         with pytest.raises(FMICallException):
             inst.step(1e-2)
-        assert any("input F_ext = nan violates the rule" in m[2] for m in inst.messages)
+        # (the model, the input, its value, the time the step starts at, the rule)
+        said = [m[2] for m in inst.messages if "input F_ext = nan" in m[2]]
+        assert said and said[0] == f"PogoStick: input F_ext = nan at t = {inst.t!r} s violates the rule: F_ext must be " \
+                                   f"a finite number", said
         inst.set(F_ext=0.0)
         with pytest.raises(FMICallException):
             inst.fmu.doStep(currentCommunicationPoint=inst.t, communicationStepSize=-0.5)
