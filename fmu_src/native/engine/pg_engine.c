@@ -1795,7 +1795,8 @@ static int apply_pending_event(PgEngine *e)
      * fired beyond it by an input change or a jump) */
     double own_g = NAN;
     int ne = MODEL(e)->ne;
-    int at_zero = e->zero_at_ok && e->armed_at_ok && e->armed_at_t == e->t;
+    int same_instant = e->armed_at_ok && e->armed_at_t == e->t; /* (the last re-arming was at this instant) */
+    int at_zero = e->zero_at_ok && same_instant;
     if (i < ne) {
         if (located || at_zero) TRY(guard_at(e, i, e->t, e->x, &own_g));
         /* (fired by a cascade at the point of a crossing located at this instant: its zero there only if
@@ -1856,13 +1857,13 @@ static int apply_pending_event(PgEngine *e)
      * armed with there — else the impact's guard, at its located zero, is seen beyond the counter's
      * band on its after side and the impact fires again at this instant, sending the ball through its
      * floor with both guards disarmed */
-    e->own_carry = same_x && e->armed_at_ok && e->armed_at_t == e->t;
+    e->own_carry = same_x && same_instant;
     int rc = rearm(e, was, i, own_g, x_pre, q_pre); /* a guard the jump left crossed fires at this instant (a cascade) */
     if (in_place && same && e->zarm[i] == 2) e->zarm[i] = 1;
     e->own_same = 0, e->own_kept = 0, e->own_carry = 0;
     e->armed_at_t = e->t, e->armed_at_ok = 1;
     if (i < ne && located && isfinite(own_g)) e->zero_at_g = own_g, e->zero_at_ok = same_x;
-    else e->zero_at_ok = e->zero_at_ok && same_x && at_zero;
+    else e->zero_at_ok = same_x && at_zero;
     return rc;
 }
 
@@ -2046,8 +2047,7 @@ int pg_engine_set_inputs(PgEngine *e, const double *u, const double *du)
         e->has_pending = 0, e->zero_in_place = 0;
         e->has_seg = 0;
         if (crossed < 0 && !e->stateless) { /* (the flow and the guards at this point, for the rule below) */
-            int rc = MODEL(e)->flow(e->t, e->x, e->q, u_at(e, e->t), e->p, e->f, &e->msg);
-            for (int k = 0; !rc && k < e->n_active; ++k) rc = guard_at(e, e->active[k], e->t, e->x, &e->g[k]);
+            int rc = bind(e);
             if (rc) return at_time(e, rc, "the input change at t = ", e->t, " s");
             early = 1;
         }
