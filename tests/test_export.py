@@ -837,6 +837,14 @@ FAILING = {  # (name, the line of BALL replaced, its replacement, the function t
 }
 
 
+# the ball whose flow is NaN for a start height h_0 >= 5 m and whose guard is NaN for 4 <= h_0 < 5 (the
+# default start, 1 m, is clean: the export runs it)
+BALL_START = BALL.replace('name="Ball"', 'name="BallStart"').replace(
+    "    flow=lambda t, x, q, u, p: [x[1], -p.g],", "    flow=lambda t, x, q, u, p: [x[1], -p.g if p.h_0 < 5.0 else NAN],").replace(
+    "guard=lambda x, q, u, p: x[0],", "guard=lambda x, q, u, p: x[0] if not 4.0 <= p.h_0 < 5.0 else NAN,").replace(
+    "from pogofmu import", NAN_LINE + "from pogofmu import", 1)
+
+
 @pytest.fixture(scope="module")
 def failing(tmp_path_factory):
     """The ball, six ways broken, exported by one command (every kind of FMU)."""
@@ -848,6 +856,8 @@ def failing(tmp_path_factory):
             "from pogofmu import", NAN_LINE + "from pogofmu import", 1)
         (folder / f"{name.lower()}.py").write_text(text)
         files.append(f"{name.lower()}.py")
+    (folder / "ballstart.py").write_text(BALL_START)
+    files.append("ballstart.py")
     proc = pogofmu("export", *files, "--out", "out", cwd=folder)
     assert proc.returncode == 0, proc.stderr
     return folder
@@ -914,3 +924,47 @@ def test_a_function_of_the_model_that_fails_is_named_with_time_state_and_cause(f
                 assert f"ZeroDivisionError: float division by zero at {name.lower()}.py:{line}" in msg, where
             else:
                 assert "floating-point division by zero (float division by zero)" in msg, where
+
+
+@pytest.mark.parametrize("backend", ["python", "native"])
+def test_initialization_mode_refuses_a_start_whose_flow_or_guard_is_not_finite(failing, backend):
+    """FMI 3.0 model exchange in Initialization Mode: an importer asks the rates and the event
+    indicators at the start before fmi3ExitInitializationMode. They came from the model with status
+    OK even when the flow or a guard returned NaN there: the NaN went to the importer (the exit
+    refused the start only afterwards, and named no function: "the values exceed floating-point
+    range"). Now the call is refused, as the exit is, naming the function, the start's time and
+    state, and the value."""
+    import ctypes
+
+    from fmpy import extract, read_model_description
+    from fmpy.fmi1 import FMICallException
+    from fmpy.fmi3 import FMU3Model
+
+    path = fmus(failing, "BallStart")[(backend, ME3)]
+    md = read_model_description(str(path))
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    unzip = extract(str(path))
+    cases = [(6.0, "getContinuousStateDerivatives", "fmi3GetContinuousStateDerivatives", 2,
+              "the flow failed at t = 0.0 s (state h = 6.0, v = 0.0): it returned dv/dt = nan "
+              "(a model function must return finite numbers)"),
+             (4.5, "getEventIndicators", "fmi3GetEventIndicators", 1,
+              "the guard of event bounce failed at t = 0.0 s (state h = 4.5, v = 0.0): it returned nan "
+              "(a model function must return finite numbers)")]
+    for h_0, call, name, n, cause in cases:
+        for when in ("initialization mode", "exit"):
+            messages = []
+            fmu = FMU3Model(guid=md.guid, unzipDirectory=unzip, modelIdentifier=md.modelExchange.modelIdentifier,
+                            instanceName="start")
+            fmu.instantiate(loggingOn=True, logMessage=lambda env, status, cat, msg: messages.append((status, msg.decode())))
+            fmu.setFloat64([vr["h_0"]], [h_0])
+            fmu.enterInitializationMode(startTime=0.0)
+            values = (ctypes.c_double * n)()
+            with pytest.raises(FMICallException):
+                if when == "exit":
+                    fmu.exitInitializationMode()
+                else:
+                    getattr(fmu, call)(values, n)
+            errors = [text for status, text in messages if status >= 3]
+            prefix = f"{name} refused: " if when != "exit" else ""
+            assert errors == [f"BallStart: {prefix}initialization failed: {cause}"], (backend, h_0, when, messages)
+            fmu.freeInstance()

@@ -251,6 +251,32 @@ static int initial_point(PgInstance *in, const char *what, double *x, double *q)
     return PG_ST_OK;
 }
 
+/* Initialization Mode: a function of the model that failed at the start, or returned a value that is not
+ * finite (rc PG_OK, values v[0..n)), is refused with the message fmi3ExitInitializationMode gives, found by
+ * setting the engine up for the start as the exit does (and does again): the function named with the time
+ * and the state, never a NaN handed to the importer with status OK */
+static PG_NOINLINE int start_refused(PgInstance *in, const char *what)
+{
+    PgEngine *e = &in->st.sim; /* (unused before the exit, which sets it up afresh) */
+    PgMsg m;
+    pg_msg_clear(&m);
+    memset(e, 0, sizeof *e);
+    if (pg_engine_init(e, model_of(in), in->st.par, in->st.set, in->st.u, in->st.t_start, in->st.t_stop) != PG_OK)
+        pg_msg_printf(&m, "%s: %s refused: initialization failed: %s", model_of(in)->name, what, e->msg.text);
+    else /* (the engine's own start passed: a function that fails at random) */
+        pg_msg_printf(&m, "%s: %s refused: the model's functions at the start returned a value that is not finite",
+                      model_of(in)->name, what);
+    memset(e, 0, sizeof *e);
+    return pg_inst_refuse(in, &m);
+}
+
+static int start_values(PgInstance *in, const char *what, int rc, const double *v, int n)
+{
+    for (int i = 0; !rc && i < n; ++i)
+        if (!isfinite(v[i])) rc = PG_RAISE;
+    return rc ? start_refused(in, what) : PG_ST_OK;
+}
+
 int pg3_get_derivatives(PgInstance *in, double *dx)
 {
     const PgModel *md = model_of(in);
@@ -260,9 +286,8 @@ int pg3_get_derivatives(PgInstance *in, double *dx)
         double x[PG_MAX_X], q[PG_MAX_Q];
         int rc = initial_point(in, "fmi3GetContinuousStateDerivatives", x, q);
         if (rc) return rc;
-        if (md->nx && md->flow(in->st.t_start, x, q, in->st.u, in->st.par, dx, &m) != PG_OK)
-            return pg_inst_refuse(in, &m);
-        return PG_ST_OK;
+        if (md->nx) rc = md->flow(in->st.t_start, x, q, in->st.u, in->st.par, dx, &m);
+        return start_values(in, "fmi3GetContinuousStateDerivatives", rc, dx, md->nx);
     }
     int rc = me_instance(in, "fmi3GetContinuousStateDerivatives");
     if (rc) return rc;
@@ -279,8 +304,8 @@ int pg3_get_event_indicators(PgInstance *in, double *z)
         double x[PG_MAX_X], q[PG_MAX_Q];
         int rc = initial_point(in, "fmi3GetEventIndicators", x, q);
         if (rc) return rc;
-        if (indicators(md, in->st.t_start, x, q, in->st.u, in->st.par, z, &m) != PG_OK) return pg_inst_refuse(in, &m);
-        return PG_ST_OK;
+        rc = indicators(md, in->st.t_start, x, q, in->st.u, in->st.par, z, &m);
+        return start_values(in, "fmi3GetEventIndicators", rc, z, md->ne);
     }
     int rc = me_instance(in, "fmi3GetEventIndicators");
     if (rc) return rc;

@@ -817,20 +817,23 @@ static int initial_step(PgEngine *e, double *out)
 
 static int check_initial_rates(PgEngine *e)
 {
-    for (int i = 0; i < NX(e); ++i) {
-        if (!isfinite(e->f[i])) {
-            PgMsg *m = &e->msg;
-            pg_msg_clear(m);
-            pg_msg_printf(m, "the rate d%s/dt = ", MODEL(e)->state_names[i]);
-            pg_msg_value(m, e->f[i], 'f', "r");
-            pg_msg_str(m, " at the start (t = ");
-            pg_msg_value(m, e->t, 'f', "r");
-            pg_msg_str(m, " s) is not finite: ");
-            extreme_parameters(e, m);
-            return PG_RAISE;
-        }
+    int bad = first_non_finite(e->f, NX(e));
+    if (bad < 0) return PG_OK;
+    /* the flow named with the start's time and state, as a failing flow is during the run; an infinite
+     * rate, with the parameters of the most extreme magnitude (a NaN from finite values is the
+     * model's own, not an overflow's) */
+    PgMsg *m = &e->msg;
+    pg_msg_clear(m);
+    function_failed_at(e, m, "the flow", -1, e->t, e->x);
+    pg_msg_printf(m, "it returned d%s/dt = ", MODEL(e)->state_names[bad]);
+    pg_msg_value(m, e->f[bad], 'f', "r");
+    if (isnan(e->f[bad])) {
+        pg_msg_str(m, " (a model function must return finite numbers)");
+    } else {
+        pg_msg_str(m, ": ");
+        extreme_parameters(e, m);
     }
-    return PG_OK;
+    return PG_RAISE;
 }
 
 /* ---- Simulator.__init__ -------------------------------------------------------------------- */
