@@ -103,6 +103,7 @@ struct PgEngine {
     double budget, win_t0, warn_n;
     long win_n;
     int warned;
+    signed char through_warned[PG_MAX_EVENTS]; /* the warning of a crossing that goes on through its jump, said */
     int stateless;
     int n_active, active[PG_MAX_EVENTS];
     /* the arming of each event's guard (docs/solver.md, "Event semantics"): armed[i] = 1 while it may

@@ -322,6 +322,14 @@ def _write_text(msg: PgMsg, text: str) -> None:
     msg.len = len(raw)
 
 
+def _q_value(kind: str, v: float):
+    """An entry of q as the model's dict holds it: an entry the model started as an int (kind ``i``)
+    is an int while its value is whole, and the value itself once a jump made it something else
+    (``0 + 0.25`` is 0.25, in Python's arithmetic and in the native FMU's alike; until 2026-12-07 it
+    was truncated back to 0 here, silently, in the Python-hosted FMUs only: a user's audit)."""
+    return int(v) if kind == "i" and v.is_integer() else v
+
+
 def _arith_kind(exc) -> int:
     if isinstance(exc, ZeroDivisionError):
         return PG_ZERO_DIVISION
@@ -507,7 +515,7 @@ class Binding:
                 self._ukey, self._uc, self._bound = ukey, tuple(self._U.from_address(u)[:self._nu]), None
         if key != self._qkey:
             values = self._Q.from_address(q)[:self._nq] if self._nq else []
-            self._qdict = {k: (int(v) if kind == "i" else v) for (k, kind), v in zip(self._layout, values)}
+            self._qdict = {k: _q_value(kind, v) for (k, kind), v in zip(self._layout, values)}
             self._qkey = key
             self._bound = None
         return self._qdict
@@ -832,7 +840,7 @@ class Simulator(Binding):
         if key == self._qkey:
             qd = self._qdict
         else:
-            qd = {k: (int(v) if kind == "i" else v) for (k, kind), v in zip(self._layout, values)}
+            qd = {k: _q_value(kind, v) for (k, kind), v in zip(self._layout, values)}
         self._qlast, self._qlast_dict = values, qd
         return qd
 
