@@ -347,6 +347,19 @@ def load_model_file(path, names: Sequence[str] = (), requires: Sequence[str] = (
             for attr, model in picked]
 
 
+def _local_path_index() -> int:
+    """Where a model file's folder goes on ``sys.path`` while the file loads: after the standard
+    library, before the installed packages. A module beside the model named as a standard module
+    (``platform.py``, ``random.py``) must not stand in for it on the host, for the model's own
+    ``import random`` or for a library that imports it then: inside the FMU the standard module is
+    the one imported (only the local modules the file imports are staged with it). A local module
+    still comes before an installed package of its name, as inside the FMU."""
+    for k, entry in enumerate(sys.path):
+        if "site-packages" in entry or "dist-packages" in entry:
+            return k
+    return len(sys.path)
+
+
 def _import_user_module(path: Path, files: _FileSet):
     """Import the model file as a module of its own on the host, with its folder on the path for
     its local modules (removed afterwards, as are the local modules from ``sys.modules``: two model
@@ -358,7 +371,7 @@ def _import_user_module(path: Path, files: _FileSet):
             del sys.modules[key]
     spec = importlib.util.spec_from_file_location(name, path)
     module = importlib.util.module_from_spec(spec)
-    sys.path.insert(0, str(path.parent))
+    sys.path.insert(_local_path_index(), str(path.parent))
     sys.modules[name] = module
     try:
         spec.loader.exec_module(module)
