@@ -796,21 +796,16 @@ def test_an_event_caused_by_a_held_input_fires_at_that_communication_point(user_
                 assert s[after[0]] == 0, (kind, t_ref, s[after[0]])
 
 
-def _me_drive(path, lev_at, stop, h=1.0 / 64):
-    """A model-exchange importer written here, in the standard's order (FMI 3.0 section 3.2): explicit
-    Euler on RampLevel's y' = 1 (exact in binary at h = 1/64), the event indicators compared after each
-    step, an event iteration where one changes sign or the FMU asks for one, and the input lev set once
-    at each of its changes, in Event Mode, at an instant the steps reach exactly. Returns (nD, the event
-    records, the FMU's error messages)."""
+def _me_importer(path, inputs=None):
+    """An FMI 3.0 model-exchange instance of ``path`` for an importer written here, logging on, the
+    inputs ``inputs`` ({name: value}) set in Initialization Mode, brought to Continuous-Time Mode:
+    (the fmpy object, the value references by name, the (status, category, text) messages, and a
+    function giving a numpy array's pointer)."""
     from ctypes import POINTER, c_double
 
     from fmpy import extract, read_model_description
-    from fmpy.fmi1 import FMICallException
     from fmpy.fmi3 import FMU3Model
 
-    from pogofmu.runtime.eventlog import parse_event_log
-
-    ptr = lambda a: a.ctypes.data_as(POINTER(c_double))  # noqa: E731
     md = read_model_description(str(path))
     vr = {v.name: v.valueReference for v in md.modelVariables}
     messages = []
@@ -819,10 +814,26 @@ def _me_drive(path, lev_at, stop, h=1.0 / 64):
     fmu.instantiate(loggingOn=True, logMessage=lambda *a: messages.append((a[-3], a[-2].decode(), a[-1].decode())))
     fmu.setInt32([vr["log_events"]], [1])
     fmu.enterInitializationMode()
+    for name, value in (inputs or {}).items():
+        fmu.setFloat64([vr[name]], [value])
     fmu.exitInitializationMode()
     while fmu.updateDiscreteStates()[0]:
         pass
     fmu.enterContinuousTimeMode()
+    return fmu, vr, messages, lambda a: a.ctypes.data_as(POINTER(c_double))
+
+
+def _me_drive(path, lev_at, stop, h=1.0 / 64):
+    """A model-exchange importer written here, in the standard's order (FMI 3.0 section 3.2): explicit
+    Euler on RampLevel's y' = 1 (exact in binary at h = 1/64), the event indicators compared after each
+    step, an event iteration where one changes sign or the FMU asks for one, and the input lev set once
+    at each of its changes, in Event Mode, at an instant the steps reach exactly. Returns (nD, the event
+    records, the FMU's error messages)."""
+    from fmpy.fmi1 import FMICallException
+
+    from pogofmu.runtime.eventlog import parse_event_log
+
+    fmu, vr, messages, ptr = _me_importer(path)
     x, z, dx = np.zeros(1), np.zeros(1), np.zeros(1)
     fmu.getContinuousStates(ptr(x), 1)
     fmu.getEventIndicators(ptr(z), 1)
@@ -1276,26 +1287,10 @@ def _me_platform(path, stop=1.5, h=1e-4, A=0.1, w=5.0):
     value at that instant, off the held one by the platform's motion over the step, in Event Mode, and
     iterates the discrete states again, as a master does with its connected values. Returns (the
     bounces, the lowest h - zp seen at the steps' ends, the FMU's error messages)."""
-    from ctypes import POINTER, c_double
-
-    from fmpy import extract, read_model_description
     from fmpy.fmi1 import FMICallException
-    from fmpy.fmi3 import FMU3Model
 
-    ptr = lambda a: a.ctypes.data_as(POINTER(c_double))  # noqa: E731
-    md = read_model_description(str(path))
-    vr = {v.name: v.valueReference for v in md.modelVariables}
-    messages = []
-    fmu = FMU3Model(guid=md.guid, unzipDirectory=extract(str(path)), modelIdentifier=md.modelExchange.modelIdentifier,
-                    instanceName="me")
-    fmu.instantiate(loggingOn=True, logMessage=lambda *a: messages.append((a[-3], a[-1].decode())))
     platform = lambda t: [A * math.sin(w * t), A * w * math.cos(w * t)]  # noqa: E731
-    fmu.enterInitializationMode()
-    fmu.setFloat64([vr["zp"], vr["vp"]], platform(0.0))
-    fmu.exitInitializationMode()
-    while fmu.updateDiscreteStates()[0]:
-        pass
-    fmu.enterContinuousTimeMode()
+    fmu, vr, messages, ptr = _me_importer(path, dict(zip(("zp", "vp"), platform(0.0))))
     x, z, dx = np.zeros(2), np.zeros(1), np.zeros(2)
     fmu.getContinuousStates(ptr(x), 2)
     fmu.getEventIndicators(ptr(z), 1)
@@ -1327,7 +1322,7 @@ def _me_platform(path, stop=1.5, h=1e-4, A=0.1, w=5.0):
         n = fmu.getFloat64([vr["n"]])[0]
     except FMICallException:
         n = None
-    return n, gap, [m for s, m in messages if s >= 3]
+    return n, gap, [m for s, _, m in messages if s >= 3]
 
 
 @pytest.mark.parametrize("kind", ["fmi3/{n}.fmu", "native/fmi3/{n}.fmu"])
