@@ -1098,6 +1098,30 @@ static int guard_change(PgEngine *e, int i, double t, const double *x, const dou
     return PG_OK;
 }
 
+/* guard i's motion at (t, x) along the flow f, valued g there: its change dg over 2 d (guard_change)
+ * and its rounding band z at that rate (guard_band) — what every rule of arming asks */
+static int guard_motion(PgEngine *e, int i, double t, const double *x, const double *f, double g, double *dg,
+                        double *d, double *z)
+{
+    TRY(guard_change(e, i, t, x, f, dg, d));
+    return guard_band(e, i, t, x, g, *dg / (2 * *d), z);
+}
+
+/* guard i at the jump's point (e->t, x_pre) under the modes before the jump (q_pre), the flow there
+ * too: its value g and its change dg over 2 d, and its band z unless z is NULL */
+static int guard_before_jump(PgEngine *e, int i, const double *x_pre, const double *q_pre, double *g, double *dg,
+                             double *d, double *z)
+{
+    double q_post[PG_MAX_Q], f[PG_MAX_X];
+    size_t nq = sizeof(double) * (size_t)e->nq;
+    memcpy(q_post, e->q, nq), memcpy(e->q, q_pre, nq); /* (the guard and the flow read e->q) */
+    int rc = MODEL(e)->flow(e->t, x_pre, e->q, u_at(e, e->t), e->p, f, &e->msg);
+    if (!rc) rc = guard_at(e, i, e->t, x_pre, g);
+    if (!rc) rc = z ? guard_motion(e, i, e->t, x_pre, f, *g, dg, d, z) : guard_change(e, i, e->t, x_pre, f, dg, d);
+    memcpy(e->q, q_post, nq);
+    return rc;
+}
+
 /* *still: guard i reads no state and no time (a guard of inputs or modes: no flow ever moves it),
  * tried by moving each state, and time, by RATE_STEP of its magnitude (at least RATE_STEP) */
 static int guard_still(PgEngine *e, int i, double t, const double *x, double g, int *still)
@@ -1135,16 +1159,9 @@ static void crossed_now(PgEngine *e, int i, int *fire)
  * direction at the jump's point (armed at zero there, a plastic impact's v = 0) was not crossing. */
 static int crossed_with(PgEngine *e, int i, const double *x_pre, const double *q_pre, int *with)
 {
-    double q_post[PG_MAX_Q], f[PG_MAX_X], g, dg, d, z;
-    size_t nq = sizeof(double) * (size_t)e->nq;
+    double g, dg, d, z;
     *with = 0;
-    memcpy(q_post, e->q, nq), memcpy(e->q, q_pre, nq); /* (the guard and the flow read e->q) */
-    int rc = MODEL(e)->flow(e->t, x_pre, e->q, u_at(e, e->t), e->p, f, &e->msg);
-    if (!rc) rc = guard_at(e, i, e->t, x_pre, &g);
-    if (!rc) rc = guard_change(e, i, e->t, x_pre, f, &dg, &d);
-    if (!rc) rc = guard_band(e, i, e->t, x_pre, g, dg / (2 * d), &z);
-    memcpy(e->q, q_post, nq);
-    TRY(rc);
+    TRY(guard_before_jump(e, i, x_pre, q_pre, &g, &dg, &d, &z));
     if (e->own_carry) z = pmax(z, e->zband[i]); /* (the band it was armed with at this instant: arm_guards) */
     double G = sgn_of(e, i) * g;
     *with = G > z || (G >= -z && dg > 2 * z);
@@ -1163,13 +1180,8 @@ static int warn_through(PgEngine *e, int i, double dg, double d, double z, const
     int same_x = 1;
     for (int k = 0; k < NX(e); ++k) same_x &= x_pre[k] == e->x[k];
     if (same_x) return PG_OK;
-    double q_post[PG_MAX_Q], f[PG_MAX_X], dg_pre, d_pre;
-    size_t nq = sizeof(double) * (size_t)e->nq;
-    memcpy(q_post, e->q, nq), memcpy(e->q, q_pre, nq); /* (the flow and the guard read e->q) */
-    int rc = MODEL(e)->flow(e->t, x_pre, e->q, u_at(e, e->t), e->p, f, &e->msg);
-    if (!rc) rc = guard_change(e, i, e->t, x_pre, f, &dg_pre, &d_pre);
-    memcpy(e->q, q_post, nq);
-    TRY(rc);
+    double g_pre, dg_pre, d_pre;
+    TRY(guard_before_jump(e, i, x_pre, q_pre, &g_pre, &dg_pre, &d_pre, NULL));
     if (!(fabs(dg - dg_pre) > 2 * z)) return PG_OK; /* (the jump left the guard's motion as it was) */
     e->through_warned[i] = 1;
     double sgn = sgn_of(e, i);
@@ -1204,7 +1216,8 @@ static void zero_moved(PgEngine *e, int i, double G, double z)
 
 /* Arm every active guard at (e->t, e->x) after a restart: a jump of event `own`, the start or an
  * input change (own = -1). was[i] says what guard i was just before: 1 armed, 0 active and not
- * armed, -1 not active or no before (the start). x_pre, q_pre: the states and modes at the jump's
+ * armed, -1 not active or no before (the start); at an input change 2: armed at zero heading to its
+ * before side, a rebound (zero_moved). x_pre, q_pre: the states and modes at the jump's
  * point before it (NULL for the start and an input change). A guard
  *   - on its before side beyond its band is armed;
  *   - at zero (within its band) is armed at zero, unless the flow carries it to its after side:
@@ -1231,8 +1244,7 @@ static int arm_guards(PgEngine *e, const signed char *was, int own, double own_g
         int i = e->active[k];
         double G = sgn_of(e, i) * e->g[k], z, dg, d;
         int still = 0;
-        TRY(guard_change(e, i, e->t, e->x, e->f, &dg, &d));
-        TRY(guard_band(e, i, e->t, e->x, e->g[k], dg / (2 * d), &z));
+        TRY(guard_motion(e, i, e->t, e->x, e->f, e->g[k], &dg, &d, &z));
         double z0 = z; /* (the rounding band, before its widening to the located zero) */
         if (i == own && fabs(e->g[k] - own_g) <= z) z += fabs(G);
         else if (e->own_carry) z = pmax(z, e->zband[i]); /* (the band it was armed with at this instant) */
@@ -1632,8 +1644,7 @@ static int crossing_at(PgEngine *e, int *k_now)
         int i = e->active[k];
         double G = sgn_of(e, i) * e->g[k], z, dg, d;
         if (!e->armed[i] || e->zarm[i] || G >= 0.0) continue;
-        TRY(guard_change(e, i, e->t, e->x, e->f, &dg, &d));
-        TRY(guard_band(e, i, e->t, e->x, e->g[k], dg / (2 * d), &z));
+        TRY(guard_motion(e, i, e->t, e->x, e->f, e->g[k], &dg, &d, &z));
         if (G >= -z && dg > 2 * z) {
             *k_now = k;
             return PG_OK;
@@ -1955,8 +1966,7 @@ static int leaving_zero_now(PgEngine *e)
         int i = e->active[k];
         if (e->zarm[i] != 2) continue;
         double dg, d, z;
-        TRY(guard_change(e, i, e->t, e->x, e->f, &dg, &d));
-        TRY(guard_band(e, i, e->t, e->x, e->g[k], dg / (2 * d), &z));
+        TRY(guard_motion(e, i, e->t, e->x, e->f, e->g[k], &dg, &d, &z));
         if (!(dg > 2 * z)) continue;
         e->has_seg = 0;
         set_pending(e, i, 1, e->x, e->zband[i] > 0.0, 1);
@@ -2351,19 +2361,18 @@ int pg_engine_restart_at(PgEngine *e, double t, const double *x, const double *u
         int i = e->active[k];
         if (!e->armed[i]) continue;
         double sgn = sgn_of(e, i), at = e->zarm[i] ? e->zband[i] : 0.0;
-        if (sgn * g_old[k] <= at && sgn * e->g[k] > at && e->zarm[i] == 1 && sgn * g_old[k] >= -at) {
+        int crossed = sgn * g_old[k] <= at && sgn * e->g[k] > at;
+        if (crossed && e->zarm[i] == 1 && sgn * g_old[k] >= -at) {
             /* a rebound at zero that the change put on its after side: crossed unless the flow under the
              * new inputs still carries it to its before side (zero_moved, as in co-simulation) */
             double dg, d, z;
-            TRY(at_time(e, guard_change(e, i, t, x, e->f, &dg, &d), "the input change at t = ", t, " s"));
-            TRY(at_time(e, guard_band(e, i, t, x, e->g[k], dg / (2 * d), &z), "the input change at t = ", t, " s"));
+            TRY(at_time(e, guard_motion(e, i, t, x, e->f, e->g[k], &dg, &d, &z), "the input change at t = ", t, " s"));
             if (dg < -2 * z) {
                 zero_moved(e, i, sgn * e->g[k], z);
-                e->me_input_crossed[i] = 0;
-                continue;
+                crossed = 0, e->me_input_crossed[i] = 0;
             }
         }
-        if (sgn * g_old[k] <= at && sgn * e->g[k] > at) e->me_input_crossed[i] = 1;
+        if (crossed) e->me_input_crossed[i] = 1;
         else if (sgn * e->g[k] <= at) e->me_input_crossed[i] = 0; /* (back: the importer tried a point before the change) */
     }
     return PG_OK;
