@@ -1375,3 +1375,136 @@ def test_a_ball_on_a_moving_platform_bounces_once_per_impact_in_model_exchange(a
     assert not errors, errors
     assert n == 2, (kind, n, gap)
     assert gap > -1e-3, (kind, gap)
+
+
+# Two counters on one level of x = cos(w t): `up` where x rises through L, `down` where it falls
+# (a user's audit, 2026-12-07). Closed form: the ups at (2 pi k - acos L)/w, k >= 1; the downs at
+# (2 pi k + acos L)/w, k >= 0.
+LEVEL_COUNTERS = '''
+from pogofmu import FALLING, RISING, Event, HybridModel, Parameter, Variable
+
+MODEL = HybridModel(
+    name="Levels", description="harmonic oscillator, counters of its crossings of a level L",
+    states=(Variable("x", "1", "cos"), Variable("y", "1", "-sin")),
+    parameters=(Parameter("w", 100.0, "rad/s", "angular frequency"), Parameter("L", 0.999999, "1", "level")),
+    inputs=(),
+    outputs=(Variable("x", "1", "cos"), Variable("n_up", "", "up crossings"), Variable("n_down", "", "down crossings")),
+    flow=lambda t, x, q, u, p: [p.w * x[1], -p.w * x[0]],
+    events=(Event("up", RISING, guard=lambda x, q, u, p: x[0] - p.L, jump=lambda x, q, u, p: (x, {**q, "u": q["u"] + 1})),
+            Event("down", FALLING, guard=lambda x, q, u, p: x[0] - p.L,
+                  jump=lambda x, q, u, p: (x, {**q, "d": q["d"] + 1}))),
+    initial=lambda p: ([1.0, 0.0], {"u": 0, "d": 0}),
+    output_fn=lambda t, x, q, u, p: {"x": x[0], "n_up": q["u"], "n_down": q["d"]},
+    integer_outputs=frozenset({"n_up", "n_down"}),
+    default_stop_time=1.0,
+)
+'''
+
+
+def _level_counts(L, w, T):
+    """The closed form's (ups, downs) of x = cos(w t) through L over (0, T], and the least distance
+    in time of a crossing to T."""
+    a = math.acos(L)
+    ups = [(2 * math.pi * k - a) / w for k in range(1, int((w * T + a) / (2 * math.pi)) + 2)]
+    downs = [(2 * math.pi * k + a) / w for k in range(0, int((w * T - a) / (2 * math.pi)) + 2)]
+    ups, downs = [t for t in ups if t <= T], [t for t in downs if t <= T]
+    edge = min(abs(T - t) for t in [(2 * math.pi * k + s * a) / w for k in range(int(w * T / (2 * math.pi)) + 3)
+                                     for s in (-1, 1)])
+    return len(ups), len(downs), edge
+
+
+def _counters_model():
+    import types
+
+    mod = types.ModuleType("levels")
+    exec(compile(LEVEL_COUNTERS, "levels.py", "exec"), mod.__dict__)
+    return mod.MODEL
+
+
+_LEVELS = None
+
+
+@pytest.mark.parametrize("L,w,tol", [(0.999999, 100.0, 1e-10), (0.9999784753275559, 100.0, 1e-10)])
+def test_a_counter_fires_once_per_crossing_located_a_rounding_short_of_its_level(L, w, tol):
+    """The audit's cases, in the engine (the C engine every kind runs): a crossing located 1 ulp
+    short of the level (x = L - 1 ulp, the guard on its before side), its jump changing only the
+    counter, then a step spanning the whole excursion above L (both its ends below L): the turning
+    point inside that step was taken for a new crossing, and `up` fired again 3e-16 s later — 25 ups
+    against 15 at L = 0.999999, with status OK. Now the turning point of the crossing the counter's
+    own jump continued is that crossing's: 15 ups, 16 downs, as the closed form."""
+    from pogofmu.runtime.solver import Simulator
+
+    global _LEVELS
+    _LEVELS = _LEVELS or _counters_model()
+    ups, downs, _ = _level_counts(L, w, 1.0)
+    sim = Simulator(_LEVELS, {"L": L, "w": w, "rel_tol": tol}, keep_history=True)
+    x, q = sim.advance(1.0)
+    assert (q["u"], q["d"]) == (ups, downs) == (15, 16), (q, ups, downs)
+    times = [e.time for e in sim.events]
+    assert min(np.diff(times)) > 1e-6, times  # (no two events at one crossing: an up and its down 2.8e-5 s apart)
+
+
+def test_level_counters_agree_with_the_closed_form_for_drawn_levels_and_tolerances():
+    """Any level near the peak, any frequency, any tight tolerance: the counts are the closed form's
+    and the ups and downs alternate. Drawn by hypothesis (derandomized in CI); levels nearer the
+    peak than the integrator's amplitude error at that tolerance are left out (there the integrated
+    motion does not reach the level: fewer crossings, the integrator's accuracy)."""
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    from pogofmu.runtime.solver import Simulator
+
+    global _LEVELS
+    _LEVELS = _LEVELS or _counters_model()
+
+    @settings(max_examples=120, deadline=None, derandomize=True)
+    @given(s=st.floats(1.0, 5.5), w=st.floats(5.0, 300.0), tol=st.sampled_from([1e-8, 1e-10, 1e-12]))
+    def check(s, w, tol):
+        L = 1.0 - 10.0 ** -s
+        if tol == 1e-8 and s > 4.5:
+            return  # (the amplitude error at 1e-8 over 50 periods: not the events')
+        ups, downs, edge = _level_counts(L, w, 1.0)
+        if edge < 1e-6:
+            return
+        sim = Simulator(_LEVELS, {"L": L, "w": w, "rel_tol": tol})
+        x, q = sim.advance(1.0)
+        assert (q["u"], q["d"]) == (ups, downs), (L, w, tol, q, ups, downs)
+        assert x[0] == pytest.approx(math.cos(w), abs=1e-5)
+    check()
+
+
+@pytest.fixture(scope="module")
+def levels_folder(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("levels")
+    (folder / "levels.py").write_text(LEVEL_COUNTERS)
+    proc = run_pogofmu("export", "levels.py", "--out", "out", "--platforms", "x86_64-linux", cwd=folder, timeout=600)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    return folder
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_two_counters_on_one_level_count_each_crossing_once_in_every_kind(levels_folder, kind):
+    """The audit's run, as a user makes it (fmpy's simulate_fmu, a 0.01 s grid): 25 ups against 16
+    downs in every kind, with status OK, until 2026-12-07; 15 and 16 now."""
+    from fmpy import simulate_fmu
+
+    r = simulate_fmu(str(levels_folder / "out" / kind.format(n="Levels")), stop_time=1.0, output_interval=0.01,
+                     start_values={"rel_tol": 1e-10, "L": 0.999999})
+    assert (r["n_up"][-1], r["n_down"][-1]) == (15, 16), kind
+
+
+@pytest.mark.parametrize("kind", [k for k in KINDS if "fmi3" in k])
+@pytest.mark.parametrize("L,dt", [(0.9995, 1e-3), (0.99998, 1e-4)])
+def test_two_counters_on_one_level_in_model_exchange_end_without_a_false_storm(levels_folder, kind, L, dt):
+    """Model exchange through fmpy's CVode (rtol 1e-8; fmpy's grid dt bounds its steps, so that no
+    excursion above L, 1.3e-4 s long at L = 0.99998, falls inside one step: there the importer
+    would not see it): at the first down crossing (L = 0.9995) CVode tries each indicator a rounding
+    after its restart point, where the up counter's guard, armed, was exactly 0 — a root at each
+    try, 200 in a row, and the run ended in an "event storm" that is not there. Now a guard exactly
+    0 is reported on its before side: 15 ups and 16 downs, as the closed form."""
+    from fmpy import simulate_fmu
+
+    ups, downs, _ = _level_counts(L, 100.0, 1.0)
+    r = simulate_fmu(str(levels_folder / "out" / kind.format(n="Levels")), fmi_type="ModelExchange", stop_time=1.0,
+                     output_interval=dt, relative_tolerance=1e-8, start_values={"L": L})
+    assert (r["n_up"][-1], r["n_down"][-1]) == (ups, downs) == (15, 16), kind

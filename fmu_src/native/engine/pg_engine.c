@@ -1734,6 +1734,11 @@ static int step(PgEngine *e, double t_target)
             }
         } else if (sgn * g1 < 0.0) {
             if (sgn * g0 >= 0.0 || (e->has_g_prev && sgn * (g0 - e->g_prev[k]) < 0.0)) continue;
+            /* (the crossing its own jump continued, located a rounding short of zero: the turning point
+             * inside the step is that crossing's, not a new one — a counter fired twice at one crossing,
+             * 3e-16 s apart, where the located point was 1 ulp short of its level and the step after it
+             * spanned the whole excursion; a user's audit, 2026-12-07) */
+            if (continues_own_crossing(e, i, sgn * g0)) continue;
             TRY(hidden_crossing(e, seg, i, sgn, g0, g1, f_new, &te, &found));
             if (!found) continue;
         } else if (sgn * g0 < 0.0) {
@@ -2274,10 +2279,14 @@ int pg_engine_me_indicators(PgEngine *e, double t, const double *x, double *z)
         if (e->zarm[i]) { /* a sign change where it leaves its band to its after side */
             double r = G - band;
             z[i] = r == 0.0 ? -sgn * ME_UNARMED_FLOOR : sgn * r;
-        } else if (!e->armed[i] && g == 0.0) {
-            /* an unarmed guard exactly 0 (after a jump) is reported on the side before its crossing:
-             * no indicator of a new mode starts at zero (an importer that does not restart its
-             * integrator after an event that changed no state meets no root at the restart point) */
+        } else if (g == 0.0) {
+            /* a guard exactly 0 is reported on the side before its crossing: no indicator of a new mode
+             * starts at zero (an importer that does not restart its integrator after an event that
+             * changed no state meets no root at the restart point), and an armed one meets its root
+             * where it is past zero (CVODE tries each indicator a rounding after its restart point: an
+             * armed guard 0 there, the rebound of a counter on the level another counter's crossing
+             * just fired at, was a root at each try, 200 times in a row, and ended in a false storm;
+             * a user's audit, 2026-12-07) */
             z[i] = -sgn * ME_UNARMED_FLOOR;
         } else {
             z[i] = g;
