@@ -254,27 +254,28 @@ MODEL = HybridModel(
 KINDS = ("{n}.fmu", "fmi3/{n}.fmu", "native/{n}.fmu", "native/fmi3/{n}.fmu")
 
 
-@pytest.fixture(scope="module")
-def user_folder(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("event_semantics")
-    # the wall at x = d (guard x - d), and the same system shifted by d (guard x, wall at 0)
-    (folder / "wall.py").write_text(WALL.format(name="Wall", shift="0.0", wall="p.d"))
-    (folder / "wall0.py").write_text(WALL.format(name="Wall0", shift="p.d", wall="0.0"))
-    (folder / "rest.py").write_text(REST)
-    (folder / "toggle.py").write_text(TOGGLE)
-    (folder / "floor.py").write_text(FLOOR)
-    (folder / "cascade.py").write_text(CASCADE)
-    (folder / "level.py").write_text(LEVEL)
-    (folder / "ticks.py").write_text(TICKS)
-    (folder / "ramp_level.py").write_text(RAMP_LEVEL)
-    (folder / "sawtooth.py").write_text(SAWTOOTH)
-    (folder / "count_first.py").write_text(SAMEGUARD.format(name="CountFirst", events="count, bounce"))
-    (folder / "bounce_first.py").write_text(SAMEGUARD.format(name="BounceFirst", events="bounce, count"))
-    proc = run_pogofmu("export", "wall.py", "wall0.py", "rest.py", "toggle.py", "floor.py", "cascade.py",
-                       "level.py", "ticks.py", "ramp_level.py", "count_first.py", "bounce_first.py", "sawtooth.py",
-                       "--out", "out", "--platforms", "x86_64-linux", cwd=folder, timeout=600)
+def _exported(tmp_path_factory, stem, files):
+    """A fresh folder holding the model files ``{name: text}`` as a user writes them, each exported
+    by `pogofmu export` into its ``out`` (every kind; native for this machine only)."""
+    folder = tmp_path_factory.mktemp(stem)
+    for name, text in files.items():
+        (folder / name).parent.mkdir(parents=True, exist_ok=True)
+        (folder / name).write_text(text)
+    proc = run_pogofmu("export", *files, "--out", "out", "--platforms", "x86_64-linux", cwd=folder, timeout=600)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     return folder
+
+
+@pytest.fixture(scope="module")
+def user_folder(tmp_path_factory):
+    return _exported(tmp_path_factory, "event_semantics", {
+        # the wall at x = d (guard x - d), and the same system shifted by d (guard x, wall at 0)
+        "wall.py": WALL.format(name="Wall", shift="0.0", wall="p.d"),
+        "wall0.py": WALL.format(name="Wall0", shift="p.d", wall="0.0"),
+        "rest.py": REST, "toggle.py": TOGGLE, "floor.py": FLOOR, "cascade.py": CASCADE, "level.py": LEVEL,
+        "ticks.py": TICKS, "ramp_level.py": RAMP_LEVEL,
+        "count_first.py": SAMEGUARD.format(name="CountFirst", events="count, bounce"),
+        "bounce_first.py": SAMEGUARD.format(name="BounceFirst", events="bounce, count"), "sawtooth.py": SAWTOOTH})
 
 
 def _logged(path, raises=False, rows=None, **kw):
@@ -713,11 +714,7 @@ MODEL = HybridModel(
 
 @pytest.fixture(scope="module")
 def drop_folder(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("drop")
-    (folder / "drop.py").write_text(DROP)
-    proc = run_pogofmu("export", "drop.py", "--out", "out", "--platforms", "x86_64-linux", cwd=folder, timeout=600)
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    return folder
+    return _exported(tmp_path_factory, "drop", {"drop.py": DROP})
 
 
 def test_any_impact_against_a_pressing_wall_ends_in_the_storm_at_the_closed_form_time(drop_folder):
@@ -979,13 +976,7 @@ MODEL = HybridModel(
 
 @pytest.fixture(scope="module")
 def apex_folder(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("apex")
-    (folder / "apex.py").write_text(APEX)
-    (folder / "peak.py").write_text(PEAK)
-    proc = run_pogofmu("export", "apex.py", "peak.py", "--out", "out", "--platforms", "x86_64-linux", cwd=folder,
-                       timeout=600)
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    return folder
+    return _exported(tmp_path_factory, "apex", {"apex.py": APEX, "peak.py": PEAK})
 
 
 def _touches(path, start_values, stop_time):
@@ -1156,15 +1147,8 @@ def audit_folder(tmp_path_factory):
     of its own (python -m, the tests' way of running the command, puts the working folder first on
     the path, where platform.py would stand in for the standard module: the installed `pogofmu`
     command does not)."""
-    folder = tmp_path_factory.mktemp("audit_2026_12_07")
-    (folder / "models").mkdir()
-    for name, text in (("models/platform.py", PLATFORM), ("bad_bounce.py", BAD_BOUNCE), ("start_tick.py", START_TICK),
-                       ("quarter.py", QUARTER)):
-        (folder / name).write_text(text)
-    proc = run_pogofmu("export", "models/platform.py", "bad_bounce.py", "start_tick.py", "quarter.py", "--out", "out",
-                       "--platforms", "x86_64-linux", cwd=folder, timeout=600)
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    return folder
+    return _exported(tmp_path_factory, "audit_2026_12_07", {
+        "models/platform.py": PLATFORM, "bad_bounce.py": BAD_BOUNCE, "start_tick.py": START_TICK, "quarter.py": QUARTER})
 
 
 def _platform_reference(A=0.1, w=5.0, g=9.81, e=0.8, h0=1.0, stop=3.0):
@@ -1475,11 +1459,7 @@ def test_level_counters_agree_with_the_closed_form_for_drawn_levels_and_toleranc
 
 @pytest.fixture(scope="module")
 def levels_folder(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("levels")
-    (folder / "levels.py").write_text(LEVEL_COUNTERS)
-    proc = run_pogofmu("export", "levels.py", "--out", "out", "--platforms", "x86_64-linux", cwd=folder, timeout=600)
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    return folder
+    return _exported(tmp_path_factory, "levels", {"levels.py": LEVEL_COUNTERS})
 
 
 @pytest.mark.parametrize("kind", KINDS)
