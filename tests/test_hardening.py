@@ -308,6 +308,25 @@ def test_loose_abs_tol_is_refused_with_the_scale_it_must_resolve():
     assert _energy_residual(run) <= 1e-3 * run["E"][0]
 
 
+def test_abs_tol_above_a_tiny_start_names_the_state_that_sets_the_scale():
+    """A model that declares no scale of its motion: abs_tol is held to 1e-3 x its largest initial
+    state. A ball dropped from h0 = 1e-15 m (a user's start value) is refused naming the state h
+    and its value, which the user's parameter gave it; the message named only "the largest initial
+    state magnitude" (a user's audit, 2026-12-07). With abs_tol under the limit it runs: the drop
+    time sqrt(2 h0 / g) to 1e-6 of itself."""
+    from pogofmu.runtime.solver import Simulator
+
+    ball = _elastic_ball()
+    with pytest.raises(Exception) as info:
+        Simulator(ball, {"h0": 1e-15}).advance(1e-3)
+    text = str(info.value)
+    assert "parameter abs_tol = " in text and "the largest initial state magnitude (y = 1e-15 at the start, from the " \
+        "parameters) = 1e-18" in text, text
+    sim = Simulator(ball, {"h0": 1e-15, "abs_tol": 1e-21}, keep_history=True)
+    sim.advance(2e-8)
+    assert sim.events[0].time == pytest.approx(math.sqrt(2e-15 / G), rel=1e-6)
+
+
 def test_loose_rel_tol_is_refused():
     assert_parameter_rejected("PogoStick", {"rel_tol": 0.01}, "rel_tol", "rel_tol <= 0.001")
     assert_parameter_rejected("Penetrator", {"abs_tol": 1e-3}, "abs_tol", "resting depth in the soil")

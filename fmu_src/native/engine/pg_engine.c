@@ -627,11 +627,12 @@ static int check_abs_tol(PgEngine *e)
             if (sc[i].value > 0 && isfinite(sc[i].value)) sc[k++] = sc[i];
         n = k;
     }
+    int big_i = -1; /* (the state of that magnitude, named: the parameter that started it is the user's) */
     if (!n) {
         double big = 0.0;
         for (int i = 0; i < NX(e); ++i) {
             double a = fabs(e->x[i]);
-            if (i == 0 || a > big) big = a;
+            if (i == 0 || a > big) big = a, big_i = i;
         }
         if (!(big > 0)) return PG_OK;
         sc[0].label = "the largest initial state magnitude";
@@ -651,7 +652,9 @@ static int check_abs_tol(PgEngine *e)
         pg_msg_str(m, " violates the rule: abs_tol <= 0.001 x ");
         pg_msg_str(m, sc[best].label);
         pg_msg_str(m, " (");
+        if (big_i >= 0) pg_msg_printf(m, "%s = ", MODEL(e)->state_names[big_i]);
         pg_msg_value(m, sc[best].value, 'f', ".6g");
+        if (big_i >= 0) pg_msg_str(m, " at the start, from the parameters");
         if (sc[best].n_names) {
             pg_msg_str(m, " with ");
             named_values(e, &sc[best], m);
