@@ -262,15 +262,14 @@ class Exchange:
         """Every input of ``inst`` has a source value."""
         return all((c.start_element, c.start_connector) in self.value for c in self.incoming[inst.name])
 
-    def feed(self, inst, only=None, continuous=False, lines=False, slopes=False) -> bool:
+    def feed(self, inst, only=None, continuous=False, lines=False) -> bool:
         """Set the inputs of ``inst`` from the latest outputs (``only``: of those components;
         ``continuous``: the real-valued inputs only, as FMI 3.0 allows in Continuous-Time Mode;
-        ``lines``: a Gauss-Seidel step from the macro step's start, see :meth:`interpolate_inputs`;
-        ``slopes``: the latest values, each with the slope of its line from the macro step's start,
-        for a step inside the macro step); True if any value changed."""
+        ``lines``: a Gauss-Seidel step from the macro step's start, see :meth:`interpolate_inputs`);
+        True if any value changed."""
         names, values, changed = [], [], False
-        lined = self._lines.get(inst.name) if (lines and inst.t == self.t_mark) or slopes else None
-        slope_names, slope_values = [], []
+        lined = self._lines.get(inst.name) if lines and inst.t == self.t_mark else None
+        slope_names, slopes = [], []
         for c in self.incoming[inst.name]:
             if only is not None and c.start_element not in only:
                 continue
@@ -283,9 +282,8 @@ class Exchange:
                 if span > 0:  # the source has stepped: the line from its value at the start
                     v0 = self._start[src]
                     slope_names.append(c.end_connector)
-                    slope_values.append((v - v0) / span)
-                    if not slopes:
-                        v = v0
+                    slopes.append((v - v0) / span)
+                    v = v0
             key = (c.end_element, c.end_connector)
             changed |= self.held.get(key) != v
             self.held[key] = v
@@ -295,7 +293,7 @@ class Exchange:
             try:
                 inst.set_values(names, values)
                 if slope_names:
-                    inst.set_input_slopes(slope_names, slope_values)
+                    inst.set_input_slopes(slope_names, slopes)
             except Exception as exc:  # noqa: BLE001 - fmpy raises FMICallException on an error status
                 raise inst.fail(f"setting its inputs {names} at t = {inst.t!r} s", exc) from None
         return changed
@@ -574,19 +572,10 @@ class Synchronizer:
 
     def _first_event(self, inst, t, n0) -> StepResult:
         """``inst`` (a pogofmu FMU, saved at ``t``) counted events over its step from ``t``
-        (``n0`` before it): restored and stepped to just before the first of them after ``t``.
-
-        Events at ``t`` itself belong to the step: every component was at ``t`` when it began, so
-        there is no instant before them to stop at, and they are caused by what the step began
-        with (a guard at zero that the flow carries across, or an input's new value: with held
-        inputs a Gauss-Seidel step feeds a later component the values at the step's end). Cut
-        back to ``t`` and fed the values at ``t`` instead, the component would lose the event and
-        find it again at the next step: a storm without time advancing."""
+        (``n0`` before it): restored and stepped to just before the first of them."""
         ex = self.ex
         _, t_c = self._counts(inst)
-        if t_c <= t:  # every event of the step at its start: the step stands (see below)
-            return StepResult(inst.t)
-        while True:  # the first event of the step after its start (t_last_event is the latest)
+        while True:  # the first event of the step (t_last_event is the latest)
             inst.restore()
             left = math.nextafter(t_c, -math.inf)
             if left <= t:
@@ -594,7 +583,7 @@ class Synchronizer:
             inst.do_step(t, left - t)
             ex.read(inst)
             n, t_last = self._counts(inst)
-            if n == n0 or t_last <= t:
+            if n == n0:
                 return StepResult(left, event_at=t_c)
             t_c = t_last
 
@@ -845,9 +834,7 @@ class Synchronizer:
         ex, done = self.ex, set()
 
         def one(inst):
-            # (Gauss-Seidel: an input taken as a line keeps its line's slope, so that the guards of
-            # the crossing see the input move as the step saw it, not held)
-            ex.feed(inst, only=done, slopes=not self.jacobi)
+            ex.feed(inst, only=done)
             if inst.t < t_event:
                 inst.do_step(inst.t, t_event - inst.t)
             ex.read(inst)
