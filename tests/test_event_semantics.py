@@ -7,6 +7,7 @@ force presses, from the impact law; a shifted copy of the same model (a guard wi
 one without); the input table itself for an event that an input causes."""
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -1351,24 +1352,21 @@ MODEL = HybridModel(
 def _level_counts(L, w, T):
     """The closed form's (ups, downs) of x = cos(w t) through L over (0, T], and the least distance
     in time of a crossing to T."""
-    a = math.acos(L)
-    ups = [(2 * math.pi * k - a) / w for k in range(1, int((w * T + a) / (2 * math.pi)) + 2)]
-    downs = [(2 * math.pi * k + a) / w for k in range(0, int((w * T - a) / (2 * math.pi)) + 2)]
-    ups, downs = [t for t in ups if t <= T], [t for t in downs if t <= T]
-    edge = min(abs(T - t) for t in [(2 * math.pi * k + s * a) / w for k in range(int(w * T / (2 * math.pi)) + 3)
-                                     for s in (-1, 1)])
-    return len(ups), len(downs), edge
+    a, ks = math.acos(L), range(int(w * T / (2 * math.pi)) + 2)
+    ups = [(2 * math.pi * k - a) / w for k in ks if k >= 1]
+    downs = [(2 * math.pi * k + a) / w for k in ks]
+    edge = min(abs(T - t) for t in ups + downs)
+    return sum(t <= T for t in ups), sum(t <= T for t in downs), edge
 
 
+@functools.lru_cache(maxsize=None)
 def _counters_model():
+    """LEVEL_COUNTERS's model, loaded once, for runs in the engine itself."""
     import types
 
     mod = types.ModuleType("levels")
     exec(compile(LEVEL_COUNTERS, "levels.py", "exec"), mod.__dict__)
     return mod.MODEL
-
-
-_LEVELS = None
 
 
 @pytest.mark.parametrize("L,w,tol", [(0.999999, 100.0, 1e-10), (0.9999784753275559, 100.0, 1e-10)])
@@ -1381,10 +1379,8 @@ def test_a_counter_fires_once_per_crossing_located_a_rounding_short_of_its_level
     own jump continued is that crossing's: 15 ups, 16 downs, as the closed form."""
     from pogofmu.runtime.solver import Simulator
 
-    global _LEVELS
-    _LEVELS = _LEVELS or _counters_model()
     ups, downs, _ = _level_counts(L, w, 1.0)
-    sim = Simulator(_LEVELS, {"L": L, "w": w, "rel_tol": tol}, keep_history=True)
+    sim = Simulator(_counters_model(), {"L": L, "w": w, "rel_tol": tol}, keep_history=True)
     x, q = sim.advance(1.0)
     assert (q["u"], q["d"]) == (ups, downs) == (15, 16), (q, ups, downs)
     times = [e.time for e in sim.events]
@@ -1401,9 +1397,6 @@ def test_level_counters_agree_with_the_closed_form_for_drawn_levels_and_toleranc
 
     from pogofmu.runtime.solver import Simulator
 
-    global _LEVELS
-    _LEVELS = _LEVELS or _counters_model()
-
     @settings(max_examples=120, deadline=None, derandomize=True)
     @given(s=st.floats(1.0, 5.5), w=st.floats(5.0, 300.0), tol=st.sampled_from([1e-8, 1e-10, 1e-12]))
     def check(s, w, tol):
@@ -1413,7 +1406,7 @@ def test_level_counters_agree_with_the_closed_form_for_drawn_levels_and_toleranc
         ups, downs, edge = _level_counts(L, w, 1.0)
         if edge < 1e-6:
             return
-        sim = Simulator(_LEVELS, {"L": L, "w": w, "rel_tol": tol})
+        sim = Simulator(_counters_model(), {"L": L, "w": w, "rel_tol": tol})
         x, q = sim.advance(1.0)
         assert (q["u"], q["d"]) == (ups, downs), (L, w, tol, q, ups, downs)
         assert x[0] == pytest.approx(math.cos(w), abs=1e-5)

@@ -627,7 +627,7 @@ static int check_abs_tol(PgEngine *e)
             if (sc[i].value > 0 && isfinite(sc[i].value)) sc[k++] = sc[i];
         n = k;
     }
-    int big_i = -1; /* (the state of that magnitude, named: the parameter that started it is the user's) */
+    int big_i = -1; /* (the state of that magnitude, named: the user finds what started it) */
     if (!n) {
         double big = 0.0;
         for (int i = 0; i < NX(e); ++i) {
@@ -654,7 +654,7 @@ static int check_abs_tol(PgEngine *e)
         pg_msg_str(m, " (");
         if (big_i >= 0) pg_msg_printf(m, "%s = ", MODEL(e)->state_names[big_i]);
         pg_msg_value(m, sc[best].value, 'f', ".6g");
-        if (big_i >= 0) pg_msg_str(m, " at the start, from the parameters");
+        if (big_i >= 0) pg_msg_str(m, " at the start");
         if (sc[best].n_names) {
             pg_msg_str(m, " with ");
             named_values(e, &sc[best], m);
