@@ -1172,6 +1172,25 @@ def _platform_reference(A=0.1, w=5.0, g=9.81, e=0.8, h0=1.0, stop=3.0):
     return times, x[0]
 
 
+def _platform_run(folder, kind, version, real, *args, h_0=None):
+    """`pogofmu ssp run` of the platform system (the ball and the platform of this FMU kind, packed
+    as a user packs them) at 1 ms, the ball's rel_tol 1e-10: the result's rows."""
+    import csv
+
+    pkg = folder / ("ssp-" + kind.format(n="x").replace("/", "-"))
+    (pkg / "resources").mkdir(parents=True, exist_ok=True)
+    (pkg / "SystemStructure.ssd").write_text(PLATFORM_SSD.format(version=version, real=real))
+    for n in ("PlatBall", "Platform"):
+        (pkg / "resources" / f"{n}.fmu").write_bytes((folder / "out" / kind.format(n=n)).read_bytes())
+    out = f"res-{pkg.name}" + ("" if h_0 is None else f"-h0-{h_0}")
+    start = () if h_0 is None else ("--set", f"PlatBall.h_0={h_0}")
+    proc = run_pogofmu("ssp", "run", pkg.name, "--step", "1e-3", "--set", "PlatBall.rel_tol=1e-10", *start, *args,
+                       "--out", out, cwd=folder, timeout=600)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    with open(folder / out / "default.csv") as f:
+        return list(csv.DictReader(f))
+
+
 @pytest.mark.parametrize("kind,version,real,algorithm", [
     ("{n}.fmu", "1.0", "Real", "gauss-seidel"), ("native/{n}.fmu", "1.0", "Real", "gauss-seidel"),
     ("fmi3/{n}.fmu", "2.0", "Float64", "gauss-seidel"), ("native/fmi3/{n}.fmu", "2.0", "Float64", "gauss-seidel")])
@@ -1186,18 +1205,7 @@ def test_a_ball_on_a_moving_platform_bounces_once_per_impact_in_the_ssp_master(a
     status OK. Now the change only moves the zero of a guard that the flow carries back to its before
     side: 7 bounces as the reference's, the ball never below the platform by more than the input's
     error."""
-    import csv
-
-    pkg = audit_folder / ("ssp-" + kind.format(n="x").replace("/", "-"))
-    (pkg / "resources").mkdir(parents=True, exist_ok=True)
-    (pkg / "SystemStructure.ssd").write_text(PLATFORM_SSD.format(version=version, real=real))
-    for n in ("PlatBall", "Platform"):
-        (pkg / "resources" / f"{n}.fmu").write_bytes((audit_folder / "out" / kind.format(n=n)).read_bytes())
-    proc = run_pogofmu("ssp", "run", pkg.name, "--step", "1e-3", "--algorithm", algorithm, "--set",
-                       "PlatBall.rel_tol=1e-10", "--out", f"res-{pkg.name}", cwd=audit_folder, timeout=600)
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    with open(audit_folder / f"res-{pkg.name}" / "default.csv") as f:
-        rows = list(csv.DictReader(f))
+    rows = _platform_run(audit_folder, kind, version, real, "--algorithm", algorithm)
     times, h_end = _platform_reference()
     n = [float(r["PlatBall.n"]) for r in rows]
     gap = min(float(r["PlatBall.h"]) - float(r["Platform.z"]) for r in rows)
@@ -1207,6 +1215,29 @@ def test_a_ball_on_a_moving_platform_bounces_once_per_impact_in_the_ssp_master(a
     assert gap > (-1e-3 if held else -1e-6), (kind, gap)
     assert np.max(np.abs(np.array(got) - times)) < (2e-3 if held else 2e-6), (kind, got, times)
     assert float(rows[-1]["PlatBall.h"]) == pytest.approx(h_end, abs=2e-3 if held else 1e-5), kind
+
+
+@pytest.mark.parametrize("kind", ["{n}.fmu", "native/{n}.fmu"])
+def test_a_ball_dropped_just_above_the_rising_platform_bounces_once_per_impact(audit_folder, kind):
+    """The ball dropped from 0.1 mm above the platform as it starts rising at 0.5 m/s: struck at
+    0.2 ms, then bouncing on it ever lower (e = 0.8), nine bounces to 0.4 s. FMI 2.0, in the master
+    that rolls a component back to just before its event and then steps every component across it.
+    Until 2026-12-07 that step across the event held the platform's values instead of moving them
+    along their lines: at the 8th bounce (0.3685 s, the platform moving down faster than the ball
+    left it) the ball, still moving down at 0.058 m/s against the held platform, bounced a second
+    time at that instant, into the platform (5.6 mm under it at 0.4 s, 34 m at 3 s, with one
+    warning and status OK). Now each input keeps its line's slope across the event: one bounce per
+    impact, at the reference's times to the line's error (which grows as the bounces shrink: 1.8e-5 s
+    at the 9th), the ball never under the platform by more than that error."""
+    rows = _platform_run(audit_folder, kind, "1.0", "Real", "--stop-time", "0.4", h_0=1e-4)
+    times, _ = _platform_reference(h0=1e-4, stop=0.4)
+    n = [float(r["PlatBall.n"]) for r in rows]
+    got = [float(rows[k]["time"]) for k in range(1, len(rows)) if n[k] > n[k - 1]]
+    assert n[-1] == len(times) == 9 and all(b - a == 1 for a, b in zip(n, n[1:]) if b != a), (kind, n[-1], got, times)
+    err = np.abs(np.array(got) - times)
+    assert np.all(err < [1e-8, 1e-6, 1e-6, 2e-6, 1e-5, 1e-5, 2e-5, 4e-5, 5e-5]), (kind, err)
+    gap = min(float(r["PlatBall.h"]) - float(r["Platform.z"]) for r in rows)
+    assert gap > -1e-6, (kind, gap)
 
 
 @pytest.mark.parametrize("kind", KINDS)

@@ -262,14 +262,15 @@ class Exchange:
         """Every input of ``inst`` has a source value."""
         return all((c.start_element, c.start_connector) in self.value for c in self.incoming[inst.name])
 
-    def feed(self, inst, only=None, continuous=False, lines=False) -> bool:
+    def feed(self, inst, only=None, continuous=False, lines=False, slopes=False) -> bool:
         """Set the inputs of ``inst`` from the latest outputs (``only``: of those components;
         ``continuous``: the real-valued inputs only, as FMI 3.0 allows in Continuous-Time Mode;
-        ``lines``: a Gauss-Seidel step from the macro step's start, see :meth:`interpolate_inputs`);
-        True if any value changed."""
+        ``lines``: a Gauss-Seidel step from the macro step's start, see :meth:`interpolate_inputs`;
+        ``slopes``: the latest values, each with the slope of its line from the macro step's start,
+        for a step inside the macro step); True if any value changed."""
         names, values, changed = [], [], False
-        lined = self._lines.get(inst.name) if lines and inst.t == self.t_mark else None
-        slope_names, slopes = [], []
+        lined = self._lines.get(inst.name) if (lines and inst.t == self.t_mark) or slopes else None
+        slope_names, slope_values = [], []
         for c in self.incoming[inst.name]:
             if only is not None and c.start_element not in only:
                 continue
@@ -282,8 +283,9 @@ class Exchange:
                 if span > 0:  # the source has stepped: the line from its value at the start
                     v0 = self._start[src]
                     slope_names.append(c.end_connector)
-                    slopes.append((v - v0) / span)
-                    v = v0
+                    slope_values.append((v - v0) / span)
+                    if not slopes:
+                        v = v0
             key = (c.end_element, c.end_connector)
             changed |= self.held.get(key) != v
             self.held[key] = v
@@ -293,7 +295,7 @@ class Exchange:
             try:
                 inst.set_values(names, values)
                 if slope_names:
-                    inst.set_input_slopes(slope_names, slopes)
+                    inst.set_input_slopes(slope_names, slope_values)
             except Exception as exc:  # noqa: BLE001 - fmpy raises FMICallException on an error status
                 raise inst.fail(f"setting its inputs {names} at t = {inst.t!r} s", exc) from None
         return changed
@@ -834,7 +836,9 @@ class Synchronizer:
         ex, done = self.ex, set()
 
         def one(inst):
-            ex.feed(inst, only=done)
+            # (Gauss-Seidel: an input taken as a line keeps its line's slope, so that the guards of
+            # the crossing see the input move as the step saw it, not held)
+            ex.feed(inst, only=done, slopes=not self.jacobi)
             if inst.t < t_event:
                 inst.do_step(inst.t, t_event - inst.t)
             ex.read(inst)
