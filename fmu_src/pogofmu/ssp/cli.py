@@ -64,8 +64,21 @@ def run(ssp, parameters=None, stop_time=None, step=1e-3, out=None, algorithm="ga
         plot(rec, png_path, f"{rec.system} ({rec.parameter_set}): {how}, output step {step:g} s", rec.connections)
     except OSError as exc:
         raise SSPError(f"cannot write {png_path}: {exc.strerror or exc} (the results are in {csv_path})") from None
-    print(f"{rec.system}: simulated to t = {rec.last_time:.6g} s -> {csv_path}, {png_path}")
+    print(f"{rec.system}: simulated to t = {rec.last_time:.6g} s{warned(rec.warnings)} -> {csv_path}, {png_path}")
     return rec, csv_path, png_path
+
+
+def warned(warnings) -> str:
+    """The last line's count of the components' warnings, and the first of them (a warning printed
+    amid the progress lines says the result may not be what the model meant: a bounce that let the
+    ball through its floor)."""
+    if not warnings:
+        return ""
+    name, text = warnings[0]
+    text = text[len(name) + 2:] if text.startswith(name + ": ") else text  # (an FMU that names itself)
+    first = text if len(text) <= 200 else text[:200] + "..."
+    count = f"{len(warnings)} warning" + ("s" if len(warnings) > 1 else "")
+    return f", with {count} of the components (printed above; the first: {name}: {first})"
 
 
 def parse_sets(texts) -> dict:

@@ -208,7 +208,8 @@ def simulate(ssp, parameters: Optional[str] = None, stop_time: Optional[float] =
     string with commas), the columns recorded (default: every connector). ``overrides``:
     ``{"Component.parameter": value}`` set over the selected parameter sets (``--set``).
 
-    The returned recorder also gets ``event_sources``: ``[(t, components)]``, one entry per
+    The returned recorder also gets ``warnings``: ``[(component, message)]``, every warning the
+    components logged, and ``event_sources``: ``[(t, components)]``, one entry per
     event instant the master synchronized, naming the components whose event it was (empty for
     an event seen only through the integrator of ``model-exchange``).
 
@@ -273,6 +274,10 @@ def simulate(ssp, parameters: Optional[str] = None, stop_time: Optional[float] =
         res.algorithm, res.events, res.step, res.connections = algorithm, events, step, list(system.connections)
         res.inputs = inputs
         res.event_sources = ex.event_sources
+        # the components' warnings (status fmi2Warning), in the order they came: the last line of
+        # `pogofmu ssp run` counts them, so that one printed amid the progress is not missed
+        res.warnings = [(name, text) for name, inst in instances.items() for status, text in inst.messages
+                        if status == 1]
         res.close(complete=True)
         res.last_time = t_last
         return res
