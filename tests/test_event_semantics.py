@@ -1155,13 +1155,16 @@ def audit_folder(tmp_path_factory):
 
 def _platform_reference(A=0.1, w=5.0, g=9.81, e=0.8, h0=1.0, stop=3.0):
     """scipy's DOP853 at 1e-12 from bounce to bounce on z = A sin(w t), the jump applied by hand:
-    the bounce times and h at the end."""
+    the bounce times and h at the end. A ball at rest on the platform at the start (h0 = 0, the
+    platform rising at A w) is struck at t = 0."""
     from scipy.integrate import solve_ivp
 
     def hit(t, x):
         return x[0] - A * math.sin(w * t)
     hit.terminal, hit.direction = True, -1
     t, x, times = 0.0, [h0, 0.0], []
+    if h0 == 0.0:
+        x, times = [0.0, A * w * (1.0 + e)], [0.0]
     while t < stop:
         sol = solve_ivp(lambda t, x: [x[1], -g], (t, stop), x, method="DOP853", rtol=1e-12, atol=1e-12, events=hit)
         if sol.status != 1:
@@ -1242,6 +1245,29 @@ def test_a_ball_dropped_just_above_the_rising_platform_bounces_once_per_impact(a
     assert n[-1] == len(times) == 9 and all(b - a == 1 for a, b in zip(n, n[1:]) if b != a), (kind, n[-1], got, times)
     err = np.abs(np.array(got) - times)
     assert np.all(err < [1e-8, 1e-6, 1e-6, 2e-6, 1e-5, 1e-5, 2e-5, 4e-5, 5e-5]), (kind, err)
+    gap = min(float(r["PlatBall.h"]) - float(r["Platform.z"]) for r in rows)
+    assert gap > -1e-6, (kind, gap)
+
+
+@pytest.mark.parametrize("kind", ["{n}.fmu", "native/{n}.fmu"])
+def test_a_ball_at_rest_on_the_rising_platform_is_struck_at_the_start_and_bounces_once_per_impact(audit_folder, kind):
+    """The ball at rest on the platform (h_0 = 0) as it starts rising at 0.5 m/s: struck at t = 0,
+    then bouncing on it ever lower (e = 0.8), nine bounces to 0.4 s. FMI 2.0, in the master that
+    rolls a component back to just before its event. Until 2026-12-07 the master ended the run at
+    t = 0 in an "event storm": it rolled the ball back to before its event at the step's start,
+    where there is no "before", fed it the values at that instant, and found the event again at
+    the next step. Now the event at the start stays in the ball's step (and the crossing keeps
+    each input's slope, the test above): one bounce per impact, at the reference's times to the
+    line's error (which grows as the bounces shrink: 1.5e-5 s at the 9th), the ball never under
+    the platform by more than that error."""
+    rows = _platform_run(audit_folder, kind, "1.0", "Real", "--stop-time", "0.4", h_0=0.0)
+    times, _ = _platform_reference(h0=0.0, stop=0.4)
+    n = [float(r["PlatBall.n"]) for r in rows]
+    got = [float(rows[k]["time"]) for k in range(1, len(rows)) if n[k] > n[k - 1]]
+    assert n[-1] == len(times) == 9 and all(b - a == 1 for a, b in zip(n, n[1:]) if b != a), (kind, n[-1], got, times)
+    assert got[0] == 1e-3  # (the strike at t = 0, inside the first step: seen at its end)
+    err = np.abs(np.array(got[1:]) - times[1:])
+    assert np.all(err < [1e-6, 1e-6, 2e-6, 1e-5, 2e-5, 2e-5, 4e-5, 5e-5]), (kind, err)
     gap = min(float(r["PlatBall.h"]) - float(r["Platform.z"]) for r in rows)
     assert gap > -1e-6, (kind, gap)
 

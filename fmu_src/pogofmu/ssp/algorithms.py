@@ -540,6 +540,9 @@ class Synchronizer:
         self.next_event = {}  # component -> time event it asked for (FMI 3.0 nextEventTime)
         self.cause = ()  # the components whose event ended the latest macro step (advance)
         self.switch_now = None  # Jacobi: the switching outputs at the inputs of the latest point
+        self._kept_now = False  # an event at a step's start stayed in the step (_first_event)
+        self._kept_until = None  # where the latest macro step that kept one ended (None after one without)
+        self._event_of = None  # (instant, components) of the event that ended the latest macro step
 
     @staticmethod
     def _may_have_events(inst) -> bool:
@@ -574,10 +577,24 @@ class Synchronizer:
 
     def _first_event(self, inst, t, n0) -> StepResult:
         """``inst`` (a pogofmu FMU, saved at ``t``) counted events over its step from ``t``
-        (``n0`` before it): restored and stepped to just before the first of them."""
+        (``n0`` before it): restored and stepped to just before the first of them after ``t``.
+
+        Events at ``t`` itself belong to the step: every component was at ``t`` when it began, so
+        there is no instant before them to stop at, and they are caused by what the step began
+        with (a guard at zero that the flow carries across, or an input's new value: with held
+        inputs a Gauss-Seidel step feeds a later component the values at the step's end). Cut
+        back to ``t`` and fed the values at ``t`` instead, the component would lose the event and
+        find it again at the next step: a storm without time advancing.
+
+        Unless the macro step before ended at ``t`` with an event of ``inst`` (the limit of an
+        accumulation of its events: the mirror's controller) or keeping such an event itself (two
+        components switching each other back and forth at step after step): a step would hide the
+        chatter in its length. Then the event is cut back to, and the run ends in its storm."""
         ex = self.ex
         _, t_c = self._counts(inst)
-        while True:  # the first event of the step (t_last_event is the latest)
+        if t_c <= t:  # every event of the step at its start: the step stands (see above)
+            return self._keep_start_event(inst, t, StepResult(inst.t), t_c)
+        while True:  # the first event of the step after its start (t_last_event is the latest)
             inst.restore()
             left = math.nextafter(t_c, -math.inf)
             if left <= t:
@@ -587,7 +604,21 @@ class Synchronizer:
             n, t_last = self._counts(inst)
             if n == n0:
                 return StepResult(left, event_at=t_c)
+            if t_last <= t:  # (the events before ``left`` all at the start)
+                return self._keep_start_event(inst, t, StepResult(left, event_at=t_c), t_last)
             t_c = t_last
+
+    def _keep_start_event(self, inst, t, kept: StepResult, t_start) -> StepResult:
+        """``kept`` for ``inst``, whose step from ``t`` holds an event at ``t`` (``t_start``), unless
+        the macro step before makes it a chatter (:meth:`_first_event`): then ``inst`` is restored to
+        ``t`` with the event located there."""
+        again = self._event_of is not None and self._event_of[0] == t and inst.name in self._event_of[1]
+        if self._kept_until != t and not again:
+            self._kept_now = True
+            return kept
+        inst.restore()
+        self.ex.read(inst)
+        return StepResult(t, event_at=t_start)
 
     def _bisect(self, inst, t, T) -> StepResult:
         """An FMU of another tool (saved at ``t``) stepped to ``T``, stopped before the change of a
@@ -625,6 +656,17 @@ class Synchronizer:
         (:meth:`_step_level`), the earliest event among a level's components cutting the macro
         step (:meth:`_earliest`, :meth:`_back_to`), then a time event or a switch of a
         feed-through output inside the step (:meth:`_switch_event`)."""
+        target, event = self._advance(t, T)
+        crossed = event is not None and event.event_at is not None and event.event_at > target
+        end = event.event_at if crossed else target  # (where the next macro step begins)
+        if self._kept_now:  # an event at the step's start stayed in a step (_first_event)
+            self._kept_until, self._kept_now = end, False
+        elif target > t:
+            self._kept_until = None
+        self._event_of = (end, self.cause) if event is not None else None
+        return target, event
+
+    def _advance(self, t, T):
         ex, jacobi = self.ex, self.jacobi
         switch0 = None
         if self._switch_keys:
