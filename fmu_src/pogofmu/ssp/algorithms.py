@@ -540,9 +540,8 @@ class Synchronizer:
         self.next_event = {}  # component -> time event it asked for (FMI 3.0 nextEventTime)
         self.cause = ()  # the components whose event ended the latest macro step (advance)
         self.switch_now = None  # Jacobi: the switching outputs at the inputs of the latest point
-        self._kept_now = False  # an event at a step's start stayed in the step (_first_event)
-        self._kept_until = None  # where the latest macro step that kept one ended (None after one without)
-        self._event_of = None  # (instant, components) of the event that ended the latest macro step
+        self._kept_now = False  # an event at a step's start stays in this macro step (_first_event)
+        self._kept_before = False  # ... stayed in the latest macro step that advanced or kept one
 
     @staticmethod
     def _may_have_events(inst) -> bool:
@@ -612,8 +611,11 @@ class Synchronizer:
         """``kept`` for ``inst``, whose step from ``t`` holds an event at ``t`` (``t_start``), unless
         the macro step before makes it a chatter (:meth:`_first_event`): then ``inst`` is restored to
         ``t`` with the event located there."""
-        again = self._event_of is not None and self._event_of[0] == t and inst.name in self._event_of[1]
-        if self._kept_until != t and not again:
+        # (a macro step begins where the one before ended: an event instant recorded at ``t`` is
+        # the one that ended it)
+        last = self.ex.event_sources[-1] if self.ex.event_sources else None
+        again = last is not None and last[0] == t and inst.name in last[1]
+        if not self._kept_before and not again:
             self._kept_now = True
             return kept
         inst.restore()
@@ -657,13 +659,8 @@ class Synchronizer:
         step (:meth:`_earliest`, :meth:`_back_to`), then a time event or a switch of a
         feed-through output inside the step (:meth:`_switch_event`)."""
         target, event = self._advance(t, T)
-        crossed = event is not None and event.event_at is not None and event.event_at > target
-        end = event.event_at if crossed else target  # (where the next macro step begins)
-        if self._kept_now:  # an event at the step's start stayed in a step (_first_event)
-            self._kept_until, self._kept_now = end, False
-        elif target > t:
-            self._kept_until = None
-        self._event_of = (end, self.cause) if event is not None else None
+        if self._kept_now or target > t:  # (a step that stood at ``t`` leaves the mark as it was)
+            self._kept_before, self._kept_now = self._kept_now, False
         return target, event
 
     def _advance(self, t, T):
