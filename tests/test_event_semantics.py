@@ -1226,6 +1226,20 @@ def test_a_ball_on_a_moving_platform_bounces_once_per_impact_in_the_ssp_master(a
     assert float(rows[-1]["PlatBall.h"]) == pytest.approx(h_end, abs=2e-3 if held else 1e-5), kind
 
 
+def _nine_bounces_to_0_4_s(folder, kind, h_0):
+    """The ball dropped from ``h_0`` on the rising platform, FMI 2.0 in the master to 0.4 s: nine
+    bounces, one per impact (the counter never steps by two), as the reference's, and the ball never
+    under the platform by more than 1e-6 m. The times the counter stepped at, and the reference's."""
+    rows = _platform_run(folder, kind, "1.0", "Real", "--stop-time", "0.4", h_0=h_0)
+    times, _ = _platform_reference(h0=h_0, stop=0.4)
+    n = [float(r["PlatBall.n"]) for r in rows]
+    got = [float(rows[k]["time"]) for k in range(1, len(rows)) if n[k] > n[k - 1]]
+    assert n[-1] == len(times) == 9 and all(b - a == 1 for a, b in zip(n, n[1:]) if b != a), (kind, n[-1], got, times)
+    gap = min(float(r["PlatBall.h"]) - float(r["Platform.z"]) for r in rows)
+    assert gap > -1e-6, (kind, gap)
+    return got, times
+
+
 @pytest.mark.parametrize("kind", ["{n}.fmu", "native/{n}.fmu"])
 def test_a_ball_dropped_just_above_the_rising_platform_bounces_once_per_impact(audit_folder, kind):
     """The ball dropped from 0.1 mm above the platform as it starts rising at 0.5 m/s: struck at
@@ -1238,15 +1252,9 @@ def test_a_ball_dropped_just_above_the_rising_platform_bounces_once_per_impact(a
     warning and status OK). Now each input keeps its line's slope across the event: one bounce per
     impact, at the reference's times to the line's error (which grows as the bounces shrink: 1.8e-5 s
     at the 9th), the ball never under the platform by more than that error."""
-    rows = _platform_run(audit_folder, kind, "1.0", "Real", "--stop-time", "0.4", h_0=1e-4)
-    times, _ = _platform_reference(h0=1e-4, stop=0.4)
-    n = [float(r["PlatBall.n"]) for r in rows]
-    got = [float(rows[k]["time"]) for k in range(1, len(rows)) if n[k] > n[k - 1]]
-    assert n[-1] == len(times) == 9 and all(b - a == 1 for a, b in zip(n, n[1:]) if b != a), (kind, n[-1], got, times)
+    got, times = _nine_bounces_to_0_4_s(audit_folder, kind, 1e-4)
     err = np.abs(np.array(got) - times)
     assert np.all(err < [1e-8, 1e-6, 1e-6, 2e-6, 1e-5, 1e-5, 2e-5, 4e-5, 5e-5]), (kind, err)
-    gap = min(float(r["PlatBall.h"]) - float(r["Platform.z"]) for r in rows)
-    assert gap > -1e-6, (kind, gap)
 
 
 @pytest.mark.parametrize("kind", ["{n}.fmu", "native/{n}.fmu"])
@@ -1260,16 +1268,10 @@ def test_a_ball_at_rest_on_the_rising_platform_is_struck_at_the_start_and_bounce
     each input's slope, the test above): one bounce per impact, at the reference's times to the
     line's error (which grows as the bounces shrink: 1.5e-5 s at the 9th), the ball never under
     the platform by more than that error."""
-    rows = _platform_run(audit_folder, kind, "1.0", "Real", "--stop-time", "0.4", h_0=0.0)
-    times, _ = _platform_reference(h0=0.0, stop=0.4)
-    n = [float(r["PlatBall.n"]) for r in rows]
-    got = [float(rows[k]["time"]) for k in range(1, len(rows)) if n[k] > n[k - 1]]
-    assert n[-1] == len(times) == 9 and all(b - a == 1 for a, b in zip(n, n[1:]) if b != a), (kind, n[-1], got, times)
+    got, times = _nine_bounces_to_0_4_s(audit_folder, kind, 0.0)
     assert got[0] == 1e-3  # (the strike at t = 0, inside the first step: seen at its end)
     err = np.abs(np.array(got[1:]) - times[1:])
     assert np.all(err < [1e-6, 1e-6, 2e-6, 1e-5, 2e-5, 2e-5, 4e-5, 5e-5]), (kind, err)
-    gap = min(float(r["PlatBall.h"]) - float(r["Platform.z"]) for r in rows)
-    assert gap > -1e-6, (kind, gap)
 
 
 @pytest.mark.parametrize("kind", ["{n}.fmu", "native/{n}.fmu"])
