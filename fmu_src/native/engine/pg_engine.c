@@ -1214,7 +1214,7 @@ static int warn_through(PgEngine *e, int i, double dg, double d, double z, const
  * left it to its before side. */
 static void zero_moved(PgEngine *e, int i, double G, double z)
 {
-    e->zarm[i] = 1, e->armed[i] = 1, e->zband[i] = G + z;
+    e->zarm[i] = 1, e->armed[i] = 1, e->zband[i] = G + z, e->me_seen[i] = 0;
 }
 
 /* Arm every active guard at (e->t, e->x) after a restart: a jump of event `own`, the start or an
@@ -1253,7 +1253,7 @@ static int arm_guards(PgEngine *e, const signed char *was, int own, double own_g
         else if (e->own_carry) z = pmax(z, e->zband[i]); /* (the band it was armed with at this instant) */
         int before = was ? was[i] : -1, rebound = before == 2;
         if (rebound) before = 1;
-        e->zarm[i] = 0, e->armed[i] = 0, e->zband[i] = z, e->kept[i] = 0;
+        e->zarm[i] = 0, e->armed[i] = 0, e->zband[i] = z, e->kept[i] = 0, e->me_seen[i] = 0;
         if (G > z) {
             if (before == 1 && i != own && rebound && dg < -2 * z) zero_moved(e, i, G, z);
             else if (before == 1 && i != own) crossed_now(e, i, fire);
@@ -1288,6 +1288,18 @@ static int arm_guards(PgEngine *e, const signed char *was, int own, double own_g
         }
     }
     return PG_OK;
+}
+
+/* guard i is armed at time t: armed by a restart, or, in model exchange, seen on its before side at or
+ * before t. The importer's observations come out of time order: its root search tries a point beyond a root, then
+ * comes back to the root. A guard seen on its before side only at such a later point was not armed at
+ * the root: it crossed the other way there (a rising guard falling through zero just after another
+ * event's root in the same step fired as that event's cascade; a guard on an input fired where the
+ * input fell through its level, the importer having set the later point's input first; a user's
+ * audit, 2026-12-07) */
+static int armed_at(const PgEngine *e, int i, double t)
+{
+    return e->armed[i] && !(e->me_seen[i] && e->me_seen_t[i] > t);
 }
 
 /* what each event's guard was before a restart (arm_guards' was): 1 armed, 0 active and not, -1 inactive */
@@ -1921,6 +1933,12 @@ static int apply_pending_event(PgEngine *e)
      * never through the guard; a guard that only dithers within its band, as a marker at a resting
      * record, does not fire again while it stays within it) */
     e->own_same = same && !in_place;
+    /* an event an input change fired in model exchange, whose jump left x as it was (a counter of an
+     * input's crossings): its crossing goes on too. The importer's inputs move between its points, which
+     * the flow does not see: its guard left at zero, on a rate of the flow alone heading back, was armed
+     * at zero as a rebound, and the input's next value beyond its band fired it again, 5e-14 s later (a
+     * counter on 0.25 x + u counted one crossing twice; a drawn model, 2026-12-07) */
+    e->own_same |= e->me_by_input && same_x;
     /* a jump that changed q only (a counter) at a point a step of the flow reached: at a tangency (no
      * direction to first order) its crossing goes on too, in place or not — armed at zero, it fired again
      * in place at that same point on the same curvature until the storm (two counters up and down on
@@ -2213,16 +2231,20 @@ int pg_engine_apply_event(PgEngine *e, int index, double t, const double *x)
      * zero after the jump) — unless the engine made it pending at this instant itself (a cascade, the
      * start, an input change of a model without states: as it said) or an input change carried its
      * guard past zero here (pg_engine_restart_at): then it fired beyond its zero, as in co-simulation */
-    int located = e->has_pending && e->t == t && e->pending_index == index
-                      ? e->pending_located
-                      : !(index < MODEL(e)->ne && e->me_input_crossed[index]);
+    int pending_here = e->has_pending && e->t == t && e->pending_index == index;
+    int by_input = !pending_here && index < MODEL(e)->ne && e->me_input_crossed[index];
+    int located = pending_here ? e->pending_located : !by_input;
     memset(e->me_input_crossed, 0, sizeof e->me_input_crossed); /* (the restart re-arms every guard) */
+    for (int k = 0; k < e->n_active; ++k) /* (seen on its before side only after t: not armed at t) */
+        if (!armed_at(e, e->active[k], t)) e->armed[e->active[k]] = 0;
     e->t = e->t_out = t;
     memcpy(e->x, x, sizeof(double) * (size_t)NX(e));
     e->has_seg = 0, e->flow_reached = 0; /* (the importer's point) */
     /* (e->zero_hit: as pg_engine_me_fired found this event, from zero or not: the storm rule counts it) */
     set_pending(e, index, located, e->x, e->zero_hit, e->zero_in_place);
+    e->me_by_input = by_input;
     int rc = apply_pending_event(e);
+    e->me_by_input = 0;
     if (rc) return at_time(e, rc, "t = ", e->t, " s");
     memcpy(e->x_out, e->x, sizeof e->x);
     memcpy(e->q_out, e->q, sizeof e->q);
@@ -2277,7 +2299,9 @@ int pg_engine_me_indicators(PgEngine *e, double t, const double *x, double *z)
              * the last event: at that instant the restart decided its arming, and the trajectory has not
              * moved since (an importer that sets the inputs' values from before the event again there,
              * as fmpy's model exchange does at the start of each integration, does not arm it) */
-            e->armed[i] = 1;
+            e->armed[i] = 1, e->me_seen[i] = 1, e->me_seen_t[i] = t;
+        } else if (e->me_seen[i] && G < 0.0 && t < e->me_seen_t[i] && !(t == e->t && G >= -band)) {
+            e->me_seen_t[i] = t; /* seen on its before side earlier than before: armed from here */
         }
         if (e->zarm[i]) { /* a sign change where it leaves its band to its after side */
             double r = G - band;
@@ -2311,7 +2335,7 @@ int pg_engine_me_fired(PgEngine *e, double t, const double *x, int *index)
         double g;
         TRY(guard_at(e, i, t, x, &g));
         double G = sgn_of(e, i) * g, band = e->zband[i];
-        if (!(e->zarm[i] ? G > band : e->armed[i] && G >= 0.0)) continue;
+        if (!(e->zarm[i] ? G > band : armed_at(e, i, t) && G >= 0.0)) continue;
         if (e->me_input_crossed[i]) { /* an input change carried it past zero: it fires whatever the flow does
                                        * there, as in co-simulation (not a crossing the importer located) */
             *index = i;
@@ -2330,7 +2354,7 @@ int pg_engine_me_fired(PgEngine *e, double t, const double *x, int *index)
             if (G <= 4 * band) {
                 /* at zero to rounding: armed at zero here, its band widened to this rounding, so that
                  * its indicator is back on its before side for the importer's restart */
-                e->zarm[i] = 1, e->armed[i] = 1;
+                e->zarm[i] = 1, e->armed[i] = 1, e->me_seen[i] = 0;
                 e->zband[i] = pmax(e->zband[i], 2 * fabs(G));
             } /* (else its indicator changes sign on the way back, and again where it crosses) */
             continue;
@@ -2364,14 +2388,14 @@ int pg_engine_restart_at(PgEngine *e, double t, const double *x, const double *u
     TRY(check_inputs(e, u));
     double g_old[PG_MAX_EVENTS]; /* each armed guard at this point under the inputs before the change */
     for (int k = 0; k < e->n_active; ++k)
-        if (e->armed[e->active[k]]) TRY(at_time(e, guard_at(e, e->active[k], t, x, &g_old[k]), "the input change at t = ", t, " s"));
+        if (armed_at(e, e->active[k], t)) TRY(at_time(e, guard_at(e, e->active[k], t, x, &g_old[k]), "the input change at t = ", t, " s"));
     memcpy(e->u, u, sizeof(double) * (size_t)e->nu);
     memset(e->du, 0, sizeof(double) * (size_t)e->nu);
     e->has_du = 0, e->t_u = t;
     TRY(at_time(e, bind(e), "the input change at t = ", t, " s")); /* (e->g: each active guard under the new inputs) */
     for (int k = 0; k < e->n_active; ++k) { /* an armed guard the change carried past zero (past its band, armed at zero) */
         int i = e->active[k];
-        if (!e->armed[i]) continue;
+        if (!armed_at(e, i, t)) continue;
         double sgn = sgn_of(e, i), at = e->zarm[i] ? e->zband[i] : 0.0;
         int crossed = sgn * g_old[k] <= at && sgn * e->g[k] > at;
         if (crossed && e->zarm[i] == 1 && sgn * g_old[k] >= -at) {

@@ -116,6 +116,10 @@ struct PgEngine {
      * many of the latest events in a row of event zrun_event did (a storm at ZERO_REFIRES) */
     int zero_hit, zrun, zrun_event;
     int own_same; /* (during a re-arming) the jump just applied left x and q as they were */
+    /* (model exchange, during an event's jump) the event was fired by an input change the importer made
+     * (pg_engine_restart_at), not at a crossing it located: if its jump leaves x as it was, the inputs'
+     * motion that carried its guard across carries it on (apply_pending_event) */
+    int me_by_input;
     /* (e->t, e->x) is where a step of the flow ended, no jump since having changed x (0 after the start, a
      * jump that changed x, an input change, a point the importer set); and, during a re-arming, the jump
      * just applied at such a point changed q only (a counter): its guard's departure from zero goes on */
@@ -153,6 +157,12 @@ struct PgEngine {
      * an event fires or the guard is seen on its before side again: such a guard fires whatever the flow
      * does there (pg_engine_me_fired), beyond its zero, not at a located crossing (pg_engine_apply_event) */
     signed char me_input_crossed[PG_MAX_EVENTS];
+    /* model exchange: guard i was armed by an observation (pg_engine_me_indicators) and not since by a
+     * restart (me_seen[i]), at the earliest time me_seen_t[i] it was seen on its before side. The importer
+     * observes out of time order (its root search tries points beyond a root, then comes back): such a
+     * guard is armed only at a time after me_seen_t[i] (armed_at) */
+    signed char me_seen[PG_MAX_EVENTS];
+    double me_seen_t[PG_MAX_EVENTS];
     /* the outputs that share a state's name (docs/writing-models.md section 6: they carry that state's
      * value; in FMI 3.0 they are the state's own variable): output xy_y[k] is state xy_x[k] */
     int n_xy, xy_y[PG_MAX_X], xy_x[PG_MAX_X];
