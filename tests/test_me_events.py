@@ -14,7 +14,7 @@ import sys
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, assume, example, given, note, settings
+from hypothesis import HealthCheck, assume, event, example, given, note, settings
 from hypothesis import strategies as st
 
 from support import ROOT, run_pogofmu
@@ -226,6 +226,19 @@ def _crossing_run(path, p, signal, interval, rtol):
     return r
 
 
+def _crossing_cs_events(path, p, interval):
+    """Co-simulation of the same FMU (no input read by a guard): the events of its log, (name, time)."""
+    from fmpy import simulate_fmu
+
+    from pogofmu.runtime.eventlog import parse_event_log
+
+    messages = []
+    simulate_fmu(str(path), fmi_type="CoSimulation", stop_time=T_CROSS, output_interval=interval,
+                 start_values={**p, "log_events": 1}, debug_logging=True,
+                 logger=lambda *a: messages.append((a[-3], *(b.decode() if b else "" for b in a[-2:]))))
+    return [(r["name"], r["time"]) for r in parse_event_log(messages)]
+
+
 def _one_crossing(k, s=1.0, ax=0.0, at=0.0, au=0.0, w=1.0, ph=0.0, L=0.5):
     return {f"s{k}": s, f"ax{k}": ax, f"at{k}": at, f"au{k}": au, f"w{k}": w, f"ph{k}": ph, f"L{k}": L}
 
@@ -244,6 +257,10 @@ def _one_crossing(k, s=1.0, ax=0.0, at=0.0, au=0.0, w=1.0, ph=0.0, L=0.5):
 # a drawn model: a counter on 0.25 x + u (u = sin(t + 2)) counted one crossing twice, 5e-14 s apart
 @example(case=({**_one_crossing(1, ax=1.0), **_one_crossing(2, s=-1.0, ax=0.25, au=1.0, L=0.0),
                 **_one_crossing(3, ax=1.0), **_one_crossing(4, ax=1.0)}, (1.0, 2.0, 1e-3), 0.01, None))
+# a drawn model: a counter on the input u = sin t (plus 6e-8 sin t, so that it reads the time) at the level
+# of three counters on x = sin t fired five times from zero, 1.1e-14 s apart, into a false storm
+@example(case=({**_one_crossing(1, at=5.960464477539063e-08, au=1.0), **_one_crossing(2, ax=1.0),
+                **_one_crossing(3, ax=1.0), **_one_crossing(4, ax=1.0)}, (1.0, 0.0, 1e-3), 0.01, 1e-8))
 def test_model_exchange_fires_each_drawn_guard_only_in_its_direction(crossings, case):
     """fmpy's model exchange (CVode) on both backends: each counter counts exactly the crossings of its
     guard in its direction, each within 1e-3 s of the reference's, and both backends give the same
@@ -251,7 +268,9 @@ def test_model_exchange_fires_each_drawn_guard_only_in_its_direction(crossings, 
     root (or, for a guard on the input, beyond its own root of the other direction, the input set for
     the later point first) fired at that root: a rising guard counted where it fell (a user's audit,
     2026-12-07: an input alarm 8 times instead of 7, a counter on sin t at every crossing of a state
-    counter on x = sin t)."""
+    counter on x = sin t); then a counter on the input, its guard's motion at zero taken from the flow
+    alone, fired again and again at one crossing. Where no guard reads the input, the FMU's
+    co-simulation (its own engine) gives the same crossings, each at the reference's time within 1e-8 s."""
     p, signal, interval, rtol = case
     note(repr((p, signal, interval, rtol)))
     ref = _crossing_reference(p, signal)
@@ -265,3 +284,11 @@ def test_model_exchange_fires_each_drawn_guard_only_in_its_direction(crossings, 
         assert n[-1] == len(t_ref), (name, int(n[-1]), len(t_ref), list(r["time"][up]), list(t_ref), p, signal)
         assert (np.diff(n) >= 0).all() and (np.diff(n) <= 1).all(), (name, list(r["time"][up]))
         assert np.allclose(r["time"][up], t_ref, rtol=0, atol=1e-3), (name, list(r["time"][up]), list(t_ref))
+    if all(p[f"au{k}"] == 0.0 for k in CROSSING_DIRS):  # (co-simulation holds the input over a step)
+        event("co-simulation checked too")
+        runs = [_crossing_cs_events(path, p, interval) for path in crossings]
+        assert runs[0] == runs[1], "the two backends differ in co-simulation"
+        for name, t_ref in ref.items():  # the engine's own steps: each crossing located to rounding
+            t_fmu = [t for n, t in runs[0] if n == name]
+            assert len(t_fmu) == len(t_ref), ("co-simulation", name, t_fmu, list(t_ref))
+            assert np.allclose(t_fmu, t_ref, rtol=0, atol=1e-8), ("co-simulation", name, t_fmu, list(t_ref))

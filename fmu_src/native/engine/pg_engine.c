@@ -1060,6 +1060,21 @@ static int collapse_error(PgEngine *e, double t, double h)
 }
 
 /* ---- arming the guards (docs/solver.md, "Event semantics") --------------------------------- */
+/* model exchange: the inputs put on the line of the importer's motion about its point (me_input_rate)
+ * while a rule of arming asks how a guard moves at t, the importer's latest sample: 1 if it did (undo
+ * with inputs_held) */
+static int inputs_on_line(PgEngine *e, double t)
+{
+    if (e->has_du || !e->me_has_du || t != e->me_t_last) return 0;
+    memcpy(e->du, e->me_du, sizeof(double) * (size_t)e->nu), e->has_du = 1;
+    return 1;
+}
+
+static void inputs_held(PgEngine *e, int line)
+{
+    if (line) memset(e->du, 0, sizeof(double) * (size_t)e->nu), e->has_du = 0;
+}
+
 /* The rounding band of guard i at (t, x): how far the guard moves when each state moves by
  * BAND_ULPS of its own magnitude, and time by as many ulps at the guard's rate along the flow (the
  * rate dg over 2 d: where the crossing is located) and at its own rate in time (t's rounding where
@@ -1079,8 +1094,11 @@ static int guard_band(PgEngine *e, int i, double t, const double *x, double g, d
         if (isfinite(gp)) acc += fabs(gp - g);
     }
     double d = RATE_STEP * pmax(fabs(t), 1.0); /* the rate in time at fixed x: 0 for a guard that reads no time */
-    TRY(guard_at(e, i, t + d, x, &gp));
-    TRY(guard_at(e, i, t - d, x, &gm));
+    int line = inputs_on_line(e, t);
+    int rc = guard_at(e, i, t + d, x, &gp);
+    if (!rc) rc = guard_at(e, i, t - d, x, &gm);
+    inputs_held(e, line);
+    TRY(rc);
     double own = (gp - gm) / (2 * d);
     double zt = BAND_ULPS * EPS * fabs(t) * (fabs(rate) + (isfinite(own) ? fabs(own) : 0.0));
     *z = isfinite(zt) ? acc + zt : acc;
@@ -1092,10 +1110,13 @@ static int guard_band(PgEngine *e, int i, double t, const double *x, double g, d
 static int guard_change(PgEngine *e, int i, double t, const double *x, const double *f, double *dg, double *d_out)
 {
     double d = RATE_STEP * pmax(fabs(t), 1.0), xp[PG_MAX_X], gp, gm;
+    int line = inputs_on_line(e, t);
     for (int j = 0; j < NX(e); ++j) xp[j] = x[j] + d * f[j];
-    TRY(guard_at(e, i, t + d, xp, &gp));
-    for (int j = 0; j < NX(e); ++j) xp[j] = x[j] - d * f[j];
-    TRY(guard_at(e, i, t - d, xp, &gm));
+    int rc = guard_at(e, i, t + d, xp, &gp);
+    for (int j = 0; !rc && j < NX(e); ++j) xp[j] = x[j] - d * f[j];
+    if (!rc) rc = guard_at(e, i, t - d, xp, &gm);
+    inputs_held(e, line);
+    TRY(rc);
     *dg = sgn_of(e, i) * (gp - gm);
     *d_out = d;
     return PG_OK;
@@ -1138,7 +1159,10 @@ static int guard_still(PgEngine *e, int i, double t, const double *x, double g, 
         xp[j] = x[j];
         if (!(gp == g)) return PG_OK;
     }
-    TRY(guard_at(e, i, t + RATE_STEP * pmax(fabs(t), 1.0), x, &gp));
+    int line = inputs_on_line(e, t);
+    int rc = guard_at(e, i, t + RATE_STEP * pmax(fabs(t), 1.0), x, &gp);
+    inputs_held(e, line);
+    TRY(rc);
     *still = gp == g;
     return PG_OK;
 }
@@ -1933,12 +1957,6 @@ static int apply_pending_event(PgEngine *e)
      * never through the guard; a guard that only dithers within its band, as a marker at a resting
      * record, does not fire again while it stays within it) */
     e->own_same = same && !in_place;
-    /* an event an input change fired in model exchange, whose jump left x as it was (a counter of an
-     * input's crossings): its crossing goes on too. The importer's inputs move between its points, which
-     * the flow does not see: its guard left at zero, on a rate of the flow alone heading back, was armed
-     * at zero as a rebound, and the input's next value beyond its band fired it again, 5e-14 s later (a
-     * counter on 0.25 x + u counted one crossing twice; a drawn model, 2026-12-07) */
-    e->own_same |= e->me_by_input && same_x;
     /* a jump that changed q only (a counter) at a point a step of the flow reached: at a tangency (no
      * direction to first order) its crossing goes on too, in place or not — armed at zero, it fired again
      * in place at that same point on the same curvature until the storm (two counters up and down on
@@ -2231,9 +2249,9 @@ int pg_engine_apply_event(PgEngine *e, int index, double t, const double *x)
      * zero after the jump) — unless the engine made it pending at this instant itself (a cascade, the
      * start, an input change of a model without states: as it said) or an input change carried its
      * guard past zero here (pg_engine_restart_at): then it fired beyond its zero, as in co-simulation */
-    int pending_here = e->has_pending && e->t == t && e->pending_index == index;
-    int by_input = !pending_here && index < MODEL(e)->ne && e->me_input_crossed[index];
-    int located = pending_here ? e->pending_located : !by_input;
+    int located = e->has_pending && e->t == t && e->pending_index == index
+                      ? e->pending_located
+                      : !(index < MODEL(e)->ne && e->me_input_crossed[index]);
     memset(e->me_input_crossed, 0, sizeof e->me_input_crossed); /* (the restart re-arms every guard) */
     for (int k = 0; k < e->n_active; ++k) /* (seen on its before side only after t: not armed at t) */
         if (!armed_at(e, e->active[k], t)) e->armed[e->active[k]] = 0;
@@ -2242,9 +2260,7 @@ int pg_engine_apply_event(PgEngine *e, int index, double t, const double *x)
     e->has_seg = 0, e->flow_reached = 0; /* (the importer's point) */
     /* (e->zero_hit: as pg_engine_me_fired found this event, from zero or not: the storm rule counts it) */
     set_pending(e, index, located, e->x, e->zero_hit, e->zero_in_place);
-    e->me_by_input = by_input;
     int rc = apply_pending_event(e);
-    e->me_by_input = 0;
     if (rc) return at_time(e, rc, "t = ", e->t, " s");
     memcpy(e->x_out, e->x, sizeof e->x);
     memcpy(e->q_out, e->q, sizeof e->q);
@@ -2367,6 +2383,28 @@ int pg_engine_me_fired(PgEngine *e, double t, const double *x, int *index)
     return PG_OK;
 }
 
+/* model exchange: the inputs' rate from the importer's samples (e->me_du), each sample (t, u) it sets,
+ * changed or not. A change at the time of the sample before is a discrete change (Event Mode, an
+ * input's step): no rate until a sample at another time. Else the secant from the anchor sample, once
+ * this one is a rate step away from it (closer, the secant is the rounding's; the rate found before
+ * is kept). The rate holds at the latest sample's time only (inputs_on_line): an importer that stops
+ * setting the inputs holds them */
+static void me_input_rate(PgEngine *e, double t, const double *u, int change)
+{
+    size_t nu = sizeof(double) * (size_t)e->nu;
+    int discrete = change && e->me_has_ua && t == e->me_t_last;
+    e->me_t_last = t;
+    if (!e->me_has_ua || discrete) {
+        e->me_has_du = 0;
+    } else if (fabs(t - e->me_ta) >= RATE_STEP * pmax(fabs(t), 1.0)) {
+        for (int i = 0; i < e->nu; ++i) e->me_du[i] = (u[i] - e->me_ua[i]) / (t - e->me_ta);
+        e->me_has_du = 1;
+    } else {
+        return;
+    }
+    memcpy(e->me_ua, u, nu), e->me_ta = t, e->me_has_ua = 1;
+}
+
 int pg_engine_restart_at(PgEngine *e, double t, const double *x, const double *u)
 {
     /* model exchange: the importer sets the inputs at every point it tries, beyond a crossing too;
@@ -2382,10 +2420,14 @@ int pg_engine_restart_at(PgEngine *e, double t, const double *x, const double *u
     int change = 0;
     for (int i = 0; i < e->nu; ++i) change |= !(u[i] == e->u[i]);
     e->has_pending = pending;
-    if (!change) return PG_OK;
+    if (!change) {
+        me_input_rate(e, t, u, 0);
+        return PG_OK;
+    }
     /* the new inputs bound, and nothing else of a co-simulation restart (pg_engine_set_inputs): the
      * importer integrates, so no step size is chosen, and the flow is tried at no point it did not ask for */
     TRY(check_inputs(e, u));
+    me_input_rate(e, t, u, 1);
     double g_old[PG_MAX_EVENTS]; /* each armed guard at this point under the inputs before the change */
     for (int k = 0; k < e->n_active; ++k)
         if (armed_at(e, e->active[k], t)) TRY(at_time(e, guard_at(e, e->active[k], t, x, &g_old[k]), "the input change at t = ", t, " s"));

@@ -116,10 +116,6 @@ struct PgEngine {
      * many of the latest events in a row of event zrun_event did (a storm at ZERO_REFIRES) */
     int zero_hit, zrun, zrun_event;
     int own_same; /* (during a re-arming) the jump just applied left x and q as they were */
-    /* (model exchange, during an event's jump) the event was fired by an input change the importer made
-     * (pg_engine_restart_at), not at a crossing it located: if its jump leaves x as it was, the inputs'
-     * motion that carried its guard across carries it on (apply_pending_event) */
-    int me_by_input;
     /* (e->t, e->x) is where a step of the flow ended, no jump since having changed x (0 after the start, a
      * jump that changed x, an input change, a point the importer set); and, during a re-arming, the jump
      * just applied at such a point changed q only (a counter): its guard's departure from zero goes on */
@@ -163,6 +159,13 @@ struct PgEngine {
      * guard is armed only at a time after me_seen_t[i] (armed_at) */
     signed char me_seen[PG_MAX_EVENTS];
     double me_seen_t[PG_MAX_EVENTS];
+    /* model exchange: the inputs' rate me_du (me_has_du: known), the secant from the anchor sample (me_ta,
+     * me_ua; me_has_ua) to the importer's latest sample (at me_t_last) a rate step away (me_input_rate): the
+     * importer moves its inputs between its points, and a guard's direction at zero (guard_change)
+     * counts that motion as a co-simulation's input derivatives do. Only the direction rules read it:
+     * the flow and the guards' values read the inputs as set */
+    double me_ua[PG_MAX_U], me_du[PG_MAX_U], me_ta, me_t_last;
+    int me_has_ua, me_has_du;
     /* the outputs that share a state's name (docs/writing-models.md section 6: they carry that state's
      * value; in FMI 3.0 they are the state's own variable): output xy_y[k] is state xy_x[k] */
     int n_xy, xy_y[PG_MAX_X], xy_x[PG_MAX_X];
