@@ -1238,7 +1238,7 @@ static int warn_through(PgEngine *e, int i, double dg, double d, double z, const
  * left it to its before side. */
 static void zero_moved(PgEngine *e, int i, double G, double z)
 {
-    e->zarm[i] = 1, e->armed[i] = 1, e->zband[i] = G + z, e->me_seen[i] = 0;
+    e->zarm[i] = 1, e->armed[i] = 1, e->zband[i] = G + z, e->me_seen[i] = 0, e->me_prov[i] = 0;
 }
 
 /* Arm every active guard at (e->t, e->x) after a restart: a jump of event `own`, the start or an
@@ -1277,7 +1277,7 @@ static int arm_guards(PgEngine *e, const signed char *was, int own, double own_g
         else if (e->own_carry) z = pmax(z, e->zband[i]); /* (the band it was armed with at this instant) */
         int before = was ? was[i] : -1, rebound = before == 2;
         if (rebound) before = 1;
-        e->zarm[i] = 0, e->armed[i] = 0, e->zband[i] = z, e->kept[i] = 0, e->me_seen[i] = 0;
+        e->zarm[i] = 0, e->armed[i] = 0, e->zband[i] = z, e->kept[i] = 0, e->me_seen[i] = 0, e->me_prov[i] = 0;
         if (G > z) {
             if (before == 1 && i != own && rebound && dg < -2 * z) zero_moved(e, i, G, z);
             else if (before == 1 && i != own) crossed_now(e, i, fire);
@@ -1306,6 +1306,9 @@ static int arm_guards(PgEngine *e, const signed char *was, int own, double own_g
                 if (i != own && before == 1 && x_pre) TRY(crossed_with(e, i, x_pre, q_pre, &with));
                 if (with) crossed_now(e, i, fire);
                 else e->zarm[i] = dg >= -2 * z ? 2 : 1, e->armed[i] = 1;
+                /* (model exchange just after an input's step: its rate unknown, the rebound a guess) */
+                if (e->zarm[i] == 1 && e->me_event && e->nu > 0 && !(e->me_has_du && e->t == e->me_t_last))
+                    e->me_prov[i] = 1;
             }
         } else {
             e->armed[i] = 1;
@@ -2260,7 +2263,9 @@ int pg_engine_apply_event(PgEngine *e, int index, double t, const double *x)
     e->has_seg = 0, e->flow_reached = 0; /* (the importer's point) */
     /* (e->zero_hit: as pg_engine_me_fired found this event, from zero or not: the storm rule counts it) */
     set_pending(e, index, located, e->x, e->zero_hit, e->zero_in_place);
+    e->me_event = 1;
     int rc = apply_pending_event(e);
+    e->me_event = 0;
     if (rc) return at_time(e, rc, "t = ", e->t, " s");
     memcpy(e->x_out, e->x, sizeof e->x);
     memcpy(e->q_out, e->q, sizeof e->q);
@@ -2274,6 +2279,7 @@ int pg_engine_apply_event(PgEngine *e, int index, double t, const double *x)
  * from the importer's interpolant, whose error is its tolerance, not the rounding: an event fires
  * only where its guard is not carried back to its before side by the flow (pg_engine_me_fired). */
 #define ME_UNARMED_FLOOR 1e-300 /* the least magnitude an unarmed indicator is reported with */
+#define ME_ROOT_TIME 1e-9 /* an importer's located root lies within this (times max(|t|, 1)) of the zero */
 
 /* the importer located guard i at its threshold and the flow carried it back, no event: as many
  * times as the storm bound (zeno_max_events) within zeno_window, of one event and none firing, is an
@@ -2307,10 +2313,11 @@ int pg_engine_me_indicators(PgEngine *e, double t, const double *x, double *z)
         TRY(guard_at(e, i, t, x, &g)); /* (the model's own message, as the adapters gave it) */
         double G = sgn * g, band = e->zband[i];
         if (G < -band) e->me_input_crossed[i] = 0; /* seen on its before side: no input change carries it past now */
-        if (e->zarm[i] && G < -band) { /* it left zero to its before side: an ordinary armed guard */
+        int after_event = !(e->has_last && t == e->last.time); /* (at the event's instant: see below) */
+        if (e->zarm[i] && G < -band && after_event) { /* it left zero to its before side: an ordinary armed guard */
             if (i == e->zrun_event) e->zrun = 0; /* no accumulation */
-            e->zarm[i] = 0;
-        } else if (!e->armed[i] && G < 0.0 && !(t == e->t && G >= -band) && !(e->has_last && t == e->last.time)) {
+            e->zarm[i] = 0, e->me_prov[i] = 0;
+        } else if (!e->armed[i] && G < 0.0 && !(t == e->t && G >= -band) && after_event) {
             /* seen on its before side (beyond the rounding of the restart point), after the instant of
              * the last event: at that instant the restart decided its arming, and the trajectory has not
              * moved since (an importer that sets the inputs' values from before the event again there,
@@ -2352,6 +2359,13 @@ int pg_engine_me_fired(PgEngine *e, double t, const double *x, int *index)
         TRY(guard_at(e, i, t, x, &g));
         double G = sgn_of(e, i) * g, band = e->zband[i];
         if (!(e->zarm[i] ? G > band : armed_at(e, i, t) && G >= 0.0)) continue;
+        if (e->zarm[i] && e->me_prov[i]) { /* a guessed rebound that went on to its after side: the crossing
+                                             * of its event went on (an input's step onto the level of a
+                                             * counter of x - u, u rising on: counted twice, 5.6e-14 s apart,
+                                             * until 2026-12-07) */
+            e->zarm[i] = 0, e->armed[i] = 0, e->me_prov[i] = 0;
+            continue;
+        }
         if (e->me_input_crossed[i]) { /* an input change carried it past zero: it fires whatever the flow does
                                        * there, as in co-simulation (not a crossing the importer located) */
             *index = i;
@@ -2378,6 +2392,13 @@ int pg_engine_me_fired(PgEngine *e, double t, const double *x, int *index)
         *index = i;
         e->me_decl_n = 0;
         e->zero_hit = e->zarm[i]; /* from zero, its guard never having left its band to its before side */
+        /* found far past its zero (the importer located no root: an input's motion across it between
+         * two of its points that its root finding let pass, found at the step's end): it fires beyond
+         * its zero, as one an input change carried past, its value there not taken for its zero (a
+         * counter fired 0.1 s late with its guard 0.02 past zero had its band widened to 0.02, and fired
+         * again from that "zero" until a false storm; a user's audit, 2026-12-07) */
+        if (!e->zarm[i] && G > 4 * band + fabs(dg) / (2 * d) * ME_ROOT_TIME * pmax(fabs(t), 1.0))
+            e->me_input_crossed[i] = 1;
         return PG_OK;
     }
     return PG_OK;
@@ -2388,8 +2409,8 @@ int pg_engine_me_fired(PgEngine *e, double t, const double *x, int *index)
  * input's step): no rate until a sample at another time. Else the secant from the anchor sample, once
  * this one is a rate step away from it (closer, the secant is the rounding's; the rate found before
  * is kept). The rate holds at the latest sample's time only (inputs_on_line): an importer that stops
- * setting the inputs holds them */
-static void me_input_rate(PgEngine *e, double t, const double *u, int change)
+ * setting the inputs holds them. Returns 1 for a discrete change */
+static int me_input_rate(PgEngine *e, double t, const double *u, int change)
 {
     size_t nu = sizeof(double) * (size_t)e->nu;
     int discrete = change && e->me_has_ua && t == e->me_t_last;
@@ -2400,9 +2421,10 @@ static void me_input_rate(PgEngine *e, double t, const double *u, int change)
         for (int i = 0; i < e->nu; ++i) e->me_du[i] = (u[i] - e->me_ua[i]) / (t - e->me_ta);
         e->me_has_du = 1;
     } else {
-        return;
+        return discrete;
     }
     memcpy(e->me_ua, u, nu), e->me_ta = t, e->me_has_ua = 1;
+    return discrete;
 }
 
 int pg_engine_restart_at(PgEngine *e, double t, const double *x, const double *u)
@@ -2427,7 +2449,13 @@ int pg_engine_restart_at(PgEngine *e, double t, const double *x, const double *u
     /* the new inputs bound, and nothing else of a co-simulation restart (pg_engine_set_inputs): the
      * importer integrates, so no step size is chosen, and the flow is tried at no point it did not ask for */
     TRY(check_inputs(e, u));
-    me_input_rate(e, t, u, 1);
+    /* a discrete change (at the time of the sample before) can carry an armed guard past zero at this
+     * point; a change at a new time is the inputs' motion along the importer's trajectory, whose
+     * crossings the importer locates (their direction counting that motion: me_input_rate). Until
+     * 2026-12-07 such a change fired a rebound the states' rounding put a hair past its band (the
+     * states at the new point, the inputs old and new): a ball bouncing on a platform rising at
+     * 0.05 m/s fired again 2.3e-12 s after a bounce, moving away, and was sent through the platform */
+    int step = me_input_rate(e, t, u, 1);
     double g_old[PG_MAX_EVENTS]; /* each armed guard at this point under the inputs before the change */
     for (int k = 0; k < e->n_active; ++k)
         if (armed_at(e, e->active[k], t)) TRY(at_time(e, guard_at(e, e->active[k], t, x, &g_old[k]), "the input change at t = ", t, " s"));
@@ -2439,7 +2467,7 @@ int pg_engine_restart_at(PgEngine *e, double t, const double *x, const double *u
         int i = e->active[k];
         if (!armed_at(e, i, t)) continue;
         double sgn = sgn_of(e, i), at = e->zarm[i] ? e->zband[i] : 0.0;
-        int crossed = sgn * g_old[k] <= at && sgn * e->g[k] > at;
+        int crossed = step && sgn * g_old[k] <= at && sgn * e->g[k] > at;
         if (crossed && e->zarm[i] == 1 && sgn * g_old[k] >= -at) {
             /* a rebound at zero that the change put on its after side: crossed unless the flow under the
              * new inputs still carries it to its before side (zero_moved, as in co-simulation) */

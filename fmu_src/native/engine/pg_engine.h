@@ -166,6 +166,13 @@ struct PgEngine {
      * the flow and the guards' values read the inputs as set */
     double me_ua[PG_MAX_U], me_du[PG_MAX_U], me_ta, me_t_last;
     int me_has_ua, me_has_du;
+    /* model exchange: me_prov[i], guard i armed at zero as a rebound (zarm 1) by an event's restart where
+     * the inputs' rate was unknown (just after a discrete change): its rebound is the flow's guess. Seen
+     * beyond its band on its after side before its before side, its crossing went on, and it is disarmed
+     * (pg_engine_me_fired); seen beyond its band on its before side, it is an ordinary armed guard.
+     * me_event: an event's jump in model exchange is being applied */
+    signed char me_prov[PG_MAX_EVENTS];
+    int me_event;
     /* the outputs that share a state's name (docs/writing-models.md section 6: they carry that state's
      * value; in FMI 3.0 they are the state's own variable): output xy_y[k] is state xy_x[k] */
     int n_xy, xy_y[PG_MAX_X], xy_x[PG_MAX_X];
