@@ -1307,7 +1307,7 @@ static int arm_guards(PgEngine *e, const signed char *was, int own, double own_g
                 if (with) crossed_now(e, i, fire);
                 else e->zarm[i] = dg >= -2 * z ? 2 : 1, e->armed[i] = 1;
                 /* (model exchange just after an input's step: its rate unknown, the rebound a guess) */
-                if (e->zarm[i] == 1 && e->me_event && e->nu > 0 && !(e->me_has_du && e->t == e->me_t_last))
+                if (e->zarm[i] == 1 && e->me_event && e->me_has_ua && !e->me_has_du && e->t == e->me_t_last)
                     e->me_prov[i] = 1;
             }
         } else {
