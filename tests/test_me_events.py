@@ -57,19 +57,23 @@ def user_folder(tmp_path_factory):
     return folder
 
 
-def _me_run(path, stop_time):
-    """fmpy's model exchange with CVode: (the exception or None, the log messages, every row)."""
+def _me_run(path, stop_time, table=None, interval=1e-3, rtol=1e-10):
+    """fmpy's model exchange with CVode (the input ``table`` if any, the events logged): (the exception
+    or None, the log messages, every row, the events)."""
     from fmpy import simulate_fmu
 
-    messages, rows = [], []
+    from pogofmu.runtime.eventlog import parse_event_log
+
+    messages, rows, exc = [], [], None
     try:
-        simulate_fmu(str(path), fmi_type="ModelExchange", solver="CVode", relative_tolerance=1e-10,
-                     stop_time=stop_time, output_interval=1e-3, debug_logging=True,
-                     logger=lambda *a: messages.append(a[-1].decode() if a[-1] else ""),
+        simulate_fmu(str(path), fmi_type="ModelExchange", solver="CVode", relative_tolerance=rtol,
+                     stop_time=stop_time, output_interval=interval, input=table, start_values={"log_events": 1},
+                     debug_logging=True,
+                     logger=lambda *a: messages.append((a[-3], *(b.decode() if b else "" for b in a[-2:]))),
                      step_finished=lambda t, recorder: rows.extend(recorder.rows[len(rows):]) or True)
-    except Exception as exc:  # noqa: BLE001 - the FMU's error, whatever fmpy wraps it in
-        return exc, messages, rows
-    return None, messages, rows
+    except Exception as e:  # noqa: BLE001 - the FMU's error, whatever fmpy wraps it in
+        exc = e
+    return exc, [m[2] for m in messages], rows, parse_event_log(messages)
 
 
 @pytest.mark.parametrize("name,wall", [("Wall", 0.05), ("Wall0", 0.0)])
@@ -80,7 +84,7 @@ def test_fmpy_model_exchange_against_a_pressed_wall_ends_in_the_storm(user_folde
     evaluation saw it strictly on its before side) let the mass through the wall silently."""
     for kind in ME_KINDS:
         path = user_folder / "out" / kind.format(n=name)
-        exc, messages, rows = _me_run(path, 3.0)
+        exc, messages, rows, _ = _me_run(path, 3.0)
         storm = [m for m in messages if "event storm" in m]
         x = np.array([r[1] for r in rows])
         assert exc is not None, (path, "ran to the end", x.max())
@@ -344,23 +348,6 @@ def input_models(tmp_path_factory):
     return folder / "out"
 
 
-def _me_input_run(path, table, stop_time, interval, rtol):
-    """fmpy's model exchange with an input table: (the exception or None, the messages, every row, the events)."""
-    from fmpy import simulate_fmu
-
-    from pogofmu.runtime.eventlog import parse_event_log
-
-    messages, rows = [], []
-    try:
-        simulate_fmu(str(path), fmi_type="ModelExchange", stop_time=stop_time, output_interval=interval,
-                     relative_tolerance=rtol, input=table, start_values={"log_events": 1}, debug_logging=True,
-                     logger=lambda *a: messages.append((a[-3], *(b.decode() if b else "" for b in a[-2:]))),
-                     step_finished=lambda t, recorder: rows.extend(recorder.rows[len(rows):]) or True)
-    except Exception as exc:  # noqa: BLE001 - the FMU's error, whatever fmpy wraps it in
-        return exc, [m[2] for m in messages], rows, parse_event_log(messages)
-    return None, [m[2] for m in messages], rows, parse_event_log(messages)
-
-
 @pytest.mark.parametrize("speed", [0.05, -0.05, 0.3])
 def test_a_ball_on_a_platform_the_importer_moves_ends_in_the_storm_never_under_it(input_models, speed):
     """The platform at a constant speed (the input table p = speed t, vp = speed), fmpy's CVode at 1e-8, run
@@ -371,7 +358,7 @@ def test_a_ball_on_a_platform_the_importer_moves_ends_in_the_storm_never_under_i
     passed through (18.5 m under it at 6 s, status OK; a user's audit, 2026-12-07)."""
     table = np.array([(0.0, 0.0, speed), (10.0, 10 * speed, speed)], dtype=[("time", float), ("p", float), ("vp", float)])
     for kind in ME_KINDS:
-        exc, messages, rows, events = _me_input_run(input_models / kind.format(n="PlatBall"), table, 6.0, 0.1, 1e-8)
+        exc, messages, rows, events = _me_run(input_models / kind.format(n="PlatBall"), 6.0, table, 0.1, 1e-8)
         assert exc is not None, (kind, "ran to the end", len(events))
         storm = [m for m in messages if "event storm" in m]
         assert storm and "bounce" in storm[0], (kind, messages[-3:])
@@ -394,7 +381,7 @@ def test_an_input_step_onto_a_counters_level_counts_once(input_models, interval,
     ref = {"nR": [0.5, 5 / 3, 4.0], "nF": [1.0, 3.0]}  # (x - u is piecewise linear: its zeros by hand)
     runs = []
     for kind in ME_KINDS:
-        exc, messages, _, events = _me_input_run(input_models / kind.format(n="Steps"), table, 5.0, interval, rtol)
+        exc, messages, _, events = _me_run(input_models / kind.format(n="Steps"), 5.0, table, interval, rtol)
         assert exc is None, (kind, exc, messages[-3:])
         runs.append([(e["name"], e["time"]) for e in events])
         for name, t_ref in ref.items():

@@ -1306,8 +1306,9 @@ static int arm_guards(PgEngine *e, const signed char *was, int own, double own_g
                 if (i != own && before == 1 && x_pre) TRY(crossed_with(e, i, x_pre, q_pre, &with));
                 if (with) crossed_now(e, i, fire);
                 else e->zarm[i] = dg >= -2 * z ? 2 : 1, e->armed[i] = 1;
-                /* (model exchange just after an input's step: its rate unknown, the rebound a guess) */
-                if (e->zarm[i] == 1 && e->me_event && e->me_has_ua && !e->me_has_du && e->t == e->me_t_last)
+                /* (model exchange just after an input's step: its rate unknown, the rebound a guess; the
+                 * importer's samples, me_has_ua, exist only in model exchange) */
+                if (e->zarm[i] == 1 && e->me_has_ua && !e->me_has_du && e->t == e->me_t_last)
                     e->me_prov[i] = 1;
             }
         } else {
@@ -2263,9 +2264,7 @@ int pg_engine_apply_event(PgEngine *e, int index, double t, const double *x)
     e->has_seg = 0, e->flow_reached = 0; /* (the importer's point) */
     /* (e->zero_hit: as pg_engine_me_fired found this event, from zero or not: the storm rule counts it) */
     set_pending(e, index, located, e->x, e->zero_hit, e->zero_in_place);
-    e->me_event = 1;
     int rc = apply_pending_event(e);
-    e->me_event = 0;
     if (rc) return at_time(e, rc, "t = ", e->t, " s");
     memcpy(e->x_out, e->x, sizeof e->x);
     memcpy(e->q_out, e->q, sizeof e->q);

@@ -151,7 +151,8 @@ struct PgEngine {
     double me_decl_t0, me_decl_t;
     /* model exchange: the armed guards an input change carried past their zero (pg_engine_restart_at), until
      * an event fires or the guard is seen on its before side again: such a guard fires whatever the flow
-     * does there (pg_engine_me_fired), beyond its zero, not at a located crossing (pg_engine_apply_event) */
+     * does there (pg_engine_me_fired), beyond its zero, not at a located crossing (pg_engine_apply_event);
+     * so does one pg_engine_me_fired finds far past its zero (a crossing the importer did not locate) */
     signed char me_input_crossed[PG_MAX_EVENTS];
     /* model exchange: guard i was armed by an observation (pg_engine_me_indicators) and not since by a
      * restart (me_seen[i]), at the earliest time me_seen_t[i] it was seen on its before side. The importer
@@ -166,14 +167,12 @@ struct PgEngine {
      * the flow and the guards' values read the inputs as set */
     double me_ua[PG_MAX_U], me_du[PG_MAX_U], me_ta, me_t_last;
     int me_has_ua, me_has_du;
-    /* model exchange: me_prov[i], guard i armed at zero as a rebound (zarm 1) by an event's restart where
-     * the importer had just set the inputs with no rate known (a discrete change, at that instant): its
+    /* model exchange: me_prov[i], guard i armed at zero as a rebound (zarm 1) by a restart where the
+     * importer had just set the inputs with no rate known (a discrete change, at that instant): its
      * rebound is the flow's guess (inputs never set are held, their rate 0, known). Seen
      * beyond its band on its after side before its before side, its crossing went on, and it is disarmed
-     * (pg_engine_me_fired); seen beyond its band on its before side, it is an ordinary armed guard.
-     * me_event: an event's jump in model exchange is being applied */
+     * (pg_engine_me_fired); seen beyond its band on its before side, it is an ordinary armed guard */
     signed char me_prov[PG_MAX_EVENTS];
-    int me_event;
     /* the outputs that share a state's name (docs/writing-models.md section 6: they carry that state's
      * value; in FMI 3.0 they are the state's own variable): output xy_y[k] is state xy_x[k] */
     int n_xy, xy_y[PG_MAX_X], xy_x[PG_MAX_X];
