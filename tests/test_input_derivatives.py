@@ -225,6 +225,73 @@ def test_an_fmu_state_carries_the_slope(backend):
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
+def test_a_state_taken_along_the_line_goes_on_along_it(backend):
+    """The line set once at t = 0 ("once"), a state taken at t = 0.1 s, mid-line: restored in the same
+    instance after 50 more steps, and serialized into a new one, the steps after it are the straight
+    run's to the bit, on the closed form. Until 2026-12-07 the restore re-anchored the line at the
+    restored point, F(t) = F0 + dF (t - 0.1), with status OK (a user's audit). And a state taken between
+    a new value-and-slope call at 0.1 s and the step keeps that call pending: restored, the steps are
+    those of the run that made it."""
+    z_once, _ = ramp_run(backend, "once")
+    k0, k1 = 100, 150
+
+    def steps(inst, a, b):
+        out = []
+        for k in range(a, b):
+            inst.fmu.doStep(currentCommunicationPoint=k * H, communicationStepSize=H)
+            out.append(inst.get("z"))
+        return out
+    inst = new(backend)
+    try:
+        inst.set(F=F0)
+        assert set_slopes(inst, ["F"], [DF]) == OK
+        steps(inst, 0, k0)
+        state = inst.fmu.getFMUstate()
+        blob = inst.fmu.serializeFMUstate(state)
+        steps(inst, k0, k1)
+        inst.fmu.setFMUstate(state)
+        again = steps(inst, k0, k1)
+        inst.fmu.freeFMUstate(state)
+    finally:
+        inst.close()
+    other = new(backend)
+    try:
+        other.fmu.setFMUstate(other.fmu.deSerializeFMUstate(blob))
+        moved = steps(other, k0, k1)
+    finally:
+        other.close()
+    straight = list(z_once[k0 + 1:k1 + 1])
+    assert again == straight and moved == straight
+    zr, _ = closed_form(k1 * H)
+    assert abs(again[-1] - zr) < 1e-12 * max(1.0, abs(zr)) + 1e-13
+
+    # a new line set at 0.1 s (value and slope), the state taken before the step that takes it
+    F1, DF1 = F0 + 3.0, -20.0
+
+    def relined(take_state):
+        inst = new(backend)
+        try:
+            inst.set(F=F0)
+            assert set_slopes(inst, ["F"], [DF]) == OK
+            steps(inst, 0, k0)
+            inst.set(F=F1)
+            assert set_slopes(inst, ["F"], [DF1]) == OK
+            if not take_state:
+                return steps(inst, k0, k1)
+            state = inst.fmu.getFMUstate()
+            steps(inst, k0, k1)
+            inst.fmu.setFMUstate(state)
+            out = steps(inst, k0, k1)
+            inst.fmu.freeFMUstate(state)
+            return out
+        finally:
+            inst.close()
+    direct, restored = relined(False), relined(True)
+    assert restored == direct
+    assert direct != straight  # (the new line is another piston: the comparison can fail)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
 def test_the_model_description_declares_input_interpolation(backend):
     from fmpy import read_model_description
 

@@ -10,7 +10,7 @@
 #include "pg_sha256.h"
 #include "pg_support.h"
 
-#define STATE_FORMAT "pogofmu-native-state-3" /* 3: the input derivatives */
+#define STATE_FORMAT "pogofmu-native-state-4" /* 3: the input derivatives; 4: a pending input */
 
 /* ---- messages ------------------------------------------------------------------------------ */
 static void say(PgInstance *in, int status, const char *category, const char *text)
@@ -63,7 +63,7 @@ void pg_inst_reset(PgInstance *in)
         else if (v->role == 'u') st->u[v->index] = v->start;
     }
     st->t_start = 0.0, st->t_stop = INFINITY, st->t_ok = 0.0;
-    in->inputs_changed = 1;
+    in->st.inputs_changed = 1;
     in->h_fast = -1.0;
     in->rel_tol_set = 0;
     if (f->fmi == 3) pg3_reset(in);
@@ -275,7 +275,7 @@ static int set_value(PgInstance *in, const PgVar *v, double value, char kind)
     if (v->role == 'u') {
         st->u[v->index] = value;
         st->du[v->index] = 0.0; /* a value set without a derivative is held */
-        in->inputs_changed = 1;
+        in->st.inputs_changed = 1;
         if (!st->has_sim) st->has_out = 0;
         return PG_ST_OK;
     }
@@ -492,7 +492,7 @@ int pg_inst_exit_initialization(PgInstance *in)
         return refuse(in, &m);
     }
     st->has_sim = 1;
-    in->inputs_changed = any_slope(in); /* derivatives set before: the first step takes them */
+    in->st.inputs_changed = any_slope(in); /* derivatives set before: the first step takes them */
     in->h_fast = fast_step_limit(in);
     notes_end(in, &nt);
     if (update_outputs(in)) return pg_inst_model_failed(in); /* an output that is not finite */
@@ -533,7 +533,7 @@ int pg_inst_set_input_derivatives(PgInstance *in, const unsigned vr[], size_t n,
         const PgVar *v = pg_inst_variable(in->fmu, vr[i]);
         in->st.du[v->index] = values[i];
     }
-    if (n) in->inputs_changed = 1;
+    if (n) in->st.inputs_changed = 1;
     return PG_ST_OK;
 }
 
@@ -636,7 +636,7 @@ static int step_problem(PgInstance *in, double t, double h, PgMsg *m)
         pg_msg_str(m, ")");
         return 1;
     }
-    if (in->inputs_changed) return pg_inst_input_problem(in, t, m);
+    if (in->st.inputs_changed) return pg_inst_input_problem(in, t, m);
     return 0;
 }
 
@@ -668,7 +668,7 @@ int pg_inst_do_step(PgInstance *in, double t, double h)
     PgState *st = &in->st;
     PgEngine *e = &st->sim;
     double end = t + h;
-    if (!(!st->failed && st->has_sim && !in->inputs_changed && t == e->t_out && 0.0 <= h && h <= in->h_fast &&
+    if (!(!st->failed && st->has_sim && !in->st.inputs_changed && t == e->t_out && 0.0 <= h && h <= in->h_fast &&
           end <= st->t_stop)) {
         if (step_refused(in, t, h)) return PG_ST_ERROR;
         if (end < e->t_out) end = e->t_out;
@@ -676,9 +676,9 @@ int pg_inst_do_step(PgInstance *in, double t, double h)
     Notes nt;
     notes_begin(in, &nt);
     int rc = PG_OK;
-    if (in->inputs_changed) {
+    if (in->st.inputs_changed) {
         rc = pg_engine_set_inputs(e, st->u, st->du);
-        in->inputs_changed = 0;
+        in->st.inputs_changed = 0;
     }
     if (!rc) rc = in->fmu->fmi == 3 ? pg3_advance_engine(in, end) : pg_engine_advance(e, end);
     notes_end(in, &nt);
@@ -806,7 +806,8 @@ void pg_inst_restore(PgInstance *in, const PgState *state)
     if (state != &in->st) in->st = *state;
     in->st.sim.model = in->fmu->model;
     in->st.sim.on_event = NULL, in->st.sim.on_warning = NULL, in->st.sim.on_switch = NULL, in->st.sim.hook_ctx = NULL;
-    in->inputs_changed = 1;
+    /* (whether an input is pending comes with the state: forcing it here re-anchored an FMI 2.0 input
+     * line at the restored point, u(t) = u + du (t - t_restore), a user's audit, 2026-12-07) */
     if (in->st.has_sim) {
         in->h_fast = fast_step_limit(in);
         if (in->st.has_out) update_outputs(in);

@@ -51,6 +51,10 @@ typedef struct PgState {
     /* FMI 2.0: the inputs' first derivatives (fmi2SetRealInputDerivatives), from the communication
      * point the step starts at; an fmi2SetReal of the input sets its derivative back to 0 */
     double du[PG_MAX_U];
+    /* an input (or its derivative) set since the engine last took them: the next step or model-exchange
+     * call hands them over. Part of the state: a state taken between an fmi2SetReal and the step keeps
+     * that input pending, and one taken with none pending goes on along the engine's own line */
+    int inputs_changed;
     int has_sim;
     PgEngine sim;
     int has_out;
@@ -70,7 +74,6 @@ typedef struct PgInstance {
     PgLogFn log;
     void *log_env;
     PgState st;
-    int inputs_changed;
     double h_fast;
     int rel_tol_set; /* the user set rel_tol: the importer's tolerance no longer applies */
     /* FMI 3.0: the interface and its flags (fixed at instantiation), and what is not state */

@@ -69,7 +69,7 @@ static int me_inputs(PgInstance *in)
     if (pg_inst_input_problem(in, in->st.me_t, &m)) return pg_inst_refuse(in, &m);
     PgEngine *e = &in->st.sim;
     if (pg_engine_restart_at(e, in->st.me_t, in->st.me_x, in->st.u) != PG_OK) return pg_inst_model_failed(in);
-    in->inputs_changed = 0;
+    in->st.inputs_changed = 0;
     stale(in);
     return PG_ST_OK;
 }
@@ -89,7 +89,7 @@ static int me_instance(PgInstance *in, const char *what)
         pg_msg_printf(&m, "%s called before fmi3ExitInitializationMode", what);
         return pg_inst_refuse(in, &m);
     }
-    if (in->inputs_changed) return me_inputs(in);
+    if (in->st.inputs_changed) return me_inputs(in);
     return PG_ST_OK;
 }
 
@@ -98,7 +98,7 @@ static int me_refresh(PgInstance *in)
 {
     in->me_stale = 0;
     if (!in->st.has_sim) return PG_ST_OK;
-    if (in->inputs_changed) {
+    if (in->st.inputs_changed) {
         int rc = me_inputs(in);
         if (rc) return rc;
         in->me_stale = 0;
@@ -120,7 +120,7 @@ static int cs_event_inputs(PgInstance *in)
     int rc = pg_engine_set_input(&in->st.sim, in->st.u);
     pg_inst_notes_end(in, nt);
     if (rc) return pg_inst_model_failed(in);
-    in->inputs_changed = 0;
+    in->st.inputs_changed = 0;
     pg_inst_update_outputs(in);
     return PG_ST_OK;
 }
@@ -135,7 +135,7 @@ int pg3_refresh(PgInstance *in)
 /* _set, after the FMI 2.0 part */
 void pg3_after_set(PgInstance *in)
 {
-    if (!(in->inputs_changed && in->st.has_sim)) return;
+    if (!(in->st.inputs_changed && in->st.has_sim)) return;
     if (in->mode == 'm') stale(in);
     else if (in->event_mode) in->cs_stale = 1;
 }
