@@ -336,13 +336,32 @@ MODEL = HybridModel(
 )
 '''
 
+TOUCH = '''"""Counters of an input's crossings of a level, both ways, beside a clock."""
+from pogofmu import FALLING, RISING, Event, HybridModel, Parameter, Variable
+
+MODEL = HybridModel(
+    name="Touch", description="counters of an input's crossings of a level",
+    states=(Variable("c", "s", "clock"),),
+    parameters=(Parameter("L", 0.5, "1", "level"),),
+    inputs=(Variable("u", "1", "input", 0.0),),
+    outputs=(Variable("nup", "", "u - L rising"), Variable("ndn", "", "u - L falling")),
+    integer_outputs=frozenset({"nup", "ndn"}),
+    flow=lambda t, x, q, u, p: [1.0],
+    events=(Event("up", RISING, guard=lambda x, q, u, p: u[0] - p.L, jump=lambda x, q, u, p: (x, {**q, "nup": q["nup"] + 1})),
+            Event("dn", FALLING, guard=lambda x, q, u, p: u[0] - p.L, jump=lambda x, q, u, p: (x, {**q, "ndn": q["ndn"] + 1}))),
+    initial=lambda p: ([0.0], {"nup": 0, "ndn": 0}),
+    output_fn=lambda t, x, q, u, p: {"nup": q["nup"], "ndn": q["ndn"]},
+)
+'''
+
 
 @pytest.fixture(scope="module")
 def input_models(tmp_path_factory):
     folder = tmp_path_factory.mktemp("input_models")
     (folder / "platball.py").write_text(PLATFORM_BALL)
     (folder / "steps.py").write_text(STEPS)
-    proc = run_pogofmu("export", "platball.py", "steps.py", "--out", "out", "--fmi", "3", "--platforms",
+    (folder / "touch.py").write_text(TOUCH)
+    proc = run_pogofmu("export", "platball.py", "steps.py", "touch.py", "--out", "out", "--fmi", "3", "--platforms",
                        "x86_64-linux", cwd=folder, timeout=900)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     return folder / "out"
@@ -382,6 +401,33 @@ def test_an_input_step_onto_a_counters_level_counts_once(input_models, interval,
     runs = []
     for kind in ME_KINDS:
         exc, messages, _, events = _me_run(input_models / kind.format(n="Steps"), 5.0, table, interval, rtol)
+        assert exc is None, (kind, exc, messages[-3:])
+        runs.append([(e["name"], e["time"]) for e in events])
+        for name, t_ref in ref.items():
+            t_fmu = [t for n, t in runs[-1] if n == name]
+            assert len(t_fmu) == len(t_ref) and np.allclose(t_fmu, t_ref, rtol=0, atol=1e-6), (kind, name, t_fmu)
+    assert runs[0] == runs[1], "the two backends differ"
+
+
+@pytest.mark.parametrize("interval", [0.01, 0.1])
+@pytest.mark.parametrize("start,peak,ref", [
+    (0.0, 0.5, {"up": [0.5], "dn": []}),            # touches the level from below and turns back
+    (1.0, 0.5, {"up": [], "dn": [0.5]}),            # from above
+    (0.0, 0.51, {"up": [0.5 / 1.02], "dn": [0.5 + 0.01 / 1.02]}),  # crosses it and back (u = 1.02 t, ...)
+])
+def test_an_input_that_touches_a_counters_level_and_turns_counts_what_it_crosses(input_models, interval, start,
+                                                                                  peak, ref):
+    """fmpy's table u: a vertex at t = 0.5 (start -> peak -> start, straight lines), counters of u - 0.5 both
+    ways: a touch from below is a rising crossing (RISING fires at >= 0) and no falling one (FALLING needs
+    u > 0.5 first), a touch from above the reverse, and a peak 0.01 over the level both crossings, at their
+    times, both backends the same. Until 2026-12-07 model exchange counted the touch from below as both: the
+    re-arming at the rising count took the importer's secant (u still rising) for the input's future, armed
+    the falling counter as a rebound at zero, and fired it as u turned back (a user's audit)."""
+    rows = [(0.0, start), (0.5, peak), (1.0, start), (2.0, start)]
+    table = np.array(rows, dtype=[("time", float), ("u", float)])
+    runs = []
+    for kind in ME_KINDS:
+        exc, messages, _, events = _me_run(input_models / kind.format(n="Touch"), 1.5, table, interval, 1e-8)
         assert exc is None, (kind, exc, messages[-3:])
         runs.append([(e["name"], e["time"]) for e in events])
         for name, t_ref in ref.items():

@@ -419,3 +419,111 @@ def test_non_stiff_defaults_keep_their_events_in_the_python_engine(name):
         runs.append(([(e.name, e.time) for e in sim.events], list(sim.x_out), sim.n_steps, sim.n_rejected,
                      sim.new_switches))
     assert len(runs[0][0]) > 5 and runs[0] == runs[1]
+
+
+VDP_POW = '''"""A stiff Van der Pol oscillator, its cubic written with ** (a user's audit, 2026-12-07)."""
+from pogofmu import HybridModel, Parameter, Variable
+
+MODEL = HybridModel(
+    name="VdPPow", description="stiff Van der Pol, x ** 3",
+    states=(Variable("x", "1", "fast"), Variable("y", "1", "slow")),
+    parameters=(Parameter("eps", 1e-7, "s", "the fast time scale"),),
+    inputs=(),
+    outputs=(Variable("x", "1", "fast"), Variable("y", "1", "slow")),
+    flow=lambda t, x, q, u, p: [(x[0] - x[0] ** 3 / 3.0 - x[1]) / p.eps, x[0]],
+    events=(),
+    initial=lambda p: ([2.0, -2.0 / 3.0], {}),
+    output_fn=lambda t, x, q, u, p: {"x": x[0], "y": x[1]},
+    default_stop_time=1.0,
+)
+'''
+
+
+def test_a_flow_that_overflows_at_a_wild_trial_step_is_given_smaller_steps(tmp_path):
+    """A stiff Van der Pol (eps = 1e-7) written with x ** 3, exported as a user does, run by fmpy: the
+    automatic method's first explicit trial steps take x far out, where Python's ** raises OverflowError
+    (x * x * x would give inf, a rate that is not finite, and smaller steps). Each kind of FMU runs to 1 s
+    under method 0 and 1, on scipy's Radau (rtol 1e-11) within 1e-6, the two backends the same bits on
+    every row (the native pow's exponent no longer folded into x * x by the compiler: they parted by
+    5e-11 under Rodas5P). Until 2026-12-07 method 0 ended at its first step, naming a state of 1e165."""
+    import numpy as np
+    from fmpy import simulate_fmu
+    from scipy.integrate import solve_ivp
+
+    from support import run_pogofmu
+
+    (tmp_path / "vdp.py").write_text(VDP_POW)
+    proc = run_pogofmu("export", "vdp.py", "--out", "out", "--fmi", "2", "--platforms", "x86_64-linux",
+                       cwd=tmp_path, timeout=900)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    eps = 1e-7
+    ref = solve_ivp(lambda t, z: [(z[0] - z[0] ** 3 / 3.0 - z[1]) / eps, z[0]], (0.0, 1.0), [2.0, -2.0 / 3.0],
+                    method="Radau", rtol=1e-11, atol=1e-13,
+                    jac=lambda t, z: [[(1.0 - z[0] ** 2) / eps, -1.0 / eps], [1.0, 0.0]]).y[:, -1]
+    for method in (0, 1):
+        runs = []
+        for kind in ("VdPPow.fmu", "native/VdPPow.fmu"):
+            res = simulate_fmu(str(tmp_path / "out" / kind), stop_time=1.0, output_interval=0.01,
+                               start_values={"method": method, "rel_tol": 1e-8}, output=["x", "y"])
+            runs.append(res)
+            end = np.array([res["x"][-1], res["y"][-1]])
+            assert res["time"][-1] == 1.0 and np.allclose(end, ref, rtol=1e-6, atol=1e-9), (kind, method, end, ref)
+        assert runs[0].tobytes() == runs[1].tobytes(), f"the two backends differ (method {method})"
+
+
+LAG = '''"""A stiff lag following a sine, with counters of a level 1e-4 under its peak."""
+from pogofmu import FALLING, RISING, Event, HybridModel, Parameter, Variable, fmath
+
+MODEL = HybridModel(
+    name="Lag", description="a stiff lag of a sine, a counter near its peak",
+    states=(Variable("x", "1", "lag output"),),
+    parameters=(Parameter("eps", 1e-5, "s", "lag time constant"), Parameter("L", 0.999899998026, "1", "level")),
+    inputs=(),
+    outputs=(Variable("x", "1", "lag output"),),
+    flow=lambda t, x, q, u, p: [(fmath.sin(6.283185307179586 * t) - x[0]) / p.eps],
+    events=(Event("up", RISING, guard=lambda x, q, u, p: x[0] - p.L, jump=lambda x, q, u, p: (x, {**q, "nu": q["nu"] + 1})),
+            Event("down", FALLING, guard=lambda x, q, u, p: x[0] - p.L,
+                  jump=lambda x, q, u, p: (x, {**q, "nd": q["nd"] + 1}))),
+    initial=lambda p: ([0.0], {"nu": 0, "nd": 0}),
+    output_fn=lambda t, x, q, u, p: {"x": x[0]},
+    default_stop_time=0.5,
+)
+'''
+
+
+def test_an_explicit_methods_failure_on_a_stiff_problem_names_the_stiff_method(tmp_path):
+    """A lag of 1e-5 s under DOPRI5 (method = 5): with too small a work budget the run ends naming the stiff
+    method as the remedy, and no "parameters named above" where the model names none; at rel_tol 1e-4
+    DOPRI5's dithering across a level near the peak ends in an event storm whose message names the stiff
+    method too. Rodas5P (method = 1) runs the same case to its end, and its own budget error suggests
+    no stiff method (it is one). Both backends, the same message (a user's audit, 2026-12-07)."""
+    from support import Instance, run_pogofmu
+
+    (tmp_path / "lag.py").write_text(LAG)
+    proc = run_pogofmu("export", "lag.py", "--out", "out", "--fmi", "2", "--platforms", "x86_64-linux",
+                       cwd=tmp_path, timeout=900)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+
+    from fmpy.fmi1 import FMICallException
+
+    def end(kind, **settings):
+        """The run to 0.3 s in steps of 0.03 s: None, or the error's message."""
+        inst = Instance(str(tmp_path / "out" / kind)).init(**settings)
+        try:
+            for k in range(10):
+                try:
+                    inst.fmu.doStep(currentCommunicationPoint=k * 0.03, communicationStepSize=0.03)
+                except FMICallException:
+                    return inst.messages[-1][2]
+            return None
+        finally:
+            inst.close()
+    for kind in ("Lag", "native/Lag"):
+        budget = end(kind, method=5, max_steps_per_second=1e4)
+        assert budget and "work budget exhausted" in budget and "method = 1, Rodas5P" in budget, budget
+        assert "named above" not in budget, budget
+        storm = end(kind, method=5, rel_tol=1e-4)
+        assert storm and "event storm" in storm and "method = 1 (Rodas5P) is the stiff method" in storm, storm
+        assert end(kind, method=1, rel_tol=1e-4) is None
+        rodas = end(kind, method=1, rel_tol=1e-12, max_steps_per_second=2e2)
+        assert rodas and "work budget exhausted" in rodas and "Rodas5P" not in rodas, rodas

@@ -279,14 +279,19 @@ static int model_failed(const PgEngine *e, PgMsg *m, int rc, const char *functio
  * before (a wild trial may recover at a smaller step), and the failure is noted; if the step size
  * then collapses, the note is the run's message: the flow named, with its time, state and value. */
 #define NOTE_NEAR 1e-3 /* a stage this near the step's start state (relative to 1 + its magnitude) */
+/* a stage's state y near the step's start: a wild trial of a stiff or singular step (a state far out,
+ * the rate overflowing) is the step size's problem, told by the collapse's own message */
+static int near_start(const PgEngine *e, const double *y)
+{
+    for (int i = 0; i < NX(e); ++i)
+        if (!isfinite(y[i]) || fabs(y[i] - e->x[i]) > NOTE_NEAR * (1.0 + fabs(e->x[i]))) return 0;
+    return 1;
+}
+
 static void note_flow(PgEngine *e, double t, const double *y, const double *dy)
 {
     int bad = first_non_finite(dy, NX(e));
-    if (bad < 0) return;
-    /* only at a state near the step's start: a wild trial of a stiff or singular step (a state far out,
-     * the rate overflowing) is the step size's problem, told by the collapse's own message */
-    for (int i = 0; i < NX(e); ++i)
-        if (!isfinite(y[i]) || fabs(y[i] - e->x[i]) > NOTE_NEAR * (1.0 + fabs(e->x[i]))) return;
+    if (bad < 0 || !near_start(e, y)) return;
     PgMsg *m = &e->note;
     pg_msg_clear(m);
     function_failed_at(e, m, "the flow", -1, t, y);
@@ -326,7 +331,10 @@ static PG_NOINLINE int model_fun_checked(PgEngine *e, double t, const double *y,
         if (!all_finite(dy, NX(e))) note_flow(e, t, y, dy);
         return PG_OK;
     }
-    return model_failed(e, m, rc, "the flow", -1, t, y, dy, NX(e), "d%s/dt", MODEL(e)->state_names);
+    int overflow = rc == PG_ARITH && m->arith == PG_OVERFLOW;
+    rc = model_failed(e, m, rc, "the flow", -1, t, y, dy, NX(e), "d%s/dt", MODEL(e)->state_names);
+    if (overflow && near_start(e, y)) e->note = *m, e->has_note = 1; /* (a trial's overflow: step()) */
+    return rc;
 }
 
 /* guard i at the state x of time t (with the inputs of t) */
@@ -451,6 +459,10 @@ static double dopri5_h_rho(const PgEngine *e, const double *K, double h)
  * is made before the next step */
 static void stiffness_test(PgEngine *e, const double *K, double h)
 {
+    if (e->method == M_DOPRI5) { /* (DOPRI5 asked for: the estimate only, for the messages: explicit_hint) */
+        e->h_rho = dopri5_h_rho(e, K, h);
+        return;
+    }
     if (e->method != 0) return;
     if (e->cur == M_DOPRI5) {
         double hr = dopri5_h_rho(e, K, h);
@@ -470,6 +482,18 @@ static void stiffness_test(PgEngine *e, const double *K, double h)
             e->calm_n = 0;
         }
     }
+}
+
+/* an error's advice where an explicit method is integrating a problem that may be stiff (DOPRI5's
+ * latest steps near its stability bound, or DOP853, which has no estimate): its solution dithers
+ * across a level and its steps stay small at any tolerance — the stiff method is the remedy (a relay
+ * on a lag of 1e-5 s under DOPRI5 at rel_tol 1e-4 ended in an "event storm ... Zeno behaviour" that
+ * Rodas5P does not have; a user's audit, 2026-12-07) */
+static void explicit_hint(const PgEngine *e, PgMsg *m)
+{
+    if (!(e->cur == M_DOP853 || (e->cur == M_DOPRI5 && e->h_rho > 1.0))) return;
+    pg_msg_str(m, e->cur == M_DOP853 ? ". The explicit method in use (DOP853) " : ". The explicit method in use (DOPRI5) ");
+    pg_msg_str(m, "may be integrating a stiff problem here: method = 1 (Rodas5P) is the stiff method");
 }
 
 static void make_switch(PgEngine *e)
@@ -543,7 +567,7 @@ static int time_scales(PgEngine *e, PgScale *out, int *n, int filtered)
     return PG_OK;
 }
 
-static void stiffness_text(PgEngine *e, PgMsg *m)
+static int stiffness_text(PgEngine *e, PgMsg *m) /* returns the number of time scales named */
 {
     PgScale sc[PG_MAX_SCALES];
     int n = 0;
@@ -552,7 +576,7 @@ static void stiffness_text(PgEngine *e, PgMsg *m)
     e->msg = keep;
     if (!n) {
         pg_msg_str(m, "the error control forces steps this small");
-        return;
+        return 0;
     }
     /* sorted(scales, key=value)[:2]: a stable sort */
     for (int a = 1; a < n; ++a)
@@ -570,6 +594,7 @@ static void stiffness_text(PgEngine *e, PgMsg *m)
         named_values(e, &sc[k], m);
         pg_msg_str(m, ")");
     }
+    return n;
 }
 
 /* _check_time_scales */
@@ -962,9 +987,11 @@ static int spend(PgEngine *e, double t, double h)
         pg_msg_str(m, " s, latest ");
         pg_msg_value(m, h, 'f', ".3g");
         pg_msg_str(m, " s). The model is stiff here: ");
-        stiffness_text(e, m);
-        pg_msg_str(m, ". To change: make the fastest time scale slower (the parameters named above), or raise "
-                      "max_steps_per_second to let the run go on slowly");
+        int named = stiffness_text(e, m);
+        pg_msg_str(m, ". To change: ");
+        if (named) pg_msg_str(m, "make the fastest time scale slower (the parameters named above), ");
+        if (e->cur != M_RODAS) pg_msg_str(m, "use the stiff method (method = 1, Rodas5P), ");
+        pg_msg_str(m, "or raise max_steps_per_second to let the run go on slowly");
         return PG_RAISE;
     }
     if (!e->warned) {
@@ -981,6 +1008,7 @@ static int spend(PgEngine *e, double t, double h)
         pg_msg_value(&w, e->s[PG_S_MAX_STEPS_PER_SECOND], 'f', "g");
         pg_msg_str(&w, " steps per simulated second. ");
         stiffness_text(e, &w);
+        if (e->cur != M_RODAS) pg_msg_str(&w, "; method = 1 (Rodas5P) is the stiff method");
         if (e->on_warning) e->on_warning(e->hook_ctx, w.text);
     }
     return PG_OK;
@@ -1107,10 +1135,11 @@ static int guard_band(PgEngine *e, int i, double t, const double *x, double g, d
 
 /* the guard's change along the flow f through (t, x), in its direction: sgn (g(t + d, x + d f) -
  * g(t - d, x - d f)) with d = RATE_STEP max(|t|, 1); positive: it heads to its after side */
-static int guard_change(PgEngine *e, int i, double t, const double *x, const double *f, double *dg, double *d_out)
+static int guard_change_of(PgEngine *e, int i, double t, const double *x, const double *f, int inputs_move,
+                           double *dg, double *d_out)
 {
     double d = RATE_STEP * pmax(fabs(t), 1.0), xp[PG_MAX_X], gp, gm;
-    int line = inputs_on_line(e, t);
+    int line = inputs_move && inputs_on_line(e, t);
     for (int j = 0; j < NX(e); ++j) xp[j] = x[j] + d * f[j];
     int rc = guard_at(e, i, t + d, xp, &gp);
     for (int j = 0; !rc && j < NX(e); ++j) xp[j] = x[j] - d * f[j];
@@ -1120,6 +1149,11 @@ static int guard_change(PgEngine *e, int i, double t, const double *x, const dou
     *dg = sgn_of(e, i) * (gp - gm);
     *d_out = d;
     return PG_OK;
+}
+
+static int guard_change(PgEngine *e, int i, double t, const double *x, const double *f, double *dg, double *d_out)
+{
+    return guard_change_of(e, i, t, x, f, 1, dg, d_out);
 }
 
 /* guard i's motion at (t, x) along the flow f, valued g there: its change dg over 2 d (guard_change)
@@ -1306,10 +1340,22 @@ static int arm_guards(PgEngine *e, const signed char *was, int own, double own_g
                 if (i != own && before == 1 && x_pre) TRY(crossed_with(e, i, x_pre, q_pre, &with));
                 if (with) crossed_now(e, i, fire);
                 else e->zarm[i] = dg >= -2 * z ? 2 : 1, e->armed[i] = 1;
-                /* (model exchange just after an input's step: its rate unknown, the rebound a guess; the
-                 * importer's samples, me_has_ua, exist only in model exchange) */
-                if (e->zarm[i] == 1 && e->me_has_ua && !e->me_has_du && e->t == e->me_t_last)
-                    e->me_prov[i] = 1;
+                /* (model exchange, a rebound that is a guess about the inputs: just after an input's step,
+                 * its rate unknown; or one made by the inputs' secant alone, the guard still along the flow
+                 * with the inputs held — the importer's next samples may turn the inputs back, as at a
+                 * vertex of its input table, where a falling counter on an input that touched its level
+                 * from below fired as the input fell, until 2026-12-07. A guard the states move too (a
+                 * ball on a platform the importer moves) keeps its rebound: its hop may be shorter than
+                 * the importer's step. The importer's samples, me_has_ua, exist only in model exchange) */
+                if (e->zarm[i] == 1 && e->me_has_ua && e->t == e->me_t_last) {
+                    int guess = !e->me_has_du;
+                    if (!guess) {
+                        double dg_held, d_held;
+                        TRY(guard_change_of(e, i, e->t, e->x, e->f, 0, &dg_held, &d_held));
+                        guess = fabs(dg_held) <= 2 * z;
+                    }
+                    e->me_prov[i] = (signed char)guess;
+                }
             }
         } else {
             e->armed[i] = 1;
@@ -1378,6 +1424,7 @@ static int zero_storm(PgEngine *e, int i)
     pg_msg_str(m, ") in between: the events accumulate faster than floating point resolves them (Zeno "
                   "behaviour, e.g. a bouncing ball coming to rest). Model the rest (a mode without this event once "
                   "the motion is small), or stop before this time");
+    explicit_hint(e, m);
     return PG_RAISE;
 }
 
@@ -1718,6 +1765,18 @@ static int step(PgEngine *e, double t_target)
         h = t_new - t;
         if (h <= MIN_STEP_ULPS * EPS * pmax(fabs(t), 1.0) && !(on_time && h > 0.0)) return collapse_error(e, t, h);
         int rc = pair_step(e, t, y, f, h, y_new, f_new, K);
+        if (rc == PG_ARITH && e->msg.arith == PG_OVERFLOW) {
+            /* the flow overflowed at a trial stage: as a rate that is not finite, a wild trial of a stiff
+             * step, given smaller steps (x**3 raises where x*x*x gives inf: a stiff Van der Pol written
+             * with ** ended at its first explicit trial step, naming a state of 1e165 that was never on
+             * its trajectory; a user's audit, 2026-12-07); noted near the step's start, the collapse's
+             * message if no step gets past it */
+            (void)probe_step(e, t, y, f, h, y_new, f_new, K);
+            e->n_rejected += 1;
+            rejected = 1;
+            h *= MIN_FACTOR;
+            continue;
+        }
         if (rc) { /* the flow failed (raised, or an arithmetic error): the same step again, to name it */
             if (rc == PG_ARITH || rc == PG_RAISE) rc = probe_step(e, t, y, f, h, y_new, f_new, K);
             return rc;
@@ -1894,6 +1953,7 @@ static int check_zeno(PgEngine *e)
             pg_msg_printf(m, " s (Zeno behaviour; limit %d events per ", n);
             pg_msg_value(m, e->zeno_window, 'f', "g");
             pg_msg_str(m, " s)");
+            explicit_hint(e, m);
             return PG_RAISE;
         }
     }

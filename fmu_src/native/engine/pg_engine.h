@@ -168,8 +168,9 @@ struct PgEngine {
     double me_ua[PG_MAX_U], me_du[PG_MAX_U], me_ta, me_t_last;
     int me_has_ua, me_has_du;
     /* model exchange: me_prov[i], guard i armed at zero as a rebound (zarm 1) by a restart where the
-     * importer had just set the inputs with no rate known (a discrete change, at that instant): its
-     * rebound is the flow's guess (inputs never set are held, their rate 0, known). Seen
+     * rebound is a guess about the inputs: the importer had just set them with no rate known (a discrete
+     * change, at that instant), or their secant alone makes it, the guard still along the flow with them
+     * held (the importer may turn them back; inputs never set are held, their rate 0, known). Seen
      * beyond its band on its after side before its before side, its crossing went on, and it is disarmed
      * (pg_engine_me_fired); seen beyond its band on its before side, it is an ordinary armed guard */
     signed char me_prov[PG_MAX_EVENTS];
