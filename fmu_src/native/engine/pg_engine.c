@@ -459,11 +459,10 @@ static double dopri5_h_rho(const PgEngine *e, const double *K, double h)
  * is made before the next step */
 static void stiffness_test(PgEngine *e, const double *K, double h)
 {
-    if (e->method == M_DOPRI5) { /* (DOPRI5 asked for: the estimate only, for the messages: explicit_hint) */
-        e->h_rho = dopri5_h_rho(e, K, h);
+    if (e->method != 0) {
+        if (e->method == M_DOPRI5) e->h_rho = dopri5_h_rho(e, K, h); /* (the estimate only, for explicit_hint) */
         return;
     }
-    if (e->method != 0) return;
     if (e->cur == M_DOPRI5) {
         double hr = dopri5_h_rho(e, K, h);
         e->h_rho = hr;
@@ -1765,19 +1764,20 @@ static int step(PgEngine *e, double t_target)
         h = t_new - t;
         if (h <= MIN_STEP_ULPS * EPS * pmax(fabs(t), 1.0) && !(on_time && h > 0.0)) return collapse_error(e, t, h);
         int rc = pair_step(e, t, y, f, h, y_new, f_new, K);
-        if (rc == PG_ARITH && e->msg.arith == PG_OVERFLOW) {
-            /* the flow overflowed at a trial stage: as a rate that is not finite, a wild trial of a stiff
-             * step, given smaller steps (x**3 raises where x*x*x gives inf: a stiff Van der Pol written
-             * with ** ended at its first explicit trial step, naming a state of 1e165 that was never on
-             * its trajectory; a user's audit, 2026-12-07); noted near the step's start, the collapse's
-             * message if no step gets past it */
-            (void)probe_step(e, t, y, f, h, y_new, f_new, K);
-            e->n_rejected += 1;
-            rejected = 1;
-            h *= MIN_FACTOR;
-            continue;
-        }
-        if (rc) { /* the flow failed (raised, or an arithmetic error): the same step again, to name it */
+        if (rc) {
+            if (rc == PG_ARITH && e->msg.arith == PG_OVERFLOW) {
+                /* the flow overflowed at a trial stage: as a rate that is not finite, a wild trial of a
+                 * stiff step, given smaller steps (x**3 raises where x*x*x gives inf: a stiff Van der Pol
+                 * written with ** ended at its first explicit trial step, naming a state of 1e165 that was
+                 * never on its trajectory; a user's audit, 2026-12-07); noted near the step's start, the
+                 * collapse's message if no step gets past it */
+                (void)probe_step(e, t, y, f, h, y_new, f_new, K);
+                e->n_rejected += 1;
+                rejected = 1;
+                h *= MIN_FACTOR;
+                continue;
+            }
+            /* the flow failed (raised, or an arithmetic error): the same step again, to name it */
             if (rc == PG_ARITH || rc == PG_RAISE) rc = probe_step(e, t, y, f, h, y_new, f_new, K);
             return rc;
         }
