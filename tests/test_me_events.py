@@ -367,6 +367,20 @@ def input_models(tmp_path_factory):
     return folder / "out"
 
 
+def _assert_me_counts(folder, name, stop_time, table, interval, rtol, ref):
+    """Model exchange of both backends' FMU ``name`` under fmpy's input ``table``: no error, each event's
+    times those of ``ref`` ({event: [times]}) within 1e-6 s, and the two backends' events the same."""
+    runs = []
+    for kind in ME_KINDS:
+        exc, messages, _, events = _me_run(folder / kind.format(n=name), stop_time, table, interval, rtol)
+        assert exc is None, (kind, exc, messages[-3:])
+        runs.append([(e["name"], e["time"]) for e in events])
+        for event_name, t_ref in ref.items():
+            t_fmu = [t for n, t in runs[-1] if n == event_name]
+            assert len(t_fmu) == len(t_ref) and np.allclose(t_fmu, t_ref, rtol=0, atol=1e-6), (kind, event_name, t_fmu)
+    assert runs[0] == runs[1], "the two backends differ"
+
+
 @pytest.mark.parametrize("speed", [0.05, -0.05, 0.3])
 def test_a_ball_on_a_platform_the_importer_moves_ends_in_the_storm_never_under_it(input_models, speed):
     """The platform at a constant speed (the input table p = speed t, vp = speed), fmpy's CVode at 1e-8, run
@@ -398,15 +412,7 @@ def test_an_input_step_onto_a_counters_level_counts_once(input_models, interval,
     rows = [(0, .05), (1, .15), (1, .4), (2, .3), (2.5, .3), (2.5, .45), (3, .5), (3, .6), (4, .9), (4, .2), (5, .2)]
     table = np.array(rows, dtype=[("time", float), ("u", float)])
     ref = {"nR": [0.5, 5 / 3, 4.0], "nF": [1.0, 3.0]}  # (x - u is piecewise linear: its zeros by hand)
-    runs = []
-    for kind in ME_KINDS:
-        exc, messages, _, events = _me_run(input_models / kind.format(n="Steps"), 5.0, table, interval, rtol)
-        assert exc is None, (kind, exc, messages[-3:])
-        runs.append([(e["name"], e["time"]) for e in events])
-        for name, t_ref in ref.items():
-            t_fmu = [t for n, t in runs[-1] if n == name]
-            assert len(t_fmu) == len(t_ref) and np.allclose(t_fmu, t_ref, rtol=0, atol=1e-6), (kind, name, t_fmu)
-    assert runs[0] == runs[1], "the two backends differ"
+    _assert_me_counts(input_models, "Steps", 5.0, table, interval, rtol, ref)
 
 
 @pytest.mark.parametrize("interval", [0.01, 0.1])
@@ -425,12 +431,4 @@ def test_an_input_that_touches_a_counters_level_and_turns_counts_what_it_crosses
     the falling counter as a rebound at zero, and fired it as u turned back (a user's audit)."""
     rows = [(0.0, start), (0.5, peak), (1.0, start), (2.0, start)]
     table = np.array(rows, dtype=[("time", float), ("u", float)])
-    runs = []
-    for kind in ME_KINDS:
-        exc, messages, _, events = _me_run(input_models / kind.format(n="Touch"), 1.5, table, interval, 1e-8)
-        assert exc is None, (kind, exc, messages[-3:])
-        runs.append([(e["name"], e["time"]) for e in events])
-        for name, t_ref in ref.items():
-            t_fmu = [t for n, t in runs[-1] if n == name]
-            assert len(t_fmu) == len(t_ref) and np.allclose(t_fmu, t_ref, rtol=0, atol=1e-6), (kind, name, t_fmu)
-    assert runs[0] == runs[1], "the two backends differ"
+    _assert_me_counts(input_models, "Touch", 1.5, table, interval, 1e-8, ref)

@@ -63,7 +63,7 @@ void pg_inst_reset(PgInstance *in)
         else if (v->role == 'u') st->u[v->index] = v->start;
     }
     st->t_start = 0.0, st->t_stop = INFINITY, st->t_ok = 0.0;
-    in->st.inputs_changed = 1;
+    st->inputs_changed = 1;
     in->h_fast = -1.0;
     in->rel_tol_set = 0;
     if (f->fmi == 3) pg3_reset(in);
@@ -275,7 +275,7 @@ static int set_value(PgInstance *in, const PgVar *v, double value, char kind)
     if (v->role == 'u') {
         st->u[v->index] = value;
         st->du[v->index] = 0.0; /* a value set without a derivative is held */
-        in->st.inputs_changed = 1;
+        st->inputs_changed = 1;
         if (!st->has_sim) st->has_out = 0;
         return PG_ST_OK;
     }
@@ -492,7 +492,7 @@ int pg_inst_exit_initialization(PgInstance *in)
         return refuse(in, &m);
     }
     st->has_sim = 1;
-    in->st.inputs_changed = any_slope(in); /* derivatives set before: the first step takes them */
+    st->inputs_changed = any_slope(in); /* derivatives set before: the first step takes them */
     in->h_fast = fast_step_limit(in);
     notes_end(in, &nt);
     if (update_outputs(in)) return pg_inst_model_failed(in); /* an output that is not finite */
@@ -668,7 +668,7 @@ int pg_inst_do_step(PgInstance *in, double t, double h)
     PgState *st = &in->st;
     PgEngine *e = &st->sim;
     double end = t + h;
-    if (!(!st->failed && st->has_sim && !in->st.inputs_changed && t == e->t_out && 0.0 <= h && h <= in->h_fast &&
+    if (!(!st->failed && st->has_sim && !st->inputs_changed && t == e->t_out && 0.0 <= h && h <= in->h_fast &&
           end <= st->t_stop)) {
         if (step_refused(in, t, h)) return PG_ST_ERROR;
         if (end < e->t_out) end = e->t_out;
@@ -676,9 +676,9 @@ int pg_inst_do_step(PgInstance *in, double t, double h)
     Notes nt;
     notes_begin(in, &nt);
     int rc = PG_OK;
-    if (in->st.inputs_changed) {
+    if (st->inputs_changed) {
         rc = pg_engine_set_inputs(e, st->u, st->du);
-        in->st.inputs_changed = 0;
+        st->inputs_changed = 0;
     }
     if (!rc) rc = in->fmu->fmi == 3 ? pg3_advance_engine(in, end) : pg_engine_advance(e, end);
     notes_end(in, &nt);

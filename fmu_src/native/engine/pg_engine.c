@@ -491,8 +491,8 @@ static void stiffness_test(PgEngine *e, const double *K, double h)
 static void explicit_hint(const PgEngine *e, PgMsg *m)
 {
     if (!(e->cur == M_DOP853 || (e->cur == M_DOPRI5 && e->h_rho > 1.0))) return;
-    pg_msg_str(m, e->cur == M_DOP853 ? ". The explicit method in use (DOP853) " : ". The explicit method in use (DOPRI5) ");
-    pg_msg_str(m, "may be integrating a stiff problem here: method = 1 (Rodas5P) is the stiff method");
+    pg_msg_printf(m, ". The explicit method in use (%s) may be integrating a stiff problem here: method = 1 "
+                     "(Rodas5P) is the stiff method", e->cur == M_DOP853 ? "DOP853" : "DOPRI5");
 }
 
 static void make_switch(PgEngine *e)
